@@ -1,0 +1,40 @@
+"""
+ROS-free ET-DMP core: learn a movement from one demonstration, generalize it from any start.
+
+Notation (the paper's symbols, used in every module here):
+
+- ``x``, ``v = tau dx/dt``: position and scaled velocity of the transformation system;
+  ``x0``, ``g``: start and goal; ``K``, ``D``: stiffness and damping (Table 1: 156.25, 25).
+- ``tau``: duration scale; ``s``: phase, ``tau ds/dt = -alpha s``, ``s(0) = 1``.
+- ``f(s) = s sum_i psi_i(s) w_i / sum_i psi_i(s)``: forcing term, with
+  ``tau dv/dt = K (g - x) - D v + (g - x0) f(s)`` (Ijspeert, SPEC §3.1) or
+  ``tau dv/dt = K (g - x) - D v - K (g - x0) s + K f(s)`` (Hoffmann).
+- ``I_D = x0_D - g_D``, ``I_C = x0_C - g_C``: demonstrated and current start relative to the goal;
+  ``R``: the Euclidean transform turning ``I_C`` onto the direction of ``I_D``;
+  ``theta``: its angle;
+  ``x0' = R I_C + g``: the virtual start (Eq. 12).
+- ``lambda``: obstacle coupling added to ``tau dv/dt`` (Eq. 22-27), gains ``gamma``, ``beta``,
+  ``gamma2``, ``k``.
+
+Typical use::
+
+    from etdmp_ros.dmp import builtin_demo, learn, nrmse
+    skill = learn(builtin_demo("G"))
+    traj = skill.generalize(start=[-4.0, 3.0], goal=[0.0, 0.0], method="etdmp")
+    print(nrmse(traj.x, skill.demo))
+"""
+
+from ._demos import (Demonstration, builtin_demo, builtin_demo_names, load_demo,
+                     save_demo)
+from ._errors import DemonstrationError, GeneralizationError
+from ._obstacles import obstacle_coupling, ObstacleGains
+from ._similarity import clearance, nrmse, Similarity, similarity
+from ._skill import FORMULATIONS, learn, METHODS, Skill, Trajectory
+from ._transform import euclidean_transform, EuclideanTransform
+
+__all__ = [
+    "Demonstration", "DemonstrationError", "EuclideanTransform", "FORMULATIONS",
+    "GeneralizationError", "METHODS", "ObstacleGains", "Similarity", "Skill", "Trajectory",
+    "builtin_demo", "builtin_demo_names", "clearance", "euclidean_transform", "learn",
+    "load_demo", "nrmse", "obstacle_coupling", "save_demo", "similarity",
+]

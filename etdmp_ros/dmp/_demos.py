@@ -1,0 +1,407 @@
+"""
+Demonstrations: the recorded movements a skill is learned from, their files, the built-in set.
+
+A demonstration is a path ``positions`` of shape (T, d) sampled at times ``t`` (T,) in seconds.
+Files hold one demonstration each:
+
+- ``.csv``: comma separated, UTF-8, a header row naming the columns, one sample per line. A column
+  named ``t``, ``time`` or ``stamp`` (any case) holds the sample times in seconds; every other
+  column is a position coordinate, in file order (e.g. ``t,x,y`` or ``x,y,z``).
+- ``.npy``: a numeric array (T, d) of positions (or (T,) for d = 1).
+- ``.npz``: arrays ``positions`` (T, d) and, optionally, ``t`` (T,).
+
+Without sample times the samples are taken as uniform over tau = 1 s (``t = linspace(0, 1, T)``),
+the convention of the pbdlib letters the paper uses. Files are never unpickled: object arrays
+are refused (a pickle can run arbitrary code).
+
+The built-in demonstrations (``builtin_demo_names()``) are original to this project, authored by
+``tools/make_builtin_demos.py``: the handwritten letters "G", "P", "R", "W" and a board "wipe"
+(2D, demo units, letters 10 units tall) and a bottle "stir" (3D, metres, z up, origin on
+the bottle axis at its mouth).
+"""
+
+from dataclasses import dataclass, field
+import csv
+import functools
+from importlib import resources
+import io
+from pathlib import Path
+
+import numpy as np
+
+from ._errors import DemonstrationError
+
+# Forcing-term fitting and finite-difference accelerations need a few samples per basis width;
+# fewer than this is almost certainly a truncated or mis-parsed file.
+MIN_SAMPLES = 10
+
+TIME_COLUMNS = ('t', 'time', 'stamp')
+SUFFIXES = ('.csv', '.npy', '.npz')
+
+_DATA_DIR = 'data'
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class Demonstration:
+    """
+    One demonstrated movement: ``positions`` (T, d) at strictly increasing times ``t`` (T,).
+
+    Arrays are copied to read-only float64 on construction. ``t`` defaults to uniform samples
+    over tau = 1 s. A 1-D ``positions`` (T,) is taken as a one-dimensional movement (T, 1).
+    Raises :class:`DemonstrationError` if the data is unusable (too short, NaN/inf, time not
+    increasing, shapes inconsistent).
+    """
+
+    name: str
+    positions: np.ndarray
+    t: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        """Validate and freeze the arrays."""
+        if not isinstance(self.name, str) or not self.name:
+            raise DemonstrationError(f'demonstration name must be a non-empty string, '
+                                     f'got {self.name!r}')
+        where = f'demonstration {self.name!r}'
+        positions = _as_float_array(self.positions, 'positions', where)
+        if positions.ndim == 1:
+            positions = positions[:, None]
+        if self.t is None:
+            t = np.linspace(0.0, 1.0, positions.shape[0] if positions.ndim == 2 else 0)
+        else:
+            t = _as_float_array(self.t, 't', where)
+        _validate(positions, t, where, _array_location)
+        positions = positions.copy()
+        t = t.copy()
+        positions.flags.writeable = False
+        t.flags.writeable = False
+        object.__setattr__(self, 'positions', positions)
+        object.__setattr__(self, 't', t)
+
+    @property
+    def n_samples(self):
+        """Return the number of samples T."""
+        return self.positions.shape[0]
+
+    @property
+    def dim(self):
+        """Return the number of position coordinates d."""
+        return self.positions.shape[1]
+
+    @property
+    def duration(self):
+        """Time from the first to the last sample in seconds (the DMP's tau)."""
+        return float(self.t[-1] - self.t[0])
+
+    @property
+    def start(self):
+        """First position (d,)."""
+        return self.positions[0].copy()
+
+    @property
+    def goal(self):
+        """Last position (d,)."""
+        return self.positions[-1].copy()
+
+    def __repr__(self):
+        """Summarise without printing the arrays."""
+        return (f'Demonstration(name={self.name!r}, samples={self.n_samples}, dim={self.dim}, '
+                f'duration={self.duration:g} s)')
+
+
+def load_demo(path, name=None):
+    """
+    Read a demonstration from a ``.csv``, ``.npy`` or ``.npz`` file (see the module docstring).
+
+    ``name`` defaults to the file name without its suffix. Raises :class:`DemonstrationError`
+    saying what is wrong and where (file, line, column) for a missing, unreadable, malformed or
+    unusable file.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise DemonstrationError(f'{path}: unknown demonstration file type {path.suffix!r}; '
+                                 f'use one of {", ".join(SUFFIXES)}')
+    if not path.exists():
+        raise DemonstrationError(f'{path}: no such file')
+    if not path.is_file():
+        raise DemonstrationError(f'{path}: not a regular file')
+    name = path.stem if name is None else name
+    try:
+        if suffix == '.csv':
+            try:
+                text = path.read_text(encoding='utf-8-sig')
+            except UnicodeDecodeError as err:
+                raise DemonstrationError(f'{path}: not a UTF-8 text file ({err.reason} at '
+                                         f'byte {err.start})') from None
+            return _parse_csv(text, str(path), name)
+        return _load_numpy(path, suffix, name)
+    except OSError as err:
+        raise DemonstrationError(f'{path}: cannot read: {err.strerror or err}') from None
+
+
+def save_demo(path, demo, precision=None):
+    """
+    Write ``demo`` to ``path`` in the format its suffix names; :func:`load_demo` reads it back.
+
+    - ``.csv``: header ``t,x``, ``t,x,y``, ``t,x,y,z``, or ``t,x0,...,x{d-1}`` for d > 3. Numbers
+      are written in the shortest form that reads back to the same float (exact round trip)
+      unless ``precision`` (decimal places) is given.
+    - ``.npy``: positions only; the times are NOT stored and read back as uniform over 1 s.
+    - ``.npz``: ``positions`` and ``t``.
+    """
+    if not isinstance(demo, Demonstration):
+        raise TypeError(f'save_demo expects a Demonstration, got {type(demo).__name__}')
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise DemonstrationError(f'{path}: unknown demonstration file type {path.suffix!r}; '
+                                 f'use one of {", ".join(SUFFIXES)}')
+    if suffix == '.npy':
+        with open(path, 'wb') as f:
+            np.save(f, demo.positions, allow_pickle=False)
+    elif suffix == '.npz':
+        with open(path, 'wb') as f:
+            np.savez(f, positions=demo.positions, t=demo.t)
+    else:
+        path.write_text(_format_csv(demo, precision), encoding='utf-8')
+
+
+def builtin_demo_names():
+    """Names of the demonstrations shipped with the package, sorted."""
+    return list(_builtin_files())
+
+
+def builtin_demo(name):
+    """
+    Load a shipped demonstration by name (see :func:`builtin_demo_names`).
+
+    The result is shared between callers, which is safe because its arrays are read-only.
+    """
+    files = _builtin_files()
+    if name not in files:
+        raise DemonstrationError(f'unknown built-in demonstration {name!r}; available: '
+                                 f'{", ".join(files)}')
+    return _load_builtin(name)
+
+
+@functools.lru_cache(maxsize=None)
+def _load_builtin(name):
+    resource = _builtin_files()[name]
+    return _parse_csv(resource.read_text(encoding='utf-8'), f'built-in demo {name!r}', name)
+
+
+@functools.lru_cache(maxsize=1)
+def _builtin_files():
+    # importlib.resources finds the data both in a source tree and in an installed package.
+    data = resources.files(__package__).joinpath(_DATA_DIR)
+    found = {}
+    if data.is_dir():
+        for entry in data.iterdir():
+            if entry.name.endswith('.csv') and entry.is_file():
+                found[entry.name[:-len('.csv')]] = entry
+    return {name: found[name] for name in sorted(found)}
+
+
+def _column_names(dim):
+    if dim <= 3:
+        return ['x', 'y', 'z'][:dim]
+    return [f'x{k}' for k in range(dim)]
+
+
+def _format_number(value, precision):
+    if precision is None:
+        return np.format_float_positional(value, unique=True, trim='-')
+    return np.format_float_positional(value, precision=precision, unique=True, trim='-')
+
+
+def _format_csv(demo, precision):
+    out = io.StringIO()
+    out.write(','.join(['t'] + _column_names(demo.dim)) + '\n')
+    for t, row in zip(demo.t, demo.positions):
+        out.write(','.join(_format_number(v, precision) for v in (t, *row)) + '\n')
+    return out.getvalue()
+
+
+def _is_number(text):
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _parse_csv(text, source, name):
+    rows = [(number, cells) for number, cells in
+            enumerate(csv.reader(io.StringIO(text)), start=1) if any(c.strip() for c in cells)]
+    if not rows:
+        raise DemonstrationError(f'{source}: empty file; expected a header row such as '
+                                 f'"t,x,y" followed by one sample per line')
+    header_line, header = rows[0]
+    header = [h.strip() for h in header]
+    if all(_is_number(h) for h in header):
+        raise DemonstrationError(f'{source}: no header row: line {header_line} holds numbers; the '
+                                 f'first line must name the columns, e.g. "t,x,y" or "x,y"')
+    for k, h in enumerate(header, start=1):
+        if not h:
+            raise DemonstrationError(f'{source}: header (line {header_line}) column {k} has no '
+                                     f'name')
+    duplicates = sorted({h for h in header if header.count(h) > 1})
+    if duplicates:
+        raise DemonstrationError(f'{source}: header (line {header_line}) repeats column(s) '
+                                 f'{", ".join(duplicates)}')
+    time_cols = [k for k, h in enumerate(header) if h.lower() in TIME_COLUMNS]
+    if len(time_cols) > 1:
+        raise DemonstrationError(f'{source}: header (line {header_line}) has more than one time '
+                                 f'column: {", ".join(header[k] for k in time_cols)}')
+    pos_cols = [k for k in range(len(header)) if k not in time_cols]
+    if not pos_cols:
+        raise DemonstrationError(f'{source}: header (line {header_line}) names no position '
+                                 f'column, only the time column {header[time_cols[0]]!r}')
+
+    data = rows[1:]
+    values = np.empty((len(data), len(header)))
+    for i, (line, cells) in enumerate(data):
+        if len(cells) != len(header):
+            raise DemonstrationError(f'{source}: line {line} has {len(cells)} cells but the '
+                                     f'header names {len(header)} columns ({",".join(header)})')
+        for k, cell in enumerate(cells):
+            cell = cell.strip()
+            if not cell:
+                raise DemonstrationError(f'{source}: line {line}, column {header[k]!r} is '
+                                         f'empty')
+            try:
+                values[i, k] = float(cell)
+            except ValueError:
+                raise DemonstrationError(f'{source}: line {line}, column {header[k]!r}: '
+                                         f'{cell!r} is not a number') from None
+
+    if len(data) < MIN_SAMPLES:
+        raise DemonstrationError(f'{source}: {len(data)} data rows; a demonstration needs at '
+                                 f'least {MIN_SAMPLES} samples')
+    positions = values[:, pos_cols]
+    t = values[:, time_cols[0]] if time_cols else np.linspace(0.0, 1.0, len(data))
+    lines = [line for line, _ in data]
+    pos_names = [header[k] for k in pos_cols]
+    time_name = header[time_cols[0]] if time_cols else 't'
+
+    def locate(row, col=None):
+        column = time_name if col is None else pos_names[col]
+        return f'line {lines[row]}, column {column!r}'
+
+    _validate(positions, t, source, locate)
+    return Demonstration(name, positions, t)
+
+
+_NPY_MAGIC = b'\x93NUMPY'
+_ZIP_MAGIC = b'PK\x03\x04'
+_PICKLE_REFUSED = 'holds pickled (object) data; refusing to unpickle it (unsafe). Save plain ' \
+    'numeric arrays'
+
+
+def _load_numpy(path, suffix, name):
+    with open(path, 'rb') as f:
+        head = f.read(len(_NPY_MAGIC))
+    if not head:
+        raise DemonstrationError(f'{path}: empty file')
+    if head[:1] == b'\x80':
+        raise DemonstrationError(f'{path}: is a pickle, not a {suffix} file; refusing to '
+                                 f'unpickle it (unsafe)')
+    if not head.startswith((_NPY_MAGIC, _ZIP_MAGIC)):
+        # Checked here because np.load takes any other content for a pickle.
+        raise DemonstrationError(f'{path}: not a valid {suffix} file: neither a .npy array nor '
+                                 f'an .npz archive')
+    try:
+        loaded = np.load(path, allow_pickle=False)
+    except ValueError as err:
+        if 'pickle' in str(err):
+            raise DemonstrationError(f'{path}: {_PICKLE_REFUSED}') from None
+        raise DemonstrationError(f'{path}: not a valid {suffix} file ({err})') from None
+    except EOFError:
+        raise DemonstrationError(f'{path}: empty or truncated {suffix} file') from None
+    if isinstance(loaded, np.ndarray):
+        if suffix != '.npy':
+            raise DemonstrationError(f'{path}: holds a single .npy array, not an .npz archive')
+        return _from_arrays(loaded, None, str(path), name)
+    with loaded:
+        if suffix != '.npz':
+            raise DemonstrationError(f'{path}: holds an .npz archive, not a single .npy array')
+        keys = sorted(loaded.files)
+        if 'positions' not in keys:
+            raise DemonstrationError(f'{path}: no array named "positions" (found: '
+                                     f'{", ".join(keys) or "nothing"})')
+        try:
+            positions = loaded['positions']
+            t = loaded['t'] if 't' in keys else None
+        except ValueError as err:
+            if 'pickle' in str(err):
+                raise DemonstrationError(f'{path}: {_PICKLE_REFUSED}') from None
+            raise DemonstrationError(f'{path}: unreadable array ({err})') from None
+    return _from_arrays(positions, t, str(path), name)
+
+
+def _from_arrays(positions, t, source, name):
+    positions = _as_float_array(positions, 'positions', source)
+    if positions.ndim == 1:
+        positions = positions[:, None]
+    if t is not None:
+        t = _as_float_array(t, 't', source)
+    elif positions.ndim == 2:
+        t = np.linspace(0.0, 1.0, positions.shape[0])
+    _validate(positions, t, source, _array_location)
+    return Demonstration(name, positions, t)
+
+
+def _as_float_array(value, what, where):
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError) as err:
+        raise DemonstrationError(f'{where}: {what} is not an array ({err})') from None
+    if array.dtype.kind not in 'iuf':
+        if array.dtype.kind == 'O':
+            # Lists of numbers arrive as object arrays only when ragged or mixed with non-numbers.
+            try:
+                return np.asarray(array.tolist(), dtype=np.float64)
+            except (TypeError, ValueError):
+                pass
+        raise DemonstrationError(f'{where}: {what} must be real numbers, got dtype '
+                                 f'{array.dtype} (shape {array.shape})')
+    return array.astype(np.float64, copy=False)
+
+
+def _array_location(row, col=None):
+    return f't[{row}]' if col is None else f'positions[{row}, {col}]'
+
+
+def _validate(positions, t, where, locate):
+    """Raise DemonstrationError unless positions (T, d) and t (T,) form a usable demonstration."""
+    if positions.ndim != 2:
+        raise DemonstrationError(f'{where}: positions must be a (T, d) array, got shape '
+                                 f'{positions.shape}')
+    n, dim = positions.shape
+    if dim < 1:
+        raise DemonstrationError(f'{where}: positions have no coordinates (shape '
+                                 f'{positions.shape})')
+    if n < MIN_SAMPLES:
+        hint = ''
+        if 1 <= n < dim:
+            hint = '; if the array is stored as (d, T), transpose it to (T, d)'
+        raise DemonstrationError(f'{where}: {n} samples; a demonstration needs at least '
+                                 f'{MIN_SAMPLES}{hint}')
+    if t.shape != (n,):
+        raise DemonstrationError(f'{where}: t must have shape ({n},) to match positions '
+                                 f'{positions.shape}, got {t.shape}')
+    bad = np.argwhere(~np.isfinite(positions))
+    if bad.size:
+        row, col = bad[0]
+        raise DemonstrationError(f'{where}: {locate(row, col)} is {positions[row, col]}; '
+                                 f'positions must be finite ({len(bad)} bad value(s))')
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise DemonstrationError(f'{where}: {locate(bad[0])} is {t[bad[0]]}; times must be '
+                                 f'finite')
+    bad = np.flatnonzero(np.diff(t) <= 0.0)
+    if bad.size:
+        row = bad[0] + 1
+        raise DemonstrationError(f'{where}: time does not increase at {locate(row)}: '
+                                 f'{t[row]!r} after {t[row - 1]!r}; times must be strictly '
+                                 f'increasing')

@@ -1,0 +1,227 @@
+"""
+Rollout of the transformation system, batched over starts.
+
+In the virtual situation each dimension obeys (v = tau dx/dt)::
+
+    tau dv/dt = K (g - x) - D v + A s(t) + M f(s(t)) + Omega(x, v) x v
+    tau dx/dt = v
+
+``A`` and ``M`` (per start and dimension) express both formulations: Ijspeert uses A = 0 and
+M = spatial scale; Hoffmann uses A = -K (g - x0) and M = K. The linear part is integrated exactly
+(zero-order hold over a sub-step, with the phase-dependent forcing taken at the sub-step's midpoint
+and precomputed for all sub-steps at once); the obstacle coupling, which only turns v, is
+applied as an exact rotation of v after each sub-step, so it never adds energy.
+
+Two implementations: a readable numpy reference (the oracle in tests) and a numba step loop (the
+fast path, used when numba is importable).
+"""
+
+import numpy as np
+
+from ._obstacles import steering_axis
+
+try:  # The fast path is optional: without numba the reference path serves.
+    import numba
+except ImportError:  # pragma: no cover - numba is pinned in requirements
+    numba = None
+
+
+def _expm(a):
+    """Matrix exponential of a small matrix by scaling and squaring of a Taylor series."""
+    norm = np.abs(a).sum(axis=1).max()
+    squarings = max(0, int(np.ceil(np.log2(norm))) + 1) if norm > 0.5 else 0
+    a = a / 2.0 ** squarings
+    result = np.eye(len(a))
+    term = np.eye(len(a))
+    for i in range(1, 20):
+        term = term @ a / i
+        result = result + term
+    for _ in range(squarings):
+        result = result @ result
+    return result
+
+
+def discretize(K, D, tau, h):
+    """Exact zero-order-hold step (Phi (2, 2), Gamma (2,)) of ``z = (x, v)`` over ``h`` seconds."""
+    aug = np.zeros((3, 3))
+    aug[:2, :2] = np.array([[0.0, 1.0], [-K, -D]]) / tau
+    aug[1, 2] = 1.0 / tau
+    e = _expm(aug * h)
+    return e[:2, :2].copy(), e[:2, 2].copy()
+
+
+def _rotate(v, omega, angle_scale):
+    """Rotate each v (B, d) about omega (B, 3) by |omega| * angle_scale (Rodrigues)."""
+    d = v.shape[1]
+    v3 = v if d == 3 else np.concatenate([v, np.zeros((len(v), 1))], axis=1)
+    norm = np.linalg.norm(omega, axis=1, keepdims=True)
+    k = omega / np.maximum(norm, 1e-300)
+    angle = norm * angle_scale
+    kxv = np.cross(k, v3)
+    out = v3 * np.cos(angle) + kxv * np.sin(angle) + k * (k * v3).sum(1, keepdims=True) * (
+        1.0 - np.cos(angle))
+    return out[:, :d]
+
+
+def rollout_reference(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau,
+                      h, substeps, R):
+    """
+    Numpy reference rollout in the virtual situation, returned in the real one.
+
+    Shapes: x0 (virtual start), goal, A, M (B, d); s_mid (n_sub,); f_mid (n_sub, d); s_out (n,);
+    f_out (n, d); obstacles (B, n_obs, d), virtual; gains (gamma, beta, gamma2, k (B,));
+    R (B, d, d) the Euclidean transform. Returns positions, velocities dx/dt and accelerations,
+    each (B, n, d), mapped back with ``x = R^T (x' - g) + g`` (Eq. 13-14).
+    """
+    phi, gam = discretize(K, D, tau, h)
+    B, d = x0.shape
+    n = len(s_out)
+    X, V, Acc = (np.empty((B, n, d)) for _ in range(3))
+    x, v = x0.copy(), np.zeros((B, d))
+    have_obstacles = obstacles.shape[1] > 0
+    gamma, beta, gamma2, k = gains
+    k = np.asarray(k, dtype=float)[:, None]
+
+    def omega_at(x, v):
+        return steering_axis(x, v, obstacles, goal, gamma, beta, gamma2, k)
+
+    for i in range(n):
+        lam = 0.0
+        if have_obstacles:
+            lam = np.cross(omega_at(x, v), v if d == 3 else np.c_[v, np.zeros(B)])[:, :d]
+        X[:, i], V[:, i] = x, v / tau
+        Acc[:, i] = (K * (goal - x) - D * v + A * s_out[i] + M * f_out[i] + lam) / tau ** 2
+        if i == n - 1:
+            break
+        for j in range(i * substeps, (i + 1) * substeps):
+            u = K * goal + A * s_mid[j] + M * f_mid[j]
+            x, v = (phi[0, 0] * x + phi[0, 1] * v + gam[0] * u,
+                    phi[1, 0] * x + phi[1, 1] * v + gam[1] * u)
+            if have_obstacles:
+                v = _rotate(v, omega_at(x, v), h / tau)
+    g = goal[:, None]
+    return (X - g) @ R + g, V @ R, Acc @ R
+
+
+if numba is not None:
+    @numba.njit(cache=True, fastmath=False)
+    def _omega_nb(x, v, obs, g, gamma, beta, gamma2, k, d, out):
+        """Steering axis Omega (3,) for one state; mirrors _obstacles.steering_axis."""
+        out[0] = out[1] = out[2] = 0.0
+        x2 = x[2] if d == 3 else 0.0
+        v2 = v[2] if d == 3 else 0.0
+        g2 = g[2] if d == 3 else 0.0
+        speed = np.sqrt(v[0] ** 2 + v[1] ** 2 + v2 ** 2)
+        to_goal = np.sqrt((x[0] - g[0]) ** 2 + (x[1] - g[1]) ** 2 + (x2 - g2) ** 2)
+        if speed <= 0.0:
+            return
+        for j in range(obs.shape[0]):
+            o0 = obs[j, 0] - x[0]
+            o1 = obs[j, 1] - x[1]
+            o2 = (obs[j, 2] - x2) if d == 3 else 0.0
+            dist = np.sqrt(o0 * o0 + o1 * o1 + o2 * o2)
+            if not (dist < to_goal) or dist <= 0.0:
+                continue
+            c = (o0 * v[0] + o1 * v[1] + o2 * v2) / (dist * speed)
+            phi = np.arccos(min(1.0, max(-1.0, c)))
+            r0 = o1 * v2 - o2 * v[1]
+            r1 = o2 * v[0] - o0 * v2
+            r2 = o0 * v[1] - o1 * v[0]
+            rn = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+            if rn <= 1e-12 * speed * dist:
+                if d == 2:
+                    r0, r1, r2 = 0.0, 0.0, 1.0
+                else:
+                    # e x v for the axis e least aligned with v.
+                    a0, a1, a2 = abs(v[0]), abs(v[1]), abs(v2)
+                    if a0 <= a1 and a0 <= a2:
+                        r0, r1, r2 = 0.0, -v2, v[1]
+                    elif a1 <= a2:
+                        r0, r1, r2 = v2, 0.0, -v[0]
+                    else:
+                        r0, r1, r2 = -v[1], v[0], 0.0
+                rn = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+            w = (gamma * phi * np.exp(-beta * abs(phi)) + gamma2 * np.exp(-k * dist)) / rn
+            out[0] += w * r0
+            out[1] += w * r1
+            out[2] += w * r2
+
+    @numba.njit(cache=True, fastmath=False)
+    def _rollout_nb(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gamma, beta, gamma2,
+                    k, K, D, tau, phi, gam, angle_scale, substeps, R, X, V, Acc):
+        B, d = x0.shape
+        n = s_out.shape[0]
+        n_obs = obstacles.shape[1]
+        x = np.empty(d)
+        v = np.empty(d)
+        om = np.zeros(3)
+        for b in range(B):
+            for i in range(d):
+                x[i] = x0[b, i]
+                v[i] = 0.0
+            for step in range(n):
+                lam0 = lam1 = lam2 = 0.0
+                if n_obs > 0:
+                    _omega_nb(x, v, obstacles[b], goal[b], gamma, beta, gamma2, k[b], d, om)
+                    v2 = v[2] if d == 3 else 0.0
+                    lam0 = om[1] * v2 - om[2] * v[1]
+                    lam1 = om[2] * v[0] - om[0] * v2
+                    lam2 = om[0] * v[1] - om[1] * v[0]
+                for j in range(d):
+                    X[b, step, j] = goal[b, j]
+                    V[b, step, j] = 0.0
+                    Acc[b, step, j] = 0.0
+                for i in range(d):
+                    lam = lam0 if i == 0 else (lam1 if i == 1 else lam2)
+                    acc = (K * (goal[b, i] - x[i]) - D * v[i] + A[b, i] * s_out[step]
+                           + M[b, i] * f_out[step, i] + lam) / (tau * tau)
+                    # Back to the real situation: x = R^T (x' - g) + g (Eq. 13-14).
+                    for j in range(d):
+                        X[b, step, j] += R[b, i, j] * (x[i] - goal[b, i])
+                        V[b, step, j] += R[b, i, j] * v[i] / tau
+                        Acc[b, step, j] += R[b, i, j] * acc
+                if step == n - 1:
+                    break
+                for j in range(step * substeps, (step + 1) * substeps):
+                    for i in range(d):
+                        u = K * goal[b, i] + A[b, i] * s_mid[j] + M[b, i] * f_mid[j, i]
+                        xi = x[i]
+                        x[i] = phi[0, 0] * xi + phi[0, 1] * v[i] + gam[0] * u
+                        v[i] = phi[1, 0] * xi + phi[1, 1] * v[i] + gam[1] * u
+                    if n_obs > 0:
+                        _omega_nb(x, v, obstacles[b], goal[b], gamma, beta, gamma2, k[b], d, om)
+                        norm = np.sqrt(om[0] ** 2 + om[1] ** 2 + om[2] ** 2)
+                        if norm > 0.0:
+                            k0, k1, k2 = om[0] / norm, om[1] / norm, om[2] / norm
+                            ang = norm * angle_scale
+                            ca, sa = np.cos(ang), np.sin(ang)
+                            v0, v1 = v[0], v[1]
+                            v2 = v[2] if d == 3 else 0.0
+                            kv = k0 * v0 + k1 * v1 + k2 * v2
+                            v[0] = v0 * ca + (k1 * v2 - k2 * v1) * sa + k0 * kv * (1.0 - ca)
+                            v[1] = v1 * ca + (k2 * v0 - k0 * v2) * sa + k1 * kv * (1.0 - ca)
+                            if d == 3:
+                                v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
+
+
+def rollout(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau, h,
+            substeps, R, fast=True):
+    """
+    Roll out B systems; same arguments and results as :func:`rollout_reference`.
+
+    ``fast`` selects the numba step loop when numba is available.
+    """
+    if not fast or numba is None:
+        return rollout_reference(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains,
+                                 K, D, tau, h, substeps, R)
+    phi, gam = discretize(K, D, tau, h)
+    B, d = x0.shape
+    n = len(s_out)
+    X, V, Acc = (np.empty((B, n, d)) for _ in range(3))
+    gamma, beta, gamma2, k = gains
+    f64 = np.ascontiguousarray
+    _rollout_nb(f64(x0, float), f64(goal, float), f64(A, float), f64(M, float), f64(s_mid),
+                f64(f_mid), f64(s_out), f64(f_out), f64(obstacles, float), float(gamma),
+                float(beta), float(gamma2), f64(np.broadcast_to(k, (B,)), float), float(K),
+                float(D), float(tau), phi, gam, h / tau, int(substeps), f64(R, float), X, V, Acc)
+    return X, V, Acc

@@ -1,0 +1,276 @@
+"""Learning a skill from one demonstration and generalizing it with DMP or ET-DMP."""
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._demos import Demonstration
+from ._errors import DemonstrationError, GeneralizationError
+from ._forcing_term import ForcingTerm, phase
+from ._integrate import rollout
+from ._obstacles import ObstacleGains
+from ._transform import EPS, EuclideanTransform, transforms
+
+FORMULATIONS = ("ijspeert", "hoffmann")
+METHODS = ("etdmp", "dmp")
+#: Fewest samples a demonstration may have: finite differences and 100 kernels need data.
+MIN_SAMPLES = 10
+#: Below this fraction of the demonstration's size, ``(g_D - x0_D)_i`` counts as zero for the
+#: plain Ijspeert DMP, whose per-dimension scaling would divide by it.
+PLAIN_DMP_MIN_OFFSET = 1e-3
+#: Longest sub-step of the integrator, as a fraction of tau.
+MAX_SUBSTEP = 1e-3
+#: Default extra time, as a fraction of tau, given to a movement that avoids obstacles.
+OBSTACLE_MARGIN = 0.5
+#: Most output samples one rollout may produce (guards against absurd dt).
+MAX_SAMPLES = 2_000_000
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """
+    A generalized movement.
+
+    ``x``, ``v`` (dx/dt) and ``a`` (d2x/dt2) have shape (n, d) for one start or (B, n, d) for a
+    batch; ``t`` has shape (n,). ``rotation`` is the Euclidean transform R ((d, d) or (B, d, d)),
+    the identity for plain DMPs; ``virtual_start`` is ``x0' = R I_C + g``.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    start: np.ndarray
+    goal: np.ndarray
+    method: str
+    rotation: np.ndarray
+    virtual_start: np.ndarray
+
+
+def _finite_array(value, name, error):
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise error(f"{name} must be numeric: {exc}") from None
+    if not np.all(np.isfinite(arr)):
+        raise error(f"{name} contains NaN or inf")
+    return arr
+
+
+def learn(positions, dt=None, t=None, n_basis=100, K=156.25, D=25.0, alpha=4.0,
+          formulation="ijspeert", regularization=1e-8):
+    """
+    Learn a skill from one demonstration.
+
+    ``positions`` is a (T, d) or (T,) array or a :class:`Demonstration`. Give the sample period
+    ``dt`` (tau = (T - 1) dt) or the timestamps ``t`` (may be non-uniform); with neither, tau = 1.
+    """
+    if isinstance(positions, Demonstration):
+        positions, t = positions.positions, positions.t if t is None else t
+    y = _finite_array(positions, "demonstration positions", DemonstrationError)
+    if y.ndim == 1:
+        y = y[:, None]
+    if y.ndim != 2 or y.shape[1] < 1:
+        raise DemonstrationError(f"demonstration must have shape (T, d), got {y.shape}")
+    if len(y) < MIN_SAMPLES:
+        raise DemonstrationError(
+            f"demonstration has {len(y)} samples; at least {MIN_SAMPLES} are needed")
+    if t is not None:
+        t = _finite_array(t, "demonstration timestamps", DemonstrationError).ravel()
+        if len(t) != len(y):
+            raise DemonstrationError(f"{len(t)} timestamps for {len(y)} positions")
+        if np.any(np.diff(t) <= 0.0):
+            raise DemonstrationError("demonstration timestamps must be strictly increasing")
+        t = t - t[0]
+    else:
+        if dt is None:
+            dt = 1.0 / (len(y) - 1)
+        if not (np.isfinite(dt) and dt > 0.0):
+            raise DemonstrationError(f"dt must be a positive number, got {dt!r}")
+        t = np.arange(len(y)) * float(dt)
+    if formulation not in FORMULATIONS:
+        raise DemonstrationError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
+    for name, value in (("K", K), ("D", D), ("alpha", alpha)):
+        if not (np.isfinite(value) and value > 0.0):
+            raise DemonstrationError(f"{name} must be a positive number, got {value!r}")
+    return Skill(y, t, int(n_basis), float(K), float(D), float(alpha), formulation,
+                 float(regularization))
+
+
+class Skill:
+    """
+    A movement learned from one demonstration; generalize it with :meth:`generalize`.
+
+    The forcing is stored normalised by the demonstration's size ``L`` (its largest distance from
+    its goal), never by ``g_D - x0_D`` per dimension, so demonstrations that start and end at the
+    same value in some dimension (a closed letter, a vertical stroke) are learned without dividing
+    by ~0. The Ijspeert per-dimension scaling is applied only when the plain DMP is asked for.
+    """
+
+    def __init__(self, y, t, n_basis, K, D, alpha, formulation, regularization):
+        self.demo, self.demo_t = y, t
+        self.K, self.D, self.alpha = K, D, alpha
+        self.formulation = formulation
+        self.tau = float(t[-1])
+        self.dim = y.shape[1]
+        self.dt = self.tau / (len(t) - 1)
+        self.start, self.goal = y[0].copy(), y[-1].copy()
+        self.size = float(np.max(np.linalg.norm(y - self.goal, axis=1)))
+        if not self.size > 0.0:
+            raise DemonstrationError("demonstration does not move")
+        self.forcing = ForcingTerm(n_basis, alpha)
+        # Paper Eq. 6 with v = tau dx/dt: the forcing the demonstration needed at each sample.
+        xd = np.gradient(y, t, axis=0, edge_order=2)
+        xdd = np.gradient(xd, t, axis=0, edge_order=2)
+        s = phase(t, self.tau, alpha)
+        needed = self.tau ** 2 * xdd + D * self.tau * xd - K * (self.goal - y)
+        if formulation == "ijspeert":
+            target = needed / self.size
+        else:  # Hoffmann: tau dv = K(g - x) - D v - K (g - x0) s + K f(s)
+            target = (needed / K + (self.goal - self.start) * s[:, None]) / self.size
+        self.forcing.fit(s, target, regularization)
+        self._tables = OrderedDict()
+
+    def __repr__(self):
+        return (f"Skill(dim={self.dim}, tau={self.tau:.3g}, samples={len(self.demo)}, "
+                f"formulation={self.formulation!r}, n_basis={self.forcing.n_basis})")
+
+    # -- generalization -------------------------------------------------------------------------
+
+    def reproduce(self, dt=None):
+        """Roll out the plain DMP from the demonstration's own start to its own goal."""
+        return self.generalize(self.start, self.goal, method="dmp", dt=dt)
+
+    def generalize(self, start, goal, obstacles=(), method="etdmp", mode=1, independent_axis=2,
+                   dt=None, tau=None, margin=None, gains=None, fast=True):
+        """
+        Generalize the skill from ``start`` to ``goal``.
+
+        ``start``: (d,) for one movement or (B, d) for a batch; ``goal``: (d,) or (B, d);
+        ``obstacles``: (n_obs, d) points (2D/3D). ``method``: "etdmp" (Euclidean transformation,
+        ``mode`` 1 or 2 in 3D) or "dmp" (the plain baseline). The output is sampled every ``dt``
+        (default: the demonstration's mean sample period) from 0 to ``tau * (1 + margin)``; the
+        default margin is 0 without obstacles (the output is phase-aligned with the demonstration)
+        and OBSTACLE_MARGIN with them, since a detour delays arrival at the goal.
+        Raises GeneralizationError on bad or degenerate input.
+        """
+        d = self.dim
+        start = _finite_array(start, "start", GeneralizationError)
+        goal = _finite_array(goal, "goal", GeneralizationError)
+        single = start.ndim <= 1
+        starts = start.reshape(1, -1) if single else start
+        if starts.ndim != 2 or starts.shape[1] != d or len(starts) == 0:
+            raise GeneralizationError(
+                f"start must have shape ({d},) or (B, {d}), got {start.shape}")
+        if goal.shape in ((d,), (1, d)):
+            goals = np.repeat(goal.reshape(1, d), len(starts), axis=0)
+        elif goal.shape == starts.shape:
+            goals = goal.copy()
+        else:
+            raise GeneralizationError(f"goal must have shape ({d},) or ({len(starts)}, {d}), "
+                                      f"got {goal.shape}")
+        obs = _finite_array(obstacles, "obstacles", GeneralizationError)
+        if obs.size == 0:
+            obs = np.zeros((0, d))
+        elif obs.ndim > 2 or obs.shape[-1] != d:
+            raise GeneralizationError(f"obstacles must have shape (n, {d}), got {obs.shape}")
+        obs = obs.reshape(-1, d)
+        if len(obs) and d not in (2, 3):
+            raise GeneralizationError(f"obstacle avoidance needs 2 or 3 dimensions, skill has {d}")
+        if method not in METHODS:
+            raise GeneralizationError(f"method must be one of {METHODS}, got {method!r}")
+        gains = ObstacleGains() if gains is None else gains
+        try:
+            gains.validate()
+        except ValueError as exc:
+            raise GeneralizationError(str(exc)) from None
+        tau = self.tau if tau is None else tau
+        dt = self.dt if dt is None else dt
+        for name, value in (("tau", tau), ("dt", dt)):
+            if not (np.isfinite(value) and value > 0.0):
+                raise GeneralizationError(f"{name} must be a positive number, got {value!r}")
+        if margin is None:
+            margin = OBSTACLE_MARGIN if len(obs) else 0.0
+        if not (np.isfinite(margin) and margin >= 0.0):
+            raise GeneralizationError(f"margin must be >= 0, got {margin!r}")
+        n_out = int(round(tau * (1.0 + margin) / dt)) + 1
+        if n_out > MAX_SAMPLES:
+            raise GeneralizationError(f"{n_out} samples requested (dt={dt:g}, tau={tau:g}); "
+                                      f"at most {MAX_SAMPLES}")
+
+        i_current = starts - goals
+        gaps = np.linalg.norm(i_current, axis=1)
+        if np.any(gaps <= EPS * self.size):
+            b = int(np.argmin(gaps))
+            raise GeneralizationError(
+                f"start equals goal (|x0 - g| = {gaps[b]:.3g}) for start #{b}: there is no "
+                "movement to generalize")
+        if len(obs):
+            to_goal = np.linalg.norm(obs[None] - goals[:, None], axis=2)
+            if np.any(to_goal <= EPS * self.size):
+                raise GeneralizationError("an obstacle lies on the goal: the goal is unreachable")
+
+        i_demo = self.start - self.goal
+        if method == "etdmp":
+            transform = transforms(i_demo, i_current, mode, independent_axis, self.size)
+        else:
+            B = len(starts)
+            transform = EuclideanTransform(np.broadcast_to(np.eye(d), (B, d, d)).copy(),
+                                           self._plain_scale(i_current))
+        virtual_start = transform.to_virtual(starts[:, None], goals[:, None])[:, 0]
+        virtual_obs = transform.to_virtual(np.broadcast_to(obs, (len(starts),) + obs.shape),
+                                           goals[:, None])
+        if self.formulation == "ijspeert":
+            A = np.zeros_like(starts)
+            M = transform.scale * self.size
+        else:
+            A = -self.K * (goals - virtual_start)
+            M = np.full_like(starts, self.K * self.size)
+        substeps = max(1, int(np.ceil(dt / (MAX_SUBSTEP * tau))))
+        s_mid, f_mid, s_out, f_out = self._forcing_table(tau, dt, n_out, substeps)
+        k = np.array([gains.decay(g) for g in gaps])
+        x, v, a = rollout(virtual_start, goals, A, M, s_mid, f_mid, s_out, f_out, virtual_obs,
+                          (gains.gamma, gains.beta, gains.gamma2, k), self.K, self.D, tau,
+                          dt / substeps, substeps, transform.R, fast=fast)
+        t = np.arange(n_out) * dt
+        if single:
+            return Trajectory(t, x[0], v[0], a[0], starts[0], goals[0], method, transform.R[0],
+                              virtual_start[0])
+        return Trajectory(t, x, v, a, starts, goals, method, transform.R, virtual_start)
+
+    def _plain_scale(self, i_current):
+        """
+        Ijspeert's per-dimension spatial scaling ``(g - x0)_i / (g_D - x0_D)_i``.
+
+        Where ``g_D - x0_D`` is ~0 the ratio is defined only when the request has the same offset
+        as the demonstration (ratio 1, e.g. the reproduction); otherwise it is an error.
+        """
+        offset = self.goal - self.start
+        tiny = np.abs(offset) <= PLAIN_DMP_MIN_OFFSET * self.size
+        same = np.abs(i_current + offset) <= PLAIN_DMP_MIN_OFFSET * self.size
+        undefined = tiny & ~same
+        if self.formulation == "ijspeert" and np.any(undefined):
+            b, i = (int(j[0]) for j in np.nonzero(undefined))
+            raise GeneralizationError(
+                f"plain DMP cannot generalize this demonstration: its start and goal coincide in "
+                f"dimension {i} (|g - x0| = {abs(offset[i]):.3g} <= {PLAIN_DMP_MIN_OFFSET:g} of "
+                f"its size {self.size:.3g}) but start #{b} asks for {abs(i_current[b, i]):.3g}, "
+                "and "
+                "Ijspeert's scaling (g - x0)/(g_D - x0_D) would divide by ~0; use method='etdmp' "
+                "or formulation='hoffmann'")
+        return np.where(tiny, 1.0, -i_current / np.where(tiny, 1.0, offset))
+
+    def _forcing_table(self, tau, dt, n_out, substeps):
+        """Phase and f(s) at every sub-step midpoint and output sample, cached per timing."""
+        key = (tau, dt, n_out, substeps)
+        table = self._tables.get(key)
+        if table is None:
+            h = dt / substeps
+            s_mid = phase((np.arange((n_out - 1) * substeps) + 0.5) * h, tau, self.alpha)
+            s_out = phase(np.arange(n_out) * dt, tau, self.alpha)
+            table = (s_mid, self.forcing(s_mid), s_out, self.forcing(s_out))
+            self._tables[key] = table
+            if len(self._tables) > 8:
+                self._tables.popitem(last=False)
+        return table
