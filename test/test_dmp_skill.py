@@ -380,15 +380,15 @@ def test_demo_that_starts_at_its_goal():
 
 @pytest.mark.parametrize("positions, kwargs, message", [
     (np.zeros((5, 2)), {}, "at least"),
-    (np.full((50, 2), np.nan), {}, "NaN"),
+    (np.full((50, 2), np.nan), {}, "finite"),
     (np.ones((50, 2)), {}, "does not move"),
-    (np.zeros((50, 2, 2)), {}, "shape"),
+    (np.zeros((50, 2, 2)), {}, "T, d"),
     (np.random.default_rng(0).normal(size=(50, 2)), dict(dt=0.0), "dt"),
     (np.random.default_rng(0).normal(size=(50, 2)), dict(t=np.ones(50)), "increasing"),
-    (np.random.default_rng(0).normal(size=(50, 2)), dict(t=np.arange(49.0)), "timestamps"),
+    (np.random.default_rng(0).normal(size=(50, 2)), dict(t=np.arange(49.0)), "shape"),
     (np.random.default_rng(0).normal(size=(50, 2)), dict(formulation="x"), "formulation"),
     (np.random.default_rng(0).normal(size=(50, 2)), dict(K=-1.0), "K"),
-    ("not numbers", {}, "numeric"),
+    ("not numbers", {}, "real numbers"),
 ])
 def test_bad_demonstrations(positions, kwargs, message):
     with pytest.raises(DemonstrationError, match=message):

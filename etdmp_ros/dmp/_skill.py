@@ -14,8 +14,6 @@ from ._transform import EPS, EuclideanTransform, transforms
 
 FORMULATIONS = ("ijspeert", "hoffmann")
 METHODS = ("etdmp", "dmp")
-#: Fewest samples a demonstration may have: finite differences and 100 kernels need data.
-MIN_SAMPLES = 10
 #: Below this fraction of the demonstration's size, ``(g_D - x0_D)_i`` counts as zero for the
 #: plain Ijspeert DMP, whose per-dimension scaling would divide by it.
 PLAIN_DMP_MIN_OFFSET = 1e-3
@@ -48,13 +46,14 @@ class Trajectory:
     virtual_start: np.ndarray
 
 
-def _finite_array(value, name, error):
+def _finite_array(value, name):
+    """Convert a request argument to a finite float array or raise GeneralizationError."""
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise error(f"{name} must be numeric: {exc}") from None
+        raise GeneralizationError(f"{name} must be numeric: {exc}") from None
     if not np.all(np.isfinite(arr)):
-        raise error(f"{name} contains NaN or inf")
+        raise GeneralizationError(f"{name} contains NaN or inf")
     return arr
 
 
@@ -64,38 +63,23 @@ def learn(positions, dt=None, t=None, n_basis=100, K=156.25, D=25.0, alpha=4.0,
     Learn a skill from one demonstration.
 
     ``positions`` is a (T, d) or (T,) array or a :class:`Demonstration`. Give the sample period
-    ``dt`` (tau = (T - 1) dt) or the timestamps ``t`` (may be non-uniform); with neither, tau = 1.
+    ``dt`` (tau = (T - 1) dt) or the timestamps ``t`` (may be non-uniform); with neither, tau = 1
+    (or the Demonstration's own times). Raises DemonstrationError for unusable input.
     """
     if isinstance(positions, Demonstration):
         positions, t = positions.positions, positions.t if t is None else t
-    y = _finite_array(positions, "demonstration positions", DemonstrationError)
-    if y.ndim == 1:
-        y = y[:, None]
-    if y.ndim != 2 or y.shape[1] < 1:
-        raise DemonstrationError(f"demonstration must have shape (T, d), got {y.shape}")
-    if len(y) < MIN_SAMPLES:
-        raise DemonstrationError(
-            f"demonstration has {len(y)} samples; at least {MIN_SAMPLES} are needed")
-    if t is not None:
-        t = _finite_array(t, "demonstration timestamps", DemonstrationError).ravel()
-        if len(t) != len(y):
-            raise DemonstrationError(f"{len(t)} timestamps for {len(y)} positions")
-        if np.any(np.diff(t) <= 0.0):
-            raise DemonstrationError("demonstration timestamps must be strictly increasing")
-        t = t - t[0]
-    else:
-        if dt is None:
-            dt = 1.0 / (len(y) - 1)
+    if t is None and dt is not None:
         if not (np.isfinite(dt) and dt > 0.0):
             raise DemonstrationError(f"dt must be a positive number, got {dt!r}")
-        t = np.arange(len(y)) * float(dt)
+        t = np.arange(len(np.atleast_1d(positions))) * float(dt)
+    demo = Demonstration("demonstration", positions, t)
     if formulation not in FORMULATIONS:
         raise DemonstrationError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
     for name, value in (("K", K), ("D", D), ("alpha", alpha)):
         if not (np.isfinite(value) and value > 0.0):
             raise DemonstrationError(f"{name} must be a positive number, got {value!r}")
-    return Skill(y, t, int(n_basis), float(K), float(D), float(alpha), formulation,
-                 float(regularization))
+    return Skill(np.array(demo.positions), demo.t - demo.t[0], int(n_basis), float(K), float(D),
+                 float(alpha), formulation, float(regularization))
 
 
 class Skill:
@@ -156,8 +140,8 @@ class Skill:
         Raises GeneralizationError on bad or degenerate input.
         """
         d = self.dim
-        start = _finite_array(start, "start", GeneralizationError)
-        goal = _finite_array(goal, "goal", GeneralizationError)
+        start = _finite_array(start, "start")
+        goal = _finite_array(goal, "goal")
         single = start.ndim <= 1
         starts = start.reshape(1, -1) if single else start
         if starts.ndim != 2 or starts.shape[1] != d or len(starts) == 0:
@@ -170,7 +154,7 @@ class Skill:
         else:
             raise GeneralizationError(f"goal must have shape ({d},) or ({len(starts)}, {d}), "
                                       f"got {goal.shape}")
-        obs = _finite_array(obstacles, "obstacles", GeneralizationError)
+        obs = _finite_array(obstacles, "obstacles")
         if obs.size == 0:
             obs = np.zeros((0, d))
         elif obs.ndim > 2 or obs.shape[-1] != d:
