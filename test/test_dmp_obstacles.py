@@ -1,9 +1,11 @@
 """Obstacle coupling (paper Eq. 22-27): steering, safe region, clearance, convergence."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from etdmp_ros.dmp import (builtin_demo, clearance, learn, nrmse, obstacle_coupling,
+from etdmp_ros.dmp import (builtin_demo, clearance, learn, load_demo, nrmse, obstacle_coupling,
                            ObstacleGains)
 
 
@@ -57,10 +59,18 @@ def test_distance_term_decays_with_k():
     assert far == pytest.approx(100.0 * np.exp(-6.0))
 
 
+PAPER_LETTERS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "pbdlib_2Dletters"
+
+
 def letters():
-    """Built-in letters plus, when present, the paper's letter data."""
-    yield from (("builtin " + name, builtin_demo(name).positions, builtin_demo(name).t)
-                for name in ("G", "P", "R", "W"))
+    """Yield the built-in letters plus, when present, the paper's letter data."""
+    for name in ("G", "P", "R", "W"):
+        yield "builtin " + name, builtin_demo(name).positions, builtin_demo(name).t
+    for name in ("G", "P", "R", "W"):
+        path = PAPER_LETTERS / f"{name}_00.csv"
+        if path.is_file():
+            demo = load_demo(path)
+            yield "paper " + name, demo.positions, demo.t
 
 
 @pytest.mark.parametrize("name, positions, t", list(letters()))
@@ -77,7 +87,7 @@ def test_obstacles_on_the_path_are_cleared_and_the_goal_reached(name, positions,
         assert clearance(free.x, obstacles) < 1e-9    # they sit on the obstacle-free path
         avoided = skill.generalize(start, goal, obstacles=obstacles)
         assert np.all(np.isfinite(avoided.x))
-        assert clearance(avoided.x, obstacles) > 0.03 * size, name
+        assert clearance(avoided.x, obstacles) > 0.05 * size, name
         assert np.linalg.norm(avoided.x[-1] - goal) < 0.01 * size, name
         assert np.linalg.norm(avoided.v[-1]) < 0.05 * np.abs(free.v).max()
         # The shape stays close: measured on the demo's phase span.
