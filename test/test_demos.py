@@ -2,12 +2,11 @@
 
 import pickle
 
-import numpy as np
-import pytest
-
 from etdmp_ros.dmp import (builtin_demo, builtin_demo_names, Demonstration, DemonstrationError,
                            load_demo, save_demo)
 from etdmp_ros.dmp._demos import MIN_SAMPLES
+import numpy as np
+import pytest
 
 LETTERS = ('G', 'P', 'R', 'W')
 # name: (dim, samples, duration [s])

@@ -2,11 +2,10 @@
 
 from pathlib import Path
 
-import numpy as np
-import pytest
-
 from etdmp_ros.dmp import (builtin_demo, clearance, learn, load_demo, nrmse, obstacle_coupling,
                            ObstacleGains)
+import numpy as np
+import pytest
 
 
 def test_coupling_is_perpendicular_to_the_velocity_and_steers_away():
@@ -38,7 +37,7 @@ def test_safe_region_switches_the_obstacle_off():
     assert np.linalg.norm(obstacle_coupling(x, v, np.array([[0.5, 0.1]]), goal)) > 0.0
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize('dim', [2, 3])
 def test_heading_straight_at_an_obstacle_still_pushes_sideways(dim):
     x, v = np.zeros(dim), np.eye(dim)[0]
     goal = 10.0 * np.eye(dim)[0]
@@ -59,21 +58,21 @@ def test_distance_term_decays_with_k():
     assert far == pytest.approx(100.0 * np.exp(-6.0))
 
 
-PAPER_LETTERS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "pbdlib_2Dletters"
+PAPER_LETTERS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'pbdlib_2Dletters'
 
 
 def letters():
     """Yield the built-in letters plus, when present, the paper's letter data."""
-    for name in ("G", "P", "R", "W"):
-        yield "builtin " + name, builtin_demo(name).positions, builtin_demo(name).t
-    for name in ("G", "P", "R", "W"):
-        path = PAPER_LETTERS / f"{name}_00.csv"
+    for name in ('G', 'P', 'R', 'W'):
+        yield 'builtin ' + name, builtin_demo(name).positions, builtin_demo(name).t
+    for name in ('G', 'P', 'R', 'W'):
+        path = PAPER_LETTERS / f'{name}_00.csv'
         if path.is_file():
             demo = load_demo(path)
-            yield "paper " + name, demo.positions, demo.t
+            yield 'paper ' + name, demo.positions, demo.t
 
 
-@pytest.mark.parametrize("name, positions, t", list(letters()))
+@pytest.mark.parametrize('name, positions, t', list(letters()))
 def test_obstacles_on_the_path_are_cleared_and_the_goal_reached(name, positions, t):
     skill = learn(positions, t=t)
     goal = np.array([1.0, -2.0])
@@ -97,7 +96,7 @@ def test_obstacles_on_the_path_are_cleared_and_the_goal_reached(name, positions,
 
 def test_obstacles_are_transformed_with_the_start():
     """ET-DMP avoidance is the same in every quadrant: rotate start and obstacles, rotate path."""
-    demo = builtin_demo("G")
+    demo = builtin_demo('G')
     skill = learn(demo)
     goal = np.zeros(2)
     start = goal + 1.1 * (skill.start - skill.goal)

@@ -1,9 +1,8 @@
 """nRMSE (paper Eq. 15-16, SPEC §3.4) and clearance."""
 
+from etdmp_ros.dmp import clearance, nrmse, similarity
 import numpy as np
 import pytest
-
-from etdmp_ros.dmp import clearance, nrmse, similarity
 
 
 def curve(n=200):
@@ -22,7 +21,7 @@ def test_invariant_to_rotation_scale_translation_and_sampling():
     q = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
     moved = 3.7 * (y - y[-1]) @ q.T + np.array([5.0, -2.0])
     assert nrmse(moved, y) < 1e-12
-    assert nrmse(moved, y, variant="paper") < 1e-12
+    assert nrmse(moved, y, variant='paper') < 1e-12
     dense = np.c_[np.interp(np.linspace(0, 1, 1000), np.linspace(0, 1, 200), y[:, 0]),
                   np.interp(np.linspace(0, 1, 1000), np.linspace(0, 1, 200), y[:, 1])]
     assert nrmse(dense, y) < 1e-3
@@ -65,11 +64,11 @@ def test_3d_and_1d():
 
 
 def test_bad_input():
-    with pytest.raises(ValueError, match="variant"):
-        nrmse(curve(), curve(), variant="other")
-    with pytest.raises(ValueError, match="same d"):
+    with pytest.raises(ValueError, match='variant'):
+        nrmse(curve(), curve(), variant='other')
+    with pytest.raises(ValueError, match='same d'):
         nrmse(curve(), np.zeros((10, 3)))
-    with pytest.raises(ValueError, match="NaN"):
+    with pytest.raises(ValueError, match='NaN'):
         nrmse(np.full((10, 2), np.nan), curve())
 
 

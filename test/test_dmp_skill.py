@@ -1,10 +1,8 @@
 """Learning and generalizing skills: DMP vs ET-DMP, formulations, batches, bad input."""
 
+from etdmp_ros.dmp import builtin_demo, DemonstrationError, GeneralizationError, learn, nrmse
 import numpy as np
 import pytest
-
-from etdmp_ros.dmp import (DemonstrationError, GeneralizationError, learn, nrmse,
-                           builtin_demo)
 
 
 def cross2(a, b):
@@ -51,13 +49,13 @@ def test_reproduction_follows_the_demonstration():
     assert np.linalg.norm(rep.x[-1] - demo[-1]) < 1e-3 * skill.size
 
 
-@pytest.mark.parametrize("angle", np.linspace(-np.pi, np.pi, 9))
+@pytest.mark.parametrize('angle', np.linspace(-np.pi, np.pi, 9))
 def test_2d_etdmp_is_the_reproduction_rotated_and_scaled(angle):
     skill = learn(letter_like(), dt=1 / 199)
     goal = np.array([3.0, -2.0])
     direction = np.array([np.cos(angle), np.sin(angle)])
     i_c = 1.7 * np.linalg.norm(skill.start - skill.goal) * direction
-    traj = skill.generalize(goal + i_c, goal, method="etdmp")
+    traj = skill.generalize(goal + i_c, goal, method='etdmp')
     assert similarity_residual(skill, traj, goal + i_c, goal) < 1e-9
     np.testing.assert_allclose(traj.x[0], goal + i_c, atol=1e-12)
     # The rotation is proper and turns I_C onto the direction of I_D (signed angle, SPEC fix).
@@ -92,8 +90,8 @@ def test_plain_dmp_loses_the_shape_in_another_quadrant():
     skill = learn(demo, dt=1 / 199)
     goal = skill.goal
     other = goal - (skill.start - skill.goal) * np.array([1.0, -1.0])   # mirrored quadrant
-    et = skill.generalize(other, goal, method="etdmp")
-    dmp = skill.generalize(other, goal, method="dmp")
+    et = skill.generalize(other, goal, method='etdmp')
+    dmp = skill.generalize(other, goal, method='dmp')
     assert nrmse(et.x, demo) < 0.005
     assert nrmse(dmp.x, demo) > 10 * nrmse(et.x, demo)
     np.testing.assert_allclose(dmp.rotation, np.eye(2))
@@ -117,7 +115,7 @@ def test_1d_reflection_about_the_goal():
     np.testing.assert_allclose(mirrored - goal, -(same_side - goal), atol=1e-9)
 
 
-@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize('seed', range(5))
 def test_3d_mode1_rodrigues_similarity(seed):
     rng = np.random.default_rng(seed)
     skill = learn(spiral_3d(), dt=0.01)
@@ -209,9 +207,9 @@ def letter_b(n=300):
     raw = np.c_[np.interp(s, seg, pts[:, 0]), np.interp(s, seg, pts[:, 1])]
     kernel = np.exp(-0.5 * (np.arange(-15, 16) / 5.0) ** 2)
     kernel /= kernel.sum()
-    padded = np.pad(raw, ((15, 15), (0, 0)), mode="edge")
-    return np.c_[np.convolve(padded[:, 0], kernel, "valid"),
-                 np.convolve(padded[:, 1], kernel, "valid")]
+    padded = np.pad(raw, ((15, 15), (0, 0)), mode='edge')
+    return np.c_[np.convolve(padded[:, 0], kernel, 'valid'),
+                 np.convolve(padded[:, 1], kernel, 'valid')]
 
 
 def vertical_stroke(n=150):
@@ -221,39 +219,39 @@ def vertical_stroke(n=150):
     return np.c_[0.15 * np.sin(2 * np.pi * s), 1.0 - s]
 
 
-@pytest.mark.parametrize("make", [closed_o, letter_b, vertical_stroke])
+@pytest.mark.parametrize('make', [closed_o, letter_b, vertical_stroke])
 def test_demos_with_coinciding_dimension(make):
     demo = make()
     skill = learn(demo)
     assert np.min(np.abs(skill.goal - skill.start)) < 1e-3 * skill.size
     # ET-DMP: same quality as any other demonstration, from every quadrant.
-    rep_quality = nrmse(skill.generalize(skill.start, skill.goal, method="etdmp").x, demo)
+    rep_quality = nrmse(skill.generalize(skill.start, skill.goal, method='etdmp').x, demo)
     assert rep_quality < 0.005
     goal = np.array([2.0, -1.0])
     for angle in np.linspace(0.0, 2 * np.pi, 8, endpoint=False):
         start = goal + 3.0 * np.array([np.cos(angle), np.sin(angle)])
-        traj = skill.generalize(start, goal, method="etdmp")
+        traj = skill.generalize(start, goal, method='etdmp')
         assert np.all(np.isfinite(traj.x))
         assert nrmse(traj.x, demo) == pytest.approx(rep_quality, abs=1e-6)
         assert np.linalg.norm(traj.x[-1] - goal) < 5e-3 * 3.0
     # Plain Ijspeert DMP: a clear error, never NaN.
-    with pytest.raises(GeneralizationError, match="coincide"):
-        skill.generalize(goal + [3.0, 1.0], goal, method="dmp")
+    with pytest.raises(GeneralizationError, match='coincide'):
+        skill.generalize(goal + [3.0, 1.0], goal, method='dmp')
     # The Hoffmann formulation is well posed there.
-    hoff = learn(demo, formulation="hoffmann")
-    traj = hoff.generalize(goal + [3.0, 1.0], goal, method="dmp")
+    hoff = learn(demo, formulation='hoffmann')
+    traj = hoff.generalize(goal + [3.0, 1.0], goal, method='dmp')
     assert np.all(np.isfinite(traj.x))
     assert nrmse(hoff.reproduce().x, demo) < 0.01
 
 
 def test_hoffmann_formulation():
     demo = letter_like()
-    skill = learn(demo, dt=1 / 199, formulation="hoffmann")
+    skill = learn(demo, dt=1 / 199, formulation='hoffmann')
     assert nrmse(skill.reproduce().x, demo) < 0.005
     goal = np.array([0.0, 0.0])
     start = goal - (skill.start - skill.goal)
-    et = skill.generalize(start, goal, method="etdmp")
-    dmp = skill.generalize(start, goal, method="dmp")
+    et = skill.generalize(start, goal, method='etdmp')
+    dmp = skill.generalize(start, goal, method='dmp')
     assert np.linalg.norm(et.x[-1] - goal) < 2e-3 * skill.size
     assert nrmse(et.x, demo) < nrmse(dmp.x, demo)
 
@@ -264,7 +262,7 @@ def test_batch_equals_single_rollouts():
     starts = rng.uniform(-10, 10, (7, 2))
     goals = rng.uniform(-1, 1, (7, 2))
     obstacles = [[1.0, 2.0], [-2.0, 0.5]]
-    for method in ("etdmp", "dmp"):
+    for method in ('etdmp', 'dmp'):
         batch = skill.generalize(starts, goals, obstacles=obstacles, method=method)
         assert batch.x.shape == (7, len(batch.t), 2)
         for b in range(7):
@@ -273,7 +271,7 @@ def test_batch_equals_single_rollouts():
             np.testing.assert_allclose(batch.a[b], one.a, atol=1e-9)
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize('dim', [2, 3])
 def test_fast_path_agrees_with_reference(dim):
     demo = letter_like() if dim == 2 else spiral_3d()
     skill = learn(demo, dt=0.005)
@@ -281,7 +279,7 @@ def test_fast_path_agrees_with_reference(dim):
     starts = skill.goal + rng.normal(size=(5, dim)) * skill.size
     plain = skill.generalize(starts, skill.goal)
     obstacles = plain.x[0, [40, 90]]
-    for method in ("etdmp", "dmp"):
+    for method in ('etdmp', 'dmp'):
         fast = skill.generalize(starts, skill.goal, obstacles=obstacles, method=method)
         ref = skill.generalize(starts, skill.goal, obstacles=obstacles, method=method, fast=False)
         for a, b in ((fast.x, ref.x), (fast.v, ref.v), (fast.a, ref.a)):
@@ -308,7 +306,7 @@ def test_non_uniform_timestamps():
                      np.interp(t_jittered, t_uniform, demo[:, 1])]
     skill = learn(jittered, t=t_jittered + 5.0)     # offsets in time are irrelevant
     assert skill.tau == pytest.approx(1.0)
-    rep = skill.generalize(skill.start, skill.goal, method="dmp", dt=1 / 399)
+    rep = skill.generalize(skill.start, skill.goal, method='dmp', dt=1 / 399)
     assert nrmse(rep.x, demo) < 0.01
 
 
@@ -324,7 +322,7 @@ def test_duration_output_period_and_margin():
 
 
 def test_builtin_demos_generalize():
-    for name in ("G", "P", "R", "W", "wipe"):
+    for name in ('G', 'P', 'R', 'W', 'wipe'):
         demo = builtin_demo(name)
         skill = learn(demo)
         assert nrmse(skill.reproduce().x, demo.positions) < 0.01
@@ -332,25 +330,25 @@ def test_builtin_demos_generalize():
         start = goal - 1.3 * (skill.start - skill.goal)
         traj = skill.generalize(start, goal)
         assert np.linalg.norm(traj.x[-1] - goal) < 5e-3 * skill.size
-    stir = learn(builtin_demo("stir"))
+    stir = learn(builtin_demo('stir'))
     for mode in (1, 2):
         traj = stir.generalize([0.1, -0.1, 0.2], [0.0, 0.0, 0.0], mode=mode)
         assert np.linalg.norm(traj.x[-1]) < 5e-3 * stir.size
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    (dict(start=[np.nan, 1.0], goal=[0.0, 0.0]), "NaN"),
-    (dict(start=[1.0, 1.0, 1.0], goal=[0.0, 0.0]), "shape"),
-    (dict(start=[1.0, 1.0], goal=[0.0]), "shape"),
-    (dict(start=[1.0, 1.0], goal=[1.0, 1.0]), "start equals goal"),
-    (dict(start=[1.0, 1.0], goal=[0.0, 0.0], method="spline"), "method"),
-    (dict(start=[1.0, 1.0], goal=[0.0, 0.0], dt=-1.0), "dt"),
-    (dict(start=[1.0, 1.0], goal=[0.0, 0.0], tau=np.inf), "tau"),
-    (dict(start=[1.0, 1.0], goal=[0.0, 0.0], obstacles=[[0.0, 0.0]]), "obstacle"),
-    (dict(start=[1.0, 1.0], goal=[0.0, 0.0], obstacles=[[0.0, 0.0, 1.0]]), "obstacles"),
-    (dict(start=[1.0, 1.0], goal=[0.0, 0.0], obstacles=[["a", 1]]), "numeric"),
-    (dict(start=[1.0, 1.0], goal=[0.0, 0.0], dt=1e-9), "samples"),
-    (dict(start=[1.0, 1.0, 0.0], goal=[0.0, 0.0, 0.0], mode=3), "shape"),
+@pytest.mark.parametrize('kwargs, message', [
+    ({'start': [np.nan, 1.0], 'goal': [0.0, 0.0]}, 'NaN'),
+    ({'start': [1.0, 1.0, 1.0], 'goal': [0.0, 0.0]}, 'shape'),
+    ({'start': [1.0, 1.0], 'goal': [0.0]}, 'shape'),
+    ({'start': [1.0, 1.0], 'goal': [1.0, 1.0]}, 'start equals goal'),
+    ({'start': [1.0, 1.0], 'goal': [0.0, 0.0], 'method': 'spline'}, 'method'),
+    ({'start': [1.0, 1.0], 'goal': [0.0, 0.0], 'dt': -1.0}, 'dt'),
+    ({'start': [1.0, 1.0], 'goal': [0.0, 0.0], 'tau': np.inf}, 'tau'),
+    ({'start': [1.0, 1.0], 'goal': [0.0, 0.0], 'obstacles': [[0.0, 0.0]]}, 'obstacle'),
+    ({'start': [1.0, 1.0], 'goal': [0.0, 0.0], 'obstacles': [[0.0, 0.0, 1.0]]}, 'obstacles'),
+    ({'start': [1.0, 1.0], 'goal': [0.0, 0.0], 'obstacles': [['a', 1]]}, 'numeric'),
+    ({'start': [1.0, 1.0], 'goal': [0.0, 0.0], 'dt': 1e-9}, 'samples'),
+    ({'start': [1.0, 1.0, 0.0], 'goal': [0.0, 0.0, 0.0], 'mode': 3}, 'shape'),
 ])
 def test_bad_generalization_requests(kwargs, message):
     skill = learn(letter_like(), dt=1 / 199)
@@ -361,9 +359,9 @@ def test_bad_generalization_requests(kwargs, message):
 
 def test_bad_mode_in_3d():
     skill = learn(spiral_3d(), dt=0.01)
-    with pytest.raises(GeneralizationError, match="mode"):
+    with pytest.raises(GeneralizationError, match='mode'):
         skill.generalize([0.1, 0.1, 0.1], [0.0, 0.0, 0.0], mode=3)
-    with pytest.raises(GeneralizationError, match="axis"):
+    with pytest.raises(GeneralizationError, match='axis'):
         skill.generalize([0.1, 0.1, 0.1], [0.0, 0.0, 0.0], mode=2, independent_axis=5)
 
 
@@ -371,24 +369,24 @@ def test_demo_that_starts_at_its_goal():
     t = np.linspace(0.0, 2 * np.pi, 100)
     loop = np.c_[np.sin(t), 1.0 - np.cos(t)]          # closes exactly on itself
     skill = learn(loop)
-    with pytest.raises(GeneralizationError, match="starts at its goal"):
+    with pytest.raises(GeneralizationError, match='starts at its goal'):
         skill.generalize([1.0, 1.0], [0.0, 0.0])
-    hoff = learn(loop, formulation="hoffmann")
-    traj = hoff.generalize([1.0, 1.0], [0.0, 0.0], method="dmp")
+    hoff = learn(loop, formulation='hoffmann')
+    traj = hoff.generalize([1.0, 1.0], [0.0, 0.0], method='dmp')
     assert np.all(np.isfinite(traj.x))
 
 
-@pytest.mark.parametrize("positions, kwargs, message", [
-    (np.zeros((5, 2)), {}, "at least"),
-    (np.full((50, 2), np.nan), {}, "finite"),
-    (np.ones((50, 2)), {}, "does not move"),
-    (np.zeros((50, 2, 2)), {}, "T, d"),
-    (np.random.default_rng(0).normal(size=(50, 2)), dict(dt=0.0), "dt"),
-    (np.random.default_rng(0).normal(size=(50, 2)), dict(t=np.ones(50)), "increasing"),
-    (np.random.default_rng(0).normal(size=(50, 2)), dict(t=np.arange(49.0)), "shape"),
-    (np.random.default_rng(0).normal(size=(50, 2)), dict(formulation="x"), "formulation"),
-    (np.random.default_rng(0).normal(size=(50, 2)), dict(K=-1.0), "K"),
-    ("not numbers", {}, "real numbers"),
+@pytest.mark.parametrize('positions, kwargs, message', [
+    (np.zeros((5, 2)), {}, 'at least'),
+    (np.full((50, 2), np.nan), {}, 'finite'),
+    (np.ones((50, 2)), {}, 'does not move'),
+    (np.zeros((50, 2, 2)), {}, 'T, d'),
+    (np.random.default_rng(0).normal(size=(50, 2)), {'dt': 0.0}, 'dt'),
+    (np.random.default_rng(0).normal(size=(50, 2)), {'t': np.ones(50)}, 'increasing'),
+    (np.random.default_rng(0).normal(size=(50, 2)), {'t': np.arange(49.0)}, 'shape'),
+    (np.random.default_rng(0).normal(size=(50, 2)), {'formulation': 'x'}, 'formulation'),
+    (np.random.default_rng(0).normal(size=(50, 2)), {'K': -1.0}, 'K'),
+    ('not numbers', {}, 'real numbers'),
 ])
 def test_bad_demonstrations(positions, kwargs, message):
     with pytest.raises(DemonstrationError, match=message):

@@ -7,15 +7,14 @@ Reads ``../shared/data/pbdlib_2Dletters`` beside the repository; skips when it i
 import json
 from pathlib import Path
 
+from etdmp_ros.dmp import learn, load_demo, nrmse
 import numpy as np
 import pytest
 
-from etdmp_ros.dmp import learn, load_demo, nrmse
-
-LETTERS = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "pbdlib_2Dletters"
+LETTERS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'pbdlib_2Dletters'
 
 pytestmark = pytest.mark.skipif(
-    not (LETTERS / "table2.json").is_file(),
+    not (LETTERS / 'table2.json').is_file(),
     reason=f"the paper's letter data is not at {LETTERS} (reference data, not shipped)")
 
 
@@ -27,27 +26,27 @@ def quadrant(offset):
 
 
 def table_cases():
-    if not (LETTERS / "table2.json").is_file():
+    if not (LETTERS / 'table2.json').is_file():
         return []
-    table = json.loads((LETTERS / "table2.json").read_text())
-    return [(letter, entry, table["dmp_parameters"]) for letter, entry in
-            table["letters"].items()]
+    table = json.loads((LETTERS / 'table2.json').read_text())
+    return [(letter, entry, table['dmp_parameters']) for letter, entry in
+            table['letters'].items()]
 
 
-@pytest.mark.parametrize("letter, entry, params", table_cases())
+@pytest.mark.parametrize('letter, entry, params', table_cases())
 def test_table2(letter, entry, params):
-    demo = load_demo(LETTERS / f"{letter}_00.csv")
+    demo = load_demo(LETTERS / f'{letter}_00.csv')
     positions = demo.positions
-    skill = learn(positions, dt=params["tau"] / (len(positions) - 1), n_basis=params["n_basis"],
-                  K=params["K"], D=params["D"])
-    goal = np.array(entry["goal"])
+    skill = learn(positions, dt=params['tau'] / (len(positions) - 1), n_basis=params['n_basis'],
+                  K=params['K'], D=params['D'])
+    goal = np.array(entry['goal'])
     np.testing.assert_allclose(skill.goal, goal, atol=5e-3)   # Table 2's goal is the demo's end
     demo_quadrant = quadrant(skill.start - skill.goal)
     rep = skill.reproduce()
     outside = 0
-    for start in np.array(entry["starts"]):
-        et = skill.generalize(start, goal, method="etdmp")
-        dmp = skill.generalize(start, goal, method="dmp")
+    for start in np.array(entry['starts']):
+        et = skill.generalize(start, goal, method='etdmp')
+        dmp = skill.generalize(start, goal, method='dmp')
         e_et, e_dmp = nrmse(et.x, positions), nrmse(dmp.x, positions)
         if quadrant(start - goal) != demo_quadrant:
             outside += 1

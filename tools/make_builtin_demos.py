@@ -279,9 +279,9 @@ def check(name, t, x):
         f'{name}: start {x[0]} and goal {x[-1]} closer than {MIN_SEPARATION:.0%} of size {size}')
     assert speed[0] < REST_FRACTION * speed.max() and speed[-1] < REST_FRACTION * speed.max(), (
         f'{name}: not at rest at the ends ({speed[0]}, {speed[-1]} vs peak {speed.max()})')
-    return dict(size=np.ptp(x, axis=0), peak_speed=speed.max(), mean_speed=speed.mean(),
-                peak_accel=accel.max(), end_accel=(accel[0], accel[-1]),
-                separation=separation / size)
+    return {'size': np.ptp(x, axis=0), 'peak_speed': speed.max(), 'mean_speed': speed.mean(),
+            'peak_accel': accel.max(), 'end_accel': (accel[0], accel[-1]),
+            'separation': separation / size}
 
 
 def write_csv(path, t, x, decimals):

@@ -24,8 +24,7 @@ Typical use::
     print(nrmse(traj.x, skill.demo))
 """
 
-from ._demos import (Demonstration, builtin_demo, builtin_demo_names, load_demo,
-                     save_demo)
+from ._demos import builtin_demo, builtin_demo_names, Demonstration, load_demo, save_demo
 from ._errors import DemonstrationError, GeneralizationError
 from ._obstacles import obstacle_coupling, ObstacleGains
 from ._similarity import clearance, nrmse, Similarity, similarity
@@ -33,8 +32,8 @@ from ._skill import FORMULATIONS, learn, METHODS, Skill, Trajectory
 from ._transform import euclidean_transform, EuclideanTransform
 
 __all__ = [
-    "Demonstration", "DemonstrationError", "EuclideanTransform", "FORMULATIONS",
-    "GeneralizationError", "METHODS", "ObstacleGains", "Similarity", "Skill", "Trajectory",
-    "builtin_demo", "builtin_demo_names", "clearance", "euclidean_transform", "learn",
-    "load_demo", "nrmse", "obstacle_coupling", "save_demo", "similarity",
+    'Demonstration', 'DemonstrationError', 'EuclideanTransform', 'FORMULATIONS',
+    'GeneralizationError', 'METHODS', 'ObstacleGains', 'Similarity', 'Skill', 'Trajectory',
+    'builtin_demo', 'builtin_demo_names', 'clearance', 'euclidean_transform', 'learn',
+    'load_demo', 'nrmse', 'obstacle_coupling', 'save_demo', 'similarity',
 ]

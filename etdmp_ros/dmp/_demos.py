@@ -20,8 +20,8 @@ The built-in demonstrations (``builtin_demo_names()``) are original to this proj
 the bottle axis at its mouth).
 """
 
-from dataclasses import dataclass, field
 import csv
+from dataclasses import dataclass, field
 import functools
 from importlib import resources
 import io

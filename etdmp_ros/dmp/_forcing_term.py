@@ -25,7 +25,7 @@ class ForcingTerm:
 
     def __init__(self, n_basis, alpha):
         if int(n_basis) < 2:
-            raise ValueError(f"n_basis must be >= 2, got {n_basis}")
+            raise ValueError(f'n_basis must be >= 2, got {n_basis}')
         self.n_basis = int(n_basis)
         self.alpha = float(alpha)
         # Centres evenly spaced in normalised time t/tau in [0, 1].

@@ -53,12 +53,12 @@ class ObstacleGains:
 
     def validate(self):
         """Raise ValueError unless every gain is finite and non-negative."""
-        for name in ("gamma", "beta", "gamma2", "k_relative"):
+        for name in ('gamma', 'beta', 'gamma2', 'k_relative'):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0.0:
-                raise ValueError(f"obstacle gain {name} must be finite and >= 0, got {value!r}")
+                raise ValueError(f'obstacle gain {name} must be finite and >= 0, got {value!r}')
         if self.k is not None and (not np.isfinite(self.k) or self.k < 0.0):
-            raise ValueError(f"obstacle gain k must be finite and >= 0, got {self.k!r}")
+            raise ValueError(f'obstacle gain k must be finite and >= 0, got {self.k!r}')
 
 
 def _as3(a):
@@ -80,7 +80,7 @@ def steering_axis(x, v, obstacles, goal, gamma, beta, gamma2, k):
     dist = np.linalg.norm(to_obs, axis=-1)
     speed = np.linalg.norm(v3, axis=-1)[..., None]
     active = (dist < np.linalg.norm(x3 - g3, axis=-1)[..., None]) & (speed > 0.0) & (dist > 0.0)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid='ignore', divide='ignore'):
         cos_phi = np.einsum('...ni,...i->...n', to_obs, v3) / (dist * speed)
     phi = np.arccos(np.clip(np.nan_to_num(cos_phi), -1.0, 1.0))
     r = np.cross(to_obs, v3[..., None, :])

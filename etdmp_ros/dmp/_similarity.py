@@ -42,9 +42,9 @@ def similarity(generated, demo, n_samples=None):
     if (gen.ndim != 2 or dem.ndim != 2 or gen.shape[1] != dem.shape[1]
             or min(len(gen), len(dem)) < 2):
         raise ValueError(
-            f"expected two (n, d) paths with the same d, got {gen.shape} and {dem.shape}")
+            f'expected two (n, d) paths with the same d, got {gen.shape} and {dem.shape}')
     if not (np.all(np.isfinite(gen)) and np.all(np.isfinite(dem))):
-        raise ValueError("paths contain NaN or inf")
+        raise ValueError('paths contain NaN or inf')
     gen = gen - gen[-1]
     dem = dem - dem[-1]
     R = plane_rotation(dem[0], gen[0][None])[0]
@@ -57,10 +57,10 @@ def similarity(generated, demo, n_samples=None):
     return Similarity(float(np.sqrt(np.sum(per_axis ** 2))), float(np.sqrt(np.sum(per_axis))))
 
 
-def nrmse(generated, demo, variant="conventional", n_samples=None):
+def nrmse(generated, demo, variant='conventional', n_samples=None):
     """Compute the nRMSE of ``generated`` against ``demo`` (variant "conventional" or "paper")."""
     if variant not in Similarity._fields:
-        raise ValueError(f"variant must be one of {Similarity._fields}, got {variant!r}")
+        raise ValueError(f'variant must be one of {Similarity._fields}, got {variant!r}')
     return getattr(similarity(generated, demo, n_samples), variant)
 
 
@@ -69,5 +69,5 @@ def clearance(x, obstacles):
     x = np.asarray(x, dtype=float)
     obs = np.asarray(obstacles, dtype=float).reshape(-1, x.shape[-1])
     if len(obs) == 0:
-        return float("inf")
+        return float('inf')
     return float(np.min(np.linalg.norm(x[..., None, :] - obs, axis=-1)))

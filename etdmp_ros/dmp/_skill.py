@@ -12,8 +12,8 @@ from ._integrate import rollout
 from ._obstacles import ObstacleGains
 from ._transform import EPS, EuclideanTransform, transforms
 
-FORMULATIONS = ("ijspeert", "hoffmann")
-METHODS = ("etdmp", "dmp")
+FORMULATIONS = ('ijspeert', 'hoffmann')
+METHODS = ('etdmp', 'dmp')
 #: Below this fraction of the demonstration's size, ``(g_D - x0_D)_i`` counts as zero for the
 #: plain Ijspeert DMP, whose per-dimension scaling would divide by it.
 PLAIN_DMP_MIN_OFFSET = 1e-3
@@ -51,14 +51,14 @@ def _finite_array(value, name):
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise GeneralizationError(f"{name} must be numeric: {exc}") from None
+        raise GeneralizationError(f'{name} must be numeric: {exc}') from None
     if not np.all(np.isfinite(arr)):
-        raise GeneralizationError(f"{name} contains NaN or inf")
+        raise GeneralizationError(f'{name} contains NaN or inf')
     return arr
 
 
 def learn(positions, dt=None, t=None, n_basis=100, K=156.25, D=25.0, alpha=4.0,
-          formulation="ijspeert", regularization=1e-8):
+          formulation='ijspeert', regularization=1e-8):
     """
     Learn a skill from one demonstration.
 
@@ -70,14 +70,14 @@ def learn(positions, dt=None, t=None, n_basis=100, K=156.25, D=25.0, alpha=4.0,
         positions, t = positions.positions, positions.t if t is None else t
     if t is None and dt is not None:
         if not (np.isfinite(dt) and dt > 0.0):
-            raise DemonstrationError(f"dt must be a positive number, got {dt!r}")
+            raise DemonstrationError(f'dt must be a positive number, got {dt!r}')
         t = np.arange(len(np.atleast_1d(positions))) * float(dt)
-    demo = Demonstration("demonstration", positions, t)
+    demo = Demonstration('demonstration', positions, t)
     if formulation not in FORMULATIONS:
-        raise DemonstrationError(f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
-    for name, value in (("K", K), ("D", D), ("alpha", alpha)):
+        raise DemonstrationError(f'formulation must be one of {FORMULATIONS}, got {formulation!r}')
+    for name, value in (('K', K), ('D', D), ('alpha', alpha)):
         if not (np.isfinite(value) and value > 0.0):
-            raise DemonstrationError(f"{name} must be a positive number, got {value!r}")
+            raise DemonstrationError(f'{name} must be a positive number, got {value!r}')
     return Skill(np.array(demo.positions), demo.t - demo.t[0], int(n_basis), float(K), float(D),
                  float(alpha), formulation, float(regularization))
 
@@ -102,14 +102,14 @@ class Skill:
         self.start, self.goal = y[0].copy(), y[-1].copy()
         self.size = float(np.max(np.linalg.norm(y - self.goal, axis=1)))
         if not self.size > 0.0:
-            raise DemonstrationError("demonstration does not move")
+            raise DemonstrationError('demonstration does not move')
         self.forcing = ForcingTerm(n_basis, alpha)
         # Paper Eq. 6 with v = tau dx/dt: the forcing the demonstration needed at each sample.
         xd = np.gradient(y, t, axis=0, edge_order=2)
         xdd = np.gradient(xd, t, axis=0, edge_order=2)
         s = phase(t, self.tau, alpha)
         needed = self.tau ** 2 * xdd + D * self.tau * xd - K * (self.goal - y)
-        if formulation == "ijspeert":
+        if formulation == 'ijspeert':
             target = needed / self.size
         else:  # Hoffmann: tau dv = K(g - x) - D v - K (g - x0) s + K f(s)
             target = (needed / K + (self.goal - self.start) * s[:, None]) / self.size
@@ -117,16 +117,16 @@ class Skill:
         self._tables = OrderedDict()
 
     def __repr__(self):
-        return (f"Skill(dim={self.dim}, tau={self.tau:.3g}, samples={len(self.demo)}, "
-                f"formulation={self.formulation!r}, n_basis={self.forcing.n_basis})")
+        return (f'Skill(dim={self.dim}, tau={self.tau:.3g}, samples={len(self.demo)}, '
+                f'formulation={self.formulation!r}, n_basis={self.forcing.n_basis})')
 
     # -- generalization -------------------------------------------------------------------------
 
     def reproduce(self, dt=None):
         """Roll out the plain DMP from the demonstration's own start to its own goal."""
-        return self.generalize(self.start, self.goal, method="dmp", dt=dt)
+        return self.generalize(self.start, self.goal, method='dmp', dt=dt)
 
-    def generalize(self, start, goal, obstacles=(), method="etdmp", mode=1, independent_axis=2,
+    def generalize(self, start, goal, obstacles=(), method='etdmp', mode=1, independent_axis=2,
                    dt=None, tau=None, margin=None, gains=None, fast=True):
         """
         Generalize the skill from ``start`` to ``goal``.
@@ -140,30 +140,30 @@ class Skill:
         Raises GeneralizationError on bad or degenerate input.
         """
         d = self.dim
-        start = _finite_array(start, "start")
-        goal = _finite_array(goal, "goal")
+        start = _finite_array(start, 'start')
+        goal = _finite_array(goal, 'goal')
         single = start.ndim <= 1
         starts = start.reshape(1, -1) if single else start
         if starts.ndim != 2 or starts.shape[1] != d or len(starts) == 0:
             raise GeneralizationError(
-                f"start must have shape ({d},) or (B, {d}), got {start.shape}")
+                f'start must have shape ({d},) or (B, {d}), got {start.shape}')
         if goal.shape in ((d,), (1, d)):
             goals = np.repeat(goal.reshape(1, d), len(starts), axis=0)
         elif goal.shape == starts.shape:
             goals = goal.copy()
         else:
-            raise GeneralizationError(f"goal must have shape ({d},) or ({len(starts)}, {d}), "
-                                      f"got {goal.shape}")
-        obs = _finite_array(obstacles, "obstacles")
+            raise GeneralizationError(f'goal must have shape ({d},) or ({len(starts)}, {d}), '
+                                      f'got {goal.shape}')
+        obs = _finite_array(obstacles, 'obstacles')
         if obs.size == 0:
             obs = np.zeros((0, d))
         elif obs.ndim > 2 or obs.shape[-1] != d:
-            raise GeneralizationError(f"obstacles must have shape (n, {d}), got {obs.shape}")
+            raise GeneralizationError(f'obstacles must have shape (n, {d}), got {obs.shape}')
         obs = obs.reshape(-1, d)
         if len(obs) and d not in (2, 3):
-            raise GeneralizationError(f"obstacle avoidance needs 2 or 3 dimensions, skill has {d}")
+            raise GeneralizationError(f'obstacle avoidance needs 2 or 3 dimensions, skill has {d}')
         if method not in METHODS:
-            raise GeneralizationError(f"method must be one of {METHODS}, got {method!r}")
+            raise GeneralizationError(f'method must be one of {METHODS}, got {method!r}')
         gains = ObstacleGains() if gains is None else gains
         try:
             gains.validate()
@@ -171,32 +171,32 @@ class Skill:
             raise GeneralizationError(str(exc)) from None
         tau = self.tau if tau is None else tau
         dt = self.dt if dt is None else dt
-        for name, value in (("tau", tau), ("dt", dt)):
+        for name, value in (('tau', tau), ('dt', dt)):
             if not (np.isfinite(value) and value > 0.0):
-                raise GeneralizationError(f"{name} must be a positive number, got {value!r}")
+                raise GeneralizationError(f'{name} must be a positive number, got {value!r}')
         if margin is None:
             margin = OBSTACLE_MARGIN if len(obs) else 0.0
         if not (np.isfinite(margin) and margin >= 0.0):
-            raise GeneralizationError(f"margin must be >= 0, got {margin!r}")
+            raise GeneralizationError(f'margin must be >= 0, got {margin!r}')
         n_out = int(round(tau * (1.0 + margin) / dt)) + 1
         if n_out > MAX_SAMPLES:
-            raise GeneralizationError(f"{n_out} samples requested (dt={dt:g}, tau={tau:g}); "
-                                      f"at most {MAX_SAMPLES}")
+            raise GeneralizationError(f'{n_out} samples requested (dt={dt:g}, tau={tau:g}); '
+                                      f'at most {MAX_SAMPLES}')
 
         i_current = starts - goals
         gaps = np.linalg.norm(i_current, axis=1)
         if np.any(gaps <= EPS * self.size):
             b = int(np.argmin(gaps))
             raise GeneralizationError(
-                f"start equals goal (|x0 - g| = {gaps[b]:.3g}) for start #{b}: there is no "
-                "movement to generalize")
+                f'start equals goal (|x0 - g| = {gaps[b]:.3g}) for start #{b}: there is no '
+                'movement to generalize')
         if len(obs):
             to_goal = np.linalg.norm(obs[None] - goals[:, None], axis=2)
             if np.any(to_goal <= EPS * self.size):
-                raise GeneralizationError("an obstacle lies on the goal: the goal is unreachable")
+                raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
 
         i_demo = self.start - self.goal
-        if method == "etdmp":
+        if method == 'etdmp':
             transform = transforms(i_demo, i_current, mode, independent_axis, self.size)
         else:
             B = len(starts)
@@ -205,7 +205,7 @@ class Skill:
         virtual_start = transform.to_virtual(starts[:, None], goals[:, None])[:, 0]
         virtual_obs = transform.to_virtual(np.broadcast_to(obs, (len(starts),) + obs.shape),
                                            goals[:, None])
-        if self.formulation == "ijspeert":
+        if self.formulation == 'ijspeert':
             A = np.zeros_like(starts)
             M = transform.scale * self.size
         else:
@@ -234,13 +234,13 @@ class Skill:
         tiny = np.abs(offset) <= PLAIN_DMP_MIN_OFFSET * self.size
         same = np.abs(i_current + offset) <= PLAIN_DMP_MIN_OFFSET * self.size
         undefined = tiny & ~same
-        if self.formulation == "ijspeert" and np.any(undefined):
+        if self.formulation == 'ijspeert' and np.any(undefined):
             b, i = (int(j[0]) for j in np.nonzero(undefined))
             raise GeneralizationError(
-                f"plain DMP cannot generalize this demonstration: its start and goal coincide in "
-                f"dimension {i} (|g - x0| = {abs(offset[i]):.3g} <= {PLAIN_DMP_MIN_OFFSET:g} of "
-                f"its size {self.size:.3g}) but start #{b} asks for {abs(i_current[b, i]):.3g}, "
-                "and "
+                f'plain DMP cannot generalize this demonstration: its start and goal coincide in '
+                f'dimension {i} (|g - x0| = {abs(offset[i]):.3g} <= {PLAIN_DMP_MIN_OFFSET:g} of '
+                f'its size {self.size:.3g}) but start #{b} asks for {abs(i_current[b, i]):.3g}, '
+                'and '
                 "Ijspeert's scaling (g - x0)/(g_D - x0_D) would divide by ~0; use method='etdmp' "
                 "or formulation='hoffmann'")
         return np.where(tiny, 1.0, -i_current / np.where(tiny, 1.0, offset))

@@ -134,23 +134,23 @@ def transforms(i_demo, i_current, mode=1, independent_axis=2, size=0.0):
     n_cur = np.linalg.norm(i_current, axis=1)
     if not n_demo > EPS * size:
         raise GeneralizationError(
-            "the demonstration starts at its goal (|I_D| = 0): the Euclidean transformation is "
+            'the demonstration starts at its goal (|I_D| = 0): the Euclidean transformation is '
             "undefined; use method='dmp' with formulation='hoffmann'")
     bad = np.flatnonzero(n_cur <= EPS * n_demo)
     if bad.size:
         raise GeneralizationError(
-            f"start equals goal (|x0 - g| = {n_cur[bad[0]]:.3g}) for start #{bad[0]}: "
-            "the rotation is undefined and there is no movement to make")
+            f'start equals goal (|x0 - g| = {n_cur[bad[0]]:.3g}) for start #{bad[0]}: '
+            'the rotation is undefined and there is no movement to make')
     overall = n_cur / n_demo
     if mode == 1 or d < 3:
         R = plane_rotation(i_demo, i_current)
         return EuclideanTransform(R, np.repeat(overall[:, None], d, axis=1))
     if mode != 2:
-        raise GeneralizationError(f"mode must be 1 or 2, got {mode!r}")
+        raise GeneralizationError(f'mode must be 1 or 2, got {mode!r}')
     if d != 3 or int(independent_axis) not in (0, 1, 2):
         raise GeneralizationError(
-            f"mode 2 needs 3 dimensions and an independent axis in 0..2, got d={d}, "
-            f"axis={independent_axis!r}")
+            f'mode 2 needs 3 dimensions and an independent axis in 0..2, got d={d}, '
+            f'axis={independent_axis!r}')
     a = int(independent_axis)
     plane = [(a + 1) % 3, (a + 2) % 3]   # cyclic order keeps the 2D rotation right-handed
     R = np.zeros((n, 3, 3))
