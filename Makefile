@@ -11,13 +11,13 @@ PYTEST_ARGS ?= -q test
 LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 BENCH       := test/benchmarks/bench_core.py
 
-.PHONY: venv test demo bench clean distclean help
+.PHONY: venv test demo bench bench-core clean distclean help
 .DEFAULT_GOAL := help
 
 help:
 	@echo "make demo       headless demo (builds .venv/ on first use)"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
-	@echo "make bench      core benchmarks ($(BENCH))"
+	@echo "make bench      core benchmarks vs movement-primitives and pydmps ($(BENCH), own .venv-bench/)"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make clean      remove build outputs and caches; make distclean also removes .venv*/"
 
@@ -54,9 +54,26 @@ demo: $(STAMP)
 	    --plot out/demo/G.png --json out/demo/G.json; \
 	fi
 
-bench: $(STAMP)
-	@test -f $(BENCH) || { echo "error: $(BENCH) does not exist yet" >&2; exit 1; }
-	$(VENV_PY) $(BENCH)
+# The benchmark's own environment: the project's pins plus the peer libraries it compares
+# against (movement-primitives, pydmps), which never enter .venv/.
+BENCH_VENV  := .venv-bench
+BENCH_STAMP := $(BENCH_VENV)/.installed
+BENCH_REQ   := test/benchmarks/requirements-bench.txt
+BENCH_ARGS  ?=
+
+$(BENCH_STAMP): requirements.txt $(BENCH_REQ) setup.py setup.cfg
+	$(PYTHON) -m venv $(BENCH_VENV)
+	$(BENCH_VENV)/bin/python -m pip install --quiet --disable-pip-version-check "pip==$(PIP_VERSION)"
+	$(BENCH_VENV)/bin/python -m pip install --quiet --disable-pip-version-check \
+	  -r requirements.txt -r $(BENCH_REQ)
+	$(BENCH_VENV)/bin/python -m pip install --quiet --disable-pip-version-check \
+	  --no-deps --no-build-isolation -e .
+	@touch $@
+
+bench: bench-core
+
+bench-core: $(BENCH_STAMP)
+	$(BENCH_VENV)/bin/python $(BENCH) $(BENCH_ARGS)
 
 clean:
 	rm -rf out build install log .pytest_cache *.egg-info

@@ -23,7 +23,8 @@ import json
 import math
 from pathlib import Path
 
-from etdmp_ros.dmp import clearance, GeneralizationError, learn, load_demo, similarity
+from etdmp_ros.dmp import (clearance, GeneralizationError, learn, load_demo, OBSTACLE_MARGIN,
+                           similarity)
 import numpy as np
 
 METHODS = ('etdmp', 'dmp')
@@ -36,9 +37,6 @@ QUADRANTS = ('I', 'II', 'III', 'IV')
 # slowly at the end, so time fractions would crowd the obstacles into the first strokes.
 ONE_OBSTACLE_FRACTIONS = (0.5,)
 TWO_OBSTACLE_FRACTIONS = (0.35, 0.65)
-# Obstacles delay the movement, so their runs are rolled out this fraction of tau longer to show
-# that they still converge (Eq. 28-29); nRMSE is always taken over [0, tau] only.
-OBSTACLE_MARGIN = 0.5
 
 QUADRANT_CONVENTION = (
     'quadrant of (start - goal); half-open sectors of atan2: I [0,90), II [90,180), '
@@ -128,7 +126,7 @@ def _evaluate(skill, method, start, goal, obstacles, **kwargs):
     return result
 
 
-def compare_methods(skill, start, goal, obstacles=(), *, mode=1, dt=None, margin=0.0,
+def compare_methods(skill, start, goal, obstacles=(), *, mode=1, dt=None, margin=None,
                     gains=None):
     """
     Generalize ``skill`` from ``start`` to ``goal`` with ET-DMP and DMP; return both results.

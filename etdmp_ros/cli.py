@@ -19,6 +19,7 @@ import math
 from pathlib import Path
 import sys
 
+from etdmp_ros.dmp import OBSTACLE_MARGIN
 import numpy as np
 
 PROG = 'etdmp'
@@ -64,8 +65,9 @@ def _build_parser():
                      help='DMP formulation (default ijspeert)')
     gen.add_argument('--dt', type=float, default=None,
                      help="output sample period in seconds (default: the demo's)")
-    gen.add_argument('--margin', type=float, default=0.0,
-                     help='extra rollout time after tau, as a fraction of tau (default 0)')
+    gen.add_argument('--margin', type=float, default=None,
+                     help='extra rollout time after tau, as a fraction of tau (default 0, or '
+                          f'{OBSTACLE_MARGIN:g} with obstacles: a detour arrives later)')
     gen.add_argument('--plot', metavar='PNG', help='write a figure (needs matplotlib)')
     gen.add_argument('--json', metavar='FILE', help='write t, x, v, a and the metrics as JSON')
     gen.set_defaults(func=_cmd_generalize)
@@ -152,7 +154,7 @@ def _cmd_generalize(args):
     from etdmp_ros._reproduce import compare_methods, METHOD_LABELS, METHODS
     if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
         raise UsageError(f'--dt must be a positive number, got {args.dt}')
-    if not (math.isfinite(args.margin) and args.margin >= 0):
+    if args.margin is not None and not (math.isfinite(args.margin) and args.margin >= 0):
         raise UsageError(f'--margin must be >= 0, got {args.margin}')
     json_path = _output_path(args.json, '--json')
     plot_path = _output_path(args.plot, '--plot')
