@@ -11,12 +11,13 @@ PYTEST_ARGS ?= -q test
 LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 BENCH       := test/benchmarks/bench_core.py
 
-.PHONY: venv test demo bench bench-core clean distclean help
+.PHONY: venv test demo docs bench bench-core clean distclean help
 .DEFAULT_GOAL := help
 
 help:
 	@echo "make demo       headless demo (builds .venv/ on first use)"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
+	@echo "make docs       regenerate the README pictures in docs/img/"
 	@echo "make bench      core benchmarks vs movement-primitives and pydmps ($(BENCH), own .venv-bench/)"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make clean      remove build outputs and caches; make distclean also removes .venv*/"
@@ -53,6 +54,16 @@ demo: $(STAMP)
 	  MUJOCO_GL=egl $(VENV)/bin/etdmp generalize --skill G --start 5 5 --goal 0 0 --method etdmp \
 	    --plot out/demo/G.png --json out/demo/G.json; \
 	fi
+
+# README pictures: the paper reproduction's figures and one built-in generalization.
+docs: $(STAMP)
+	$(VENV)/bin/etdmp reproduce --letters-dir "$(LETTERS_DIR)" \
+	  --table "$(LETTERS_DIR)/table2.json" --out out/reproduce
+	mkdir -p docs/img
+	cp out/reproduce/fig5_generalization.png out/reproduce/fig7_8_obstacles.png \
+	  out/reproduce/fig13_nrmse.png docs/img/
+	$(VENV)/bin/etdmp generalize --skill G --start -6 4 --goal 0 0 --obstacle -7.6 -4.4 \
+	  --plot docs/img/generalize_G.png
 
 # The benchmark's own environment: the project's pins plus the peer libraries it compares
 # against (movement-primitives, pydmps), which never enter .venv/.
