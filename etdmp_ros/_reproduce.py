@@ -23,8 +23,8 @@ import json
 import math
 from pathlib import Path
 
-from etdmp_ros.dmp import (clearance, GeneralizationError, learn, load_demo, OBSTACLE_MARGIN,
-                           similarity)
+from etdmp_ros.dmp import (clearance, DemonstrationError, GeneralizationError, learn, load_demo,
+                           OBSTACLE_MARGIN, similarity)
 import numpy as np
 
 METHODS = ('etdmp', 'dmp')
@@ -405,14 +405,10 @@ def _min(values):
 
 def _load_letter(letters_dir, name, table, formulation):
     path = Path(letters_dir) / f'{name}_00.csv'
-    if not path.is_file():
-        raise ReproductionError(f'letter {name!r}: demonstration file {path} not found')
     try:
         demo = load_demo(path)
-    except OSError as exc:
-        raise ReproductionError(f'cannot read {path}: {exc.strerror or exc}') from None
-    except ValueError as exc:
-        raise ReproductionError(f'{path}: {exc}') from None
+    except DemonstrationError as exc:   # its message names the file and what is wrong
+        raise ReproductionError(f'letter {name!r}: {exc}') from None
     positions = np.asarray(demo.positions, dtype=float)
     if positions.ndim != 2 or positions.shape[1] != 2:
         raise ReproductionError(f'{path}: letters must be 2D (x, y), got shape {positions.shape}')

@@ -19,7 +19,10 @@ import math
 from pathlib import Path
 import sys
 
-from etdmp_ros.dmp import OBSTACLE_MARGIN
+from etdmp_ros._reproduce import (compare_methods, format_report, METHOD_LABELS, METHODS,
+                                  reproduce, ReproductionError, write_metrics)
+from etdmp_ros.dmp import (builtin_demo, builtin_demo_names, DemonstrationError,
+                           GeneralizationError, learn, load_demo, OBSTACLE_MARGIN)
 import numpy as np
 
 PROG = 'etdmp'
@@ -111,23 +114,16 @@ def _point(values, dim, what):
 
 
 def _load_skill(args):
-    from etdmp_ros.dmp import builtin_demo, builtin_demo_names, learn, load_demo
     if args.skill is not None:
         names = builtin_demo_names()
         if args.skill not in names:
             raise UsageError(f"unknown skill {args.skill!r}; built-in skills: {', '.join(names)}")
         demo = builtin_demo(args.skill)
     else:
-        path = Path(args.demo)
-        if not path.is_file():
-            raise UsageError(f'demonstration file {path} not found')
         try:
-            demo = load_demo(path)
-        except OSError as exc:
-            raise UsageError(f'cannot read {path}: {exc.strerror or exc}') from None
-        except ValueError as exc:
-            msg = str(exc)
-            raise UsageError(msg if str(path) in msg else f'{path}: {msg}') from None
+            demo = load_demo(args.demo)
+        except DemonstrationError as exc:   # its message names the file and what is wrong
+            raise UsageError(str(exc)) from None
     try:
         return demo, learn(demo, formulation=args.formulation)
     except ValueError as exc:
@@ -151,7 +147,6 @@ def _fmt(value, spec='.4f'):
 
 
 def _cmd_generalize(args):
-    from etdmp_ros._reproduce import compare_methods, METHOD_LABELS, METHODS
     if args.dt is not None and not (math.isfinite(args.dt) and args.dt > 0):
         raise UsageError(f'--dt must be a positive number, got {args.dt}')
     if args.margin is not None and not (math.isfinite(args.margin) and args.margin >= 0):
@@ -224,7 +219,6 @@ def _cmd_generalize(args):
 
 
 def _cmd_reproduce(args):
-    from etdmp_ros._reproduce import format_report, reproduce, write_metrics
     letters_dir = Path(args.letters_dir)
     if not letters_dir.is_dir():
         raise UsageError(f'--letters-dir {letters_dir} is not a directory')
@@ -252,7 +246,6 @@ def _cmd_reproduce(args):
 
 
 def _cmd_demos(args):
-    from etdmp_ros.dmp import builtin_demo, builtin_demo_names
     plot_path = _output_path(args.plot, '--plot')
     if plot_path:
         from etdmp_ros.plotting import require_matplotlib
@@ -273,8 +266,6 @@ def _cmd_demos(args):
 
 def main(argv=None):
     """Run the ``etdmp`` command line with ``argv`` (default ``sys.argv[1:]``); return the code."""
-    from etdmp_ros._reproduce import ReproductionError
-    from etdmp_ros.dmp import DemonstrationError, GeneralizationError
     from etdmp_ros.plotting import PlottingUnavailable
     user_errors = (UsageError, ReproductionError, DemonstrationError, GeneralizationError)
     parser = _build_parser()

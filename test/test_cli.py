@@ -308,7 +308,7 @@ BAD_GENERALIZE = {
     'obstacle on goal': (['--skill', 'G', '--start', '1', '2', '--goal', '0', '0', '--obstacle',
                           '0', '0'], 'goal'),
     'missing demo file': (['--demo', '/nonexistent/demo.csv', '--start', '1', '2', '--goal', '0',
-                           '0'], 'not found'),
+                           '0'], 'no such file'),
     'bad dt': (['--skill', 'G', '--start', '1', '2', '--goal', '0', '0', '--dt', '0'], '--dt'),
     'json folder missing': (['--skill', 'G', '--start', '1', '2', '--goal', '0', '0', '--json',
                              '/nonexistent/x.json'], 'does not exist'),
