@@ -1,0 +1,108 @@
+"""
+The UR10 of ``example-robot-data`` in Pinocchio, with a tool tip frame.
+
+Frames: ``base_link`` is the URDF's base_link (Pinocchio's universe frame); the tool tip is a
+frame ``tool_tip`` at ``tool_offset`` (metres, expressed in ``tool0``) from the flange frame
+``tool0``. A pen or a stirrer held along the flange axis has ``tool_offset = (0, 0, length)``.
+
+Joint velocity limits are the stricter of the URDF's and the official UR10 (CB3) ones:
+120 deg/s for the two shoulder joints, 180 deg/s for the others.
+"""
+
+from importlib import metadata
+import os
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+JOINT_NAMES = ('shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint', 'wrist_1_joint',
+               'wrist_2_joint', 'wrist_3_joint')
+OFFICIAL_VELOCITY_LIMITS = np.radians([120.0, 120.0, 180.0, 180.0, 180.0, 180.0])
+TOOL_FRAME = 'tool_tip'
+FLANGE_FRAME = 'tool0'
+
+
+def robot_data_dir():
+    """
+    Return the ``example-robot-data`` robots folder (holding ``ur_description/``).
+
+    Looked up in this order: ``$EXAMPLE_ROBOT_DATA_DIR``, the PyPI wheel (cmeel prefix), the ROS
+    package of the same name (ament index).
+    """
+    env = os.environ.get('EXAMPLE_ROBOT_DATA_DIR')
+    candidates = [Path(env)] if env else []
+    try:
+        dist = metadata.distribution('example-robot-data')
+        candidates.append(Path(dist.locate_file('cmeel.prefix/share/example-robot-data/robots')))
+    except metadata.PackageNotFoundError:
+        pass
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        candidates.append(Path(get_package_share_directory('example-robot-data')) / 'robots')
+    except Exception:   # noqa: B902 - not a ROS install, or the package is not there
+        pass
+    for path in candidates:
+        if (path / 'ur_description' / 'urdf' / 'ur10_robot.urdf').is_file():
+            return path
+    raise FileNotFoundError(
+        'example-robot-data not found: pip install example-robot-data, install the ROS package '
+        'ros-jazzy-example-robot-data, or set EXAMPLE_ROBOT_DATA_DIR to its robots/ folder '
+        f'(looked in: {", ".join(str(c) for c in candidates) or "nothing"})')
+
+
+def ur10_urdf_path():
+    """Return the path of the UR10 URDF shipped by ``example-robot-data``."""
+    return robot_data_dir() / 'ur_description' / 'urdf' / 'ur10_robot.urdf'
+
+
+class UR10Model:
+    """
+    UR10 kinematics: forward kinematics and Jacobians of the tool tip, limits.
+
+    The Pinocchio model and data are created once and reused; call from one thread at a time
+    (or give each thread its own UR10Model).
+    """
+
+    def __init__(self, tool_offset=(0.0, 0.0, 0.0)):
+        """Load the URDF and add the ``tool_tip`` frame ``tool_offset`` metres from tool0."""
+        self.urdf_path = ur10_urdf_path()
+        self.model = pin.buildModelFromUrdf(str(self.urdf_path))
+        self.data = self.model.createData()
+        names = tuple(self.model.names[1:])
+        if names != JOINT_NAMES:
+            raise RuntimeError(f'unexpected UR10 joints in {self.urdf_path}: {names}')
+        flange = self.model.getFrameId(FLANGE_FRAME)
+        self.tool_offset = np.asarray(tool_offset, dtype=float).reshape(3)
+        parent = self.model.frames[flange]
+        placement = parent.placement * pin.SE3(np.eye(3), self.tool_offset)
+        frame = pin.Frame(TOOL_FRAME, parent.parentJoint, flange, placement,
+                          pin.FrameType.OP_FRAME)
+        self.tool_frame_id = self.model.addFrame(frame)
+        self.data = self.model.createData()
+        self.flange_frame_id = flange
+        self.lower = self.model.lowerPositionLimit.copy()
+        self.upper = self.model.upperPositionLimit.copy()
+        self.velocity_limits = np.minimum(self.model.velocityLimit, OFFICIAL_VELOCITY_LIMITS)
+
+    def frame_pose(self, q, frame_id=None):
+        """Return (position (3,), rotation (3, 3)) of a frame (default: tool tip) in base_link."""
+        frame_id = self.tool_frame_id if frame_id is None else frame_id
+        pin.forwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        pose = pin.updateFramePlacement(self.model, self.data, frame_id)
+        return pose.translation.copy(), pose.rotation.copy()
+
+    def tool_position(self, q):
+        """Return the tool tip position (3,) in base_link."""
+        return self.frame_pose(q)[0]
+
+    def tool_jacobian(self, q):
+        """
+        Return the 6x6 Jacobian of the tool tip (linear; angular) in base_link axes.
+
+        Columns are joints; rows map joint velocities to the tool tip's linear velocity and the
+        tool's angular velocity, both expressed in base_link (LOCAL_WORLD_ALIGNED).
+        """
+        q = np.asarray(q, dtype=float)
+        return pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame_id,
+                                        pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).copy()
