@@ -36,9 +36,11 @@ setup(
         'console_scripts': [
             # Offline command line (no ROS needed): generalize, reproduce the paper, plot.
             'etdmp = etdmp_ros.cli:main',
-            # ROS 2 nodes go here, one `<node> = etdmp_ros.nodes.<node>:main` line each, so that
-            # `ros2 run etdmp_ros <node>` finds them (setup.cfg puts scripts in lib/etdmp_ros):
-            # dmp_server, perception, controller, ur10_sim, bringup.
+            # ROS 2 nodes: `ros2 run etdmp_ros <node>` (setup.cfg puts scripts in lib/etdmp_ros).
+            'ur10_sim = etdmp_ros.nodes.ur10_sim:main',
+            'dmp_server = etdmp_ros.nodes.dmp_server:main',
+            'controller = etdmp_ros.nodes.controller:main',
+            'perception = etdmp_ros.nodes.perception:main',
         ],
     },
 )

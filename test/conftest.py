@@ -9,10 +9,12 @@ machine cannot hear each other.
 import itertools
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 
 import pytest
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 PKG = 'etdmp_ros'
@@ -51,13 +53,73 @@ def sourced(install, command):
     return ['sh', '-c', f'. "{install}/local_setup.sh" && exec {command}']
 
 
+def isolate_dds(patch):
+    """
+    Give this process (via ``patch``, a pytest MonkeyPatch) its own DDS domain; return the env.
+
+    A fresh ROS_DOMAIN_ID in 1..101 (the range safe from Linux's ephemeral ports) and
+    localhost-only discovery, so parallel runs on one machine cannot hear each other. Pass the
+    returned env to the node processes; rclpy in this process sees it too.
+    """
+    patch.setenv('ROS_DOMAIN_ID', str(next(_DOMAIN_IDS) % 101 + 1))
+    patch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    patch.delenv('ROS_LOCALHOST_ONLY', raising=False)
+    patch.delenv('ROS_STATIC_PEERS', raising=False)
+    patch.setenv('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    return dict(os.environ)
+
+
 @pytest.fixture
 def ros_env(monkeypatch):
-    """Isolate DDS for this test: own ROS_DOMAIN_ID, localhost-only discovery; return the env."""
-    domain = str(next(_DOMAIN_IDS) % 101 + 1)
-    monkeypatch.setenv('ROS_DOMAIN_ID', domain)
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    monkeypatch.delenv('ROS_LOCALHOST_ONLY', raising=False)
-    monkeypatch.delenv('ROS_STATIC_PEERS', raising=False)
-    monkeypatch.setenv('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
-    return dict(os.environ)
+    """Isolate DDS for this test (see isolate_dds); return the env."""
+    return isolate_dds(monkeypatch)
+
+
+@pytest.fixture(scope='module')
+def module_ros_env():
+    """Isolate DDS for a whole test module (nodes shared by its tests); return the env."""
+    with pytest.MonkeyPatch.context() as patch:
+        yield isolate_dds(patch)
+
+
+class NodeProcess:
+    """
+    An installed node started as `ros2 run etdmp_ros <node>` would be, its output in a file.
+
+    Parameters: config/scene.yaml, then config/<node>.yaml from the install's share folder, then
+    ``overrides`` written as the node's own section in a third file (a `-p name:=value` would
+    lose against the node's section of its YAML), then ``extra_args`` verbatim.
+    """
+
+    def __init__(self, install, env, tmp, node, overrides=None, name=None, extra_args=''):
+        """Start the node; ``name`` (default: the node's) names its log and override files."""
+        share = install / 'share' / PKG / 'config'
+        name = name or node
+        files = [share / 'scene.yaml', share / f'{node}.yaml']
+        if overrides:
+            files.append(tmp / f'{name}_overrides.yaml')
+            files[-1].write_text(yaml.safe_dump({node: {'ros__parameters': overrides}}))
+        command = (f'{install}/lib/{PKG}/{node} --ros-args '
+                   + ' '.join(f'--params-file {f}' for f in files) + f' {extra_args}')
+        env = dict(env, ROS_HOME=str(tmp / 'ros_home'), PYTHONUNBUFFERED='1',
+                   RCUTILS_COLORIZED_OUTPUT='0', MUJOCO_GL='egl')
+        self.log_path = tmp / f'{name}.log'
+        self._log = open(self.log_path, 'w')
+        self.process = subprocess.Popen(sourced(install, command), env=env, stdout=self._log,
+                                        stderr=subprocess.STDOUT)
+
+    def log(self):
+        """Return the node's output so far."""
+        return self.log_path.read_text()
+
+    def stop(self):
+        """SIGINT (a clean shutdown, as Ctrl-C), then kill; return the exit code."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        self._log.close()
+        return self.process.returncode

@@ -1,0 +1,451 @@
+"""
+controller: makes the UR10 tool tip follow ``/etdmp/path`` (:class:`TrajectoryController`).
+
+Subscribes ``/joint_states`` (sensor_msgs/JointState) and ``/etdmp/path`` (nav_msgs/Path,
+transient local); publishes ``/forward_velocity_controller/commands`` (std_msgs/
+Float64MultiArray, 6 joint velocities in rad/s, UR order), ``/etdmp/tool_pose``
+(geometry_msgs/PoseStamped, base_link), ``/etdmp/controller/reference`` (PoseStamped: where
+the tool should be, while following a reference), ``/etdmp/controller/tracking_error``
+(std_msgs/Float64, metres: distance from the reference to the tool tip; both stamped or sent with
+the joint state they belong to) and ``/etdmp/controller/status`` (std_msgs/String,
+transient local, on change: ``<state>`` or ``<state>: <reason>``, the states of
+:data:`etdmp_ros.robot.STATUSES`). Service ``/controller/pause`` (std_srvs/SetBool): true pauses
+(zero command at once), false resumes the path where it was paused.
+
+Timing. A control step runs when a joint state arrives, at most ``control_rate`` times per
+second (in step with the robot, as a ros2_control controller is), on the joint state's stamp
+(simulated time from ur10_sim; the receipt time if the stamp is zero). A wall-clock watchdog at
+``control_rate`` publishes zeros while joint states are older than ``joint_state_timeout`` and
+while paused; idle, halted or refused, the controller keeps sending explicit zeros, because the
+real ``forward_velocity_controller`` applies the last command forever. Path: pose ``k`` is
+timed at its stamp minus the first pose's stamp (the header stamp is ignored); a path whose
+stamps are all equal is timed by its length (``untimed_path_speed``); all-zero orientations
+mean "keep the tool's current orientation"; an empty path stops the arm (idle). Frames:
+``base_link`` or empty only. Paths arrive as raw bytes and are parsed with numpy, so a long path
+never stalls the control loop (see :mod:`etdmp_ros.ros_conversions._path_cdr`).
+"""
+
+from dataclasses import fields, replace
+import signal
+import sys
+import threading
+import time
+
+from etdmp_ros._paths import config_path
+from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, read_parameter_file,
+                             trajectory_from_path, TrajectoryController, TrajectoryError,
+                             UR10Model)
+from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr,
+                                       stamp_to_ns, velocity_command_msg)
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Path
+import numpy as np
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray, String
+from std_srvs.srv import SetBool
+
+NODE_NAME = 'controller'
+JOINT_STATES_TOPIC = '/joint_states'
+PATH_TOPIC = '/etdmp/path'
+COMMAND_TOPIC = '/forward_velocity_controller/commands'
+TOOL_POSE_TOPIC = '/etdmp/tool_pose'
+STATUS_TOPIC = '/etdmp/controller/status'
+ERROR_TOPIC = '/etdmp/controller/tracking_error'
+REFERENCE_TOPIC = '/etdmp/controller/reference'
+FRAMES = ('', 'base_link')
+#: Zero commands sent on exit, a few ms apart (a lost one would leave the arm moving).
+EXIT_ZEROS = 3
+#: s a path received before the first joint state waits for one (e.g. a latched path).
+WAIT_FOR_JOINT_STATES = 5.0
+
+# name -> (description, (min, max) or None, changeable at runtime). Defaults: the YAML files.
+PARAMETERS = {
+    'control_rate': ('Hz, commands per second at most (125: UR10 CB3, 500: e-series)',
+                     (1.0, 1000.0), False),
+    'actuation_delay': ('s from a measurement to its command taking effect; -1 = one control '
+                        'period (real UR through ros2_control), 0 for ur10_sim', (-1.0, 0.5),
+                        False),
+    'estimate_delay': ('estimate the actuation delay online from the joint motion (0 to 2 '
+                       'periods; actuation_delay is the starting value)', None, True),
+    'joint_state_timeout': ('s without joint states before the command is forced to zero',
+                            (0.001, 10.0), True),
+    'position_gain': ('1/s, position error feedback (below control_rate)', (0.0, 1000.0), True),
+    'orientation_gain': ('1/s, orientation error feedback (below control_rate)', (0.0, 1000.0),
+                         True),
+    'singular_value_threshold': ('damping starts when the smallest singular value of the tool '
+                                 'Jacobian falls below this', (0.0, 1.0), False),
+    'max_damping': ('damping lambda at a singularity', (0.0, 1.0), False),
+    'condition_slowdown': ('Jacobian condition number where slowing down starts', (1.0, 1e6),
+                           False),
+    'condition_halt': ('Jacobian condition number where the arm halts', (1.0, 1e6), False),
+    'posture_gain': ('1/s, null-space pull towards initial_joint_positions (0 = off)',
+                     (0.0, 100.0), False),
+    'velocity_scale': ('fraction of the UR10 joint velocity limits', (0.01, 1.0), False),
+    'joint_acceleration_limits': ('rad/s^2 per joint, UR order', None, False),
+    'joint_limit_margin': ('rad kept from each joint position limit', (0.0, 0.5), False),
+    'approach_speed': ('m/s, peak tool speed of the approach to a path', (0.001, 1.0), True),
+    'approach_angular_speed': ('rad/s, peak tool rotation speed of the approach', (0.001, 3.0),
+                               True),
+    'approach_acceleration': ('m/s^2, peak tool acceleration of the approach', (0.01, 10.0),
+                              True),
+    'approach_tolerance': ('m; a path starting closer to the tool (at rest) needs no approach',
+                           (0.0, 0.1), True),
+    'approach_angle_tolerance': ('rad; the same for the orientation', (0.0, 0.5), True),
+    'resume_ramp_time': ('s for the path clock to ramp back to full speed after a pause',
+                         (0.0, 10.0), True),
+    'hold_time': ('s holding the last pose before sending zeros', (0.0, 60.0), True),
+    'max_tracking_error': ('m; a larger tracking error stops the arm (unreachable)',
+                           (0.001, 1.0), True),
+    'untimed_path_speed': ('m/s, peak speed given to a path without timing', (0.001, 1.0),
+                           True),
+    'untimed_path_angular_speed': ('rad/s, the same for rotations', (0.001, 3.0), True),
+    'check_paths': ('check each path with position IK before moving (reach, joint limits, '
+                    'singularities)', None, True),
+}
+SCENE_PARAMETERS = {
+    'tool_offset': 'm, tool tip in the flange frame tool0 (config/scene.yaml)',
+    'initial_joint_positions': 'rad, the posture of posture_gain (config/scene.yaml)',
+}
+# Node parameters that are fields of ControllerConfig under another name.
+CONFIG_NAMES = {'control_rate': 'rate', 'joint_acceleration_limits': 'acceleration_limits'}
+
+
+def _descriptor(name, description, value_range, dynamic):
+    descriptor = ParameterDescriptor(name=name, description=description,
+                                     read_only=not dynamic)
+    if value_range is not None:
+        descriptor.floating_point_range = [FloatingPointRange(
+            from_value=float(value_range[0]), to_value=float(value_range[1]), step=0.0)]
+    return descriptor
+
+
+def _float_list(value):
+    return [float(v) for v in value] if isinstance(value, (list, tuple)) else value
+
+
+class ControllerNode(Node):
+    """The controller node: joint states and paths in, joint velocity commands out."""
+
+    def __init__(self, **kwargs):
+        """Declare parameters, build the controller, create the topics and the service."""
+        super().__init__(NODE_NAME, **kwargs)
+        params = self._declare_parameters()
+        self.config = self._config(params)
+        self.timeout = params['joint_state_timeout']
+        self.untimed_speed = (params['untimed_path_speed'], params['untimed_path_angular_speed'])
+        self.check_paths = params['check_paths']
+        self.model = UR10Model(tool_offset=params['tool_offset'])
+        self.controller = TrajectoryController(self.model, self.config)
+        self.period = self.controller.period
+
+        self._lock = threading.Lock()           # guards the controller and the fields below
+        self._q = None                          # latest joint positions
+        self._rotation = None                   # tool rotation at _q
+        self._last_receipt = None               # time.monotonic() of the latest joint state
+        self._last_step = None                  # stamp (s) of the latest control step
+        self._stale = False
+        self._status = None
+        self._path_generation = 0
+        self._tracked = [0, 0.0, 0.0]           # steps, sum of squared errors, max error
+        self._check_lock = threading.Lock()
+
+        self._command_pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, 10)
+        self._pose_pub = self.create_publisher(PoseStamped, TOOL_POSE_TOPIC, 10)
+        self._error_pub = self.create_publisher(Float64, ERROR_TOPIC, 10)
+        self._reference_pub = self.create_publisher(PoseStamped, REFERENCE_TOPIC, 10)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._status_pub = self.create_publisher(String, STATUS_TOPIC, latched)
+        # Depth 1: after a stall only the newest joint state matters (no backlog of old ones).
+        self.create_subscription(JointState, JOINT_STATES_TOPIC, self._on_joint_state,
+                                 QoSProfile(depth=1))
+        self.create_subscription(Path, PATH_TOPIC, self._on_path, latched, raw=True)
+        self.create_service(SetBool, '~/pause', self._on_pause)
+        self.create_timer(self.period, self._watchdog,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._publish_status()
+        self.get_logger().info(
+            f'following {PATH_TOPIC} at up to {self.config.rate:g} Hz, tool offset '
+            f'{np.round(self.model.tool_offset, 4).tolist()} m, actuation delay '
+            f'{self.controller.delay * 1000:.1f} ms; pause: {self.get_name()}/pause')
+
+    # ---------------------------------------------------------------------------- parameters
+    def _declare_parameters(self):
+        defaults = read_parameter_file(config_path('scene.yaml'), NODE_NAME)
+        defaults.update(read_parameter_file(config_path('controller.yaml'), NODE_NAME))
+        for name, description in SCENE_PARAMETERS.items():
+            self.declare_parameter(name, _float_list(defaults[name]),
+                                   ParameterDescriptor(name=name, description=description,
+                                                       read_only=True))
+        for name, (description, value_range, dynamic) in PARAMETERS.items():
+            value = defaults[name]
+            if value_range is not None and isinstance(value, int):
+                value = float(value)
+            self.declare_parameter(name, _float_list(value),
+                                   _descriptor(name, description, value_range, dynamic))
+        names = list(SCENE_PARAMETERS) + list(PARAMETERS)
+        return {name: self.get_parameter(name).value for name in names}
+
+    @staticmethod
+    def _config(params, base=None):
+        """Return a validated ControllerConfig from parameter values (ValueError if bad)."""
+        fields_ = {f.name for f in fields(ControllerConfig)}
+        values = {}
+        for name, value in params.items():
+            key = CONFIG_NAMES.get(name, name)
+            if key in fields_:
+                values[key] = tuple(value) if isinstance(value, (list, tuple)) else value
+        if 'actuation_delay' in values and values['actuation_delay'] < 0:
+            values['actuation_delay'] = None
+        if 'posture_gain' in params and 'initial_joint_positions' in params:
+            values['posture'] = tuple(params['initial_joint_positions'])
+        if 'acceleration_limits' in values and len(values['acceleration_limits']) != 6:
+            raise ValueError('joint_acceleration_limits must have 6 values (UR joint order)')
+        config = replace(base, **values) if base is not None else ControllerConfig(**values)
+        config.validate()
+        if config.condition_halt <= config.condition_slowdown:
+            raise ValueError('condition_halt must be above condition_slowdown')
+        return config
+
+    def _validate_parameters(self, parameters):
+        changes = {p.name: p.value for p in parameters if p.name in PARAMETERS}
+        try:
+            self._config(changes, base=self.config)
+        except (ValueError, TypeError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters):
+        changes = {p.name: p.value for p in parameters if p.name in PARAMETERS}
+        with self._lock:
+            new = self._config(changes, base=self.config)
+            for f in fields(ControllerConfig):
+                setattr(self.controller.config, f.name, getattr(new, f.name))
+            self.timeout = changes.get('joint_state_timeout', self.timeout)
+            self.check_paths = changes.get('check_paths', self.check_paths)
+            self.untimed_speed = (changes.get('untimed_path_speed', self.untimed_speed[0]),
+                                  changes.get('untimed_path_angular_speed',
+                                              self.untimed_speed[1]))
+
+    # ------------------------------------------------------------------------------ control
+    def _on_joint_state(self, msg):
+        receipt = time.monotonic()
+        try:
+            q, _ = joint_state_arrays(msg)
+        except ValueError as exc:
+            self.get_logger().warning(f'joint state ignored: {exc}', throttle_duration_sec=2.0)
+            return
+        stamp = stamp_to_ns(msg.header.stamp)
+        if stamp == 0:      # unstamped: measured when received
+            stamp = self.get_clock().now().nanoseconds
+        t = stamp * 1e-9
+        with self._lock:
+            self._last_receipt = receipt
+            self._q = q
+            if self._last_step is not None and self._last_step - 1e-9 <= t \
+                    < self._last_step + 0.75 * self.period and not self._stale:
+                return      # joint states faster than control_rate: step at control_rate
+            if self._stale:
+                self._stale = False
+                self.get_logger().info('joint states are back')
+            self._last_step = t
+            command = self.controller.step(q, t)
+            self._summarize(command)
+            self._rotation = command.tool_rotation
+            self._publish_command(command.qd)
+            self._publish_feedback(command, ns_to_stamp(stamp))
+            self._publish_status()
+
+    def _summarize(self, command):
+        """Accumulate the tracking error of a path; log a summary when its tracking ends."""
+        tracked = self._tracked
+        if command.status == 'tracking':
+            tracked[0] += 1
+            tracked[1] += command.tracking_error ** 2
+            tracked[2] = max(tracked[2], command.tracking_error)
+        elif tracked[0]:
+            self.get_logger().info(
+                f'path tracked: error RMS {np.sqrt(tracked[1] / tracked[0]) * 1e3:.3f} mm, max '
+                f'{tracked[2] * 1e3:.3f} mm over {tracked[0]} steps; actuation delay estimate '
+                f'{self.controller.delay * 1e3:.1f} ms')
+            self._tracked = [0, 0.0, 0.0]
+
+    def _watchdog(self):
+        with self._lock:
+            now = time.monotonic()
+            if self._last_receipt is None or now - self._last_receipt > self.timeout:
+                if not self._stale:
+                    self._stale = True
+                    age = ('never received' if self._last_receipt is None else
+                           f'none for {now - self._last_receipt:.3f} s')
+                    reason = f'joint states on {JOINT_STATES_TOPIC} are stale ({age})'
+                    self.controller.input_lost(reason)
+                    if self._last_receipt is not None:
+                        self.get_logger().error(f'{reason}: zero velocity command')
+                self._publish_command(np.zeros(6))
+                self._publish_status()
+
+    def _publish_command(self, qd):
+        self._command_pub.publish(velocity_command_msg(qd))
+
+    def _publish_feedback(self, command, stamp):
+        self._pose_pub.publish(_pose_msg(command.tool_position, command.tool_rotation, stamp))
+        if command.reference_position is not None:
+            self._reference_pub.publish(_pose_msg(command.reference_position,
+                                                  command.reference_rotation, stamp))
+            self._error_pub.publish(Float64(data=float(command.tracking_error)))
+
+    def _publish_status(self):
+        status = self.controller.status
+        reason = self.controller.reason
+        text = f'{status}: {reason}' if reason else status
+        if text == self._status:
+            return
+        self._status = text
+        self._status_pub.publish(String(data=text))
+        if status in ('halted-singularity', 'halted-joint-limit', 'unreachable'):
+            self.get_logger().error(f'{status}: {reason}; zero velocity command')
+        else:
+            self.get_logger().info(f'status: {text}')
+
+    # ------------------------------------------------------------------------- path, pause
+    def _on_path(self, data):
+        try:
+            frame, pose_frames, stamps, positions, quaternions = path_from_cdr(data)
+        except ValueError as exc:
+            self.get_logger().error(f'path ignored: {exc}')
+            return
+        bad = ({frame} | pose_frames) - set(FRAMES)
+        if bad:
+            self.get_logger().error(f'path ignored: frame {sorted(bad)[0]!r} is not base_link '
+                                    '(no TF here: send paths in base_link)')
+            return
+        with self._lock:
+            self._path_generation += 1
+            if len(stamps) == 0:
+                self.controller.cancel('empty path received')
+                self._publish_status()
+                return
+        # Checking a path takes milliseconds: not in the executor, which runs the control steps.
+        threading.Thread(target=self._accept_path, daemon=True, name='path_check',
+                         args=(self._path_generation, stamps, positions, quaternions)).start()
+
+    def _accept_path(self, generation, stamps, positions, quaternions):
+        """Time, check and hand over a received path (worker thread; the newest path wins)."""
+        q, rotation = self._wait_for_robot()
+        if q is None:
+            self.get_logger().error(f'path ignored: no joint states for {WAIT_FOR_JOINT_STATES:g}'
+                                    f' s, the robot pose is unknown (is {JOINT_STATES_TOPIC} '
+                                    'published?)')
+            return
+        try:
+            path = trajectory_from_path(stamps, positions, quaternions, rotation,
+                                        *self.untimed_speed)
+        except TrajectoryError as exc:
+            self.get_logger().error(f'path ignored: {exc}')
+            return
+        with self._check_lock:      # one check at a time: the checker has one model
+            reason = self.controller.check(path, q) if self.check_paths else ''
+        with self._lock:
+            if generation != self._path_generation:
+                return              # a newer path arrived meanwhile
+            if reason:
+                self.controller.reject(reason)
+            else:
+                self.controller.follow(path)
+                self.get_logger().info(f'new path: {len(stamps)} poses over '
+                                       f'{path.duration:.2f} s')
+            self._publish_status()
+
+    def _wait_for_robot(self):
+        """Return (q, tool rotation) once a control step has run (None, None on timeout)."""
+        deadline = time.monotonic() + WAIT_FOR_JOINT_STATES
+        while rclpy.ok(context=self.context):
+            with self._lock:
+                if self._rotation is not None:
+                    return self._q.copy(), self._rotation.copy()
+            if time.monotonic() > deadline:
+                break
+            time.sleep(0.01)
+        return None, None
+
+    def _on_pause(self, request, response):
+        with self._lock:
+            self.controller.set_paused(bool(request.data))
+            if request.data:
+                self._publish_command(np.zeros(6))
+            self._publish_status()
+        response.success = True
+        response.message = 'paused: zero velocity' if request.data else 'resumed'
+        return response
+
+    # -------------------------------------------------------------------------------- exit
+    def send_zeros(self):
+        """Publish zero velocity a few times (on exit: before the context shuts down)."""
+        with self._lock:
+            self.controller.shutdown()
+            for _ in range(EXIT_ZEROS):
+                self._publish_command(np.zeros(6))
+                time.sleep(0.005)
+            self._publish_status()
+        self._command_pub.wait_for_all_acked(Duration(seconds=0.2))
+
+
+def _pose_msg(position, rotation, stamp):
+    pose = PoseStamped()
+    pose.header.stamp = stamp
+    pose.header.frame_id = 'base_link'
+    p = pose.pose.position
+    p.x, p.y, p.z = (float(v) for v in position)
+    o = pose.pose.orientation
+    o.x, o.y, o.z, o.w = (float(v) for v in matrix_to_quaternion(rotation))
+    return pose
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def main(args=None):
+    """Run the controller until Ctrl-C (or SIGTERM); send zero velocity before exiting."""
+    # Our own signal handling: rclpy's would shut the context down before the zeros are sent.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    # Installed explicitly: a shell starts background jobs with SIGINT ignored.
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
+    # Let the control steps preempt a path check (worker thread) within 1 ms instead of 5 ms.
+    sys.setswitchinterval(0.001)
+    node = None
+    try:
+        node = ControllerNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException) as exc:   # bad parameter: say which, no traceback
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
+        return 1
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)    # a second Ctrl-C must not skip the zeros
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        if node is not None:
+            try:
+                node.send_zeros()
+            except Exception as exc:   # noqa: B902 - context already gone: nothing to send on
+                rclpy.logging.get_logger(NODE_NAME).warning(f'could not send zeros: {exc}')
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

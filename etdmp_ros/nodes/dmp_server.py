@@ -1,0 +1,622 @@
+"""
+dmp_server: learn skills from recorded demonstrations and serve ``/generalize`` (SPEC §4-6).
+
+``ros2 run etdmp_ros dmp_server --ros-args --params-file config/scene.yaml --params-file
+config/dmp_server.yaml``. The logic lives in ROS-free modules: :mod:`etdmp_ros.skill_library`
+(demonstrations → skills, persistence), :mod:`etdmp_ros.task_plane` and
+:mod:`etdmp_ros.planning` (request → timed base_link path). This node converts messages and
+parameters and keeps the latest inputs.
+
+Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward kinematics) or
+``/etdmp/tool_pose``, ``/etdmp/goal``, ``/etdmp/obstacles``, ``/etdmp/demonstrations`` (teaching);
+serves ``/generalize`` (nav_msgs/srv/GetPlan); publishes ``/etdmp/path`` (transient local) and
+``/etdmp/markers``.
+
+Threads: a MultiThreadedExecutor; the service runs in a reentrant callback group, so calls are
+served concurrently. ``_state_lock`` guards the latest inputs and the Pinocchio model,
+``_core_lock`` the skills' rollouts (their caches are not thread-safe; a rollout takes well under
+a millisecond), and the skill library has its own lock. Settings are an immutable snapshot,
+replaced whole when parameters change.
+"""
+
+from dataclasses import dataclass, replace
+import math
+import pathlib
+import threading
+import time
+
+from etdmp_ros._paths import config_path
+from etdmp_ros.dmp import builtin_demo, builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
+from etdmp_ros.planning import place_demo, plan_path, PlanSettings, TOOL_DOWN, Workspace
+from etdmp_ros.robot import read_parameter_file, UR10Model
+from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_numpy, path_to_numpy,
+                                       point_to_numpy, points_from_numpy, pose_array_to_numpy,
+                                       serialize_path)
+from etdmp_ros.skill_library import (BASE_FRAMES, check_skill_name, default_skills_dir,
+                                     RECORDED_DIMS, recorded_path_demo, save_skill_demo,
+                                     SkillLibrary)
+from etdmp_ros.task_plane import TaskPlane
+from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
+from nav_msgs.msg import Path
+from nav_msgs.srv import GetPlan
+import numpy as np
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterUninitializedException)
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
+from sensor_msgs.msg import JointState
+from visualization_msgs.msg import Marker, MarkerArray
+
+NODE_NAME = 'dmp_server'
+TOOL_SOURCES = ('joint_states', 'tool_pose')
+#: Executor threads: the service is reentrant; the GIL limits gains beyond a few.
+EXECUTOR_THREADS = 4
+_LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_THROTTLE = 5.0   # s between repeated warnings about the same bad input
+
+
+def _range(low, high):
+    return {'floating_point_range': [FloatingPointRange(from_value=float(low),
+                                                        to_value=float(high))]}
+
+
+def _int_range(low, high):
+    return {'integer_range': [IntegerRange(from_value=low, to_value=high, step=1)]}
+
+
+_STRING_ARRAY, _DOUBLE_ARRAY = Parameter.Type.STRING_ARRAY, Parameter.Type.DOUBLE_ARRAY
+
+# name, default, description, descriptor extras. Types follow the defaults; read_only ones are
+# used at start-up only.
+PARAMETERS = (
+    ('skill', 'G', 'Active skill planned by /generalize (a known or later taught skill name).',
+     {}),
+    ('builtin_skills', builtin_demo_names(), 'Built-in demonstrations learned at start-up.',
+     {'read_only': True}),
+    ('demo_files', [], 'Demonstration files or folders learned at start-up (.csv .npy .npz '
+     '.mcap); the skill is named after the file stem.',
+     {'read_only': True, 'type': _STRING_ARRAY}),
+    ('mcap_topic', '', 'Topic (PoseStamped or Path) to learn from in .mcap files; empty = the '
+     'only such topic.', {'read_only': True}),
+    ('recorded_dim', 'auto', 'How a recorded or taught base_link path becomes a skill: 2d '
+     '(projected onto the task plane), 3d (base_link) or auto (2d when flat and parallel to the '
+     'plane).', {'additional_constraints': 'one of ' + ', '.join(RECORDED_DIMS)}),
+    ('plane_tolerance', 0.01, 'm; recorded_dim auto: a path whose heights above the task plane '
+     'spread less than this is a 2D skill.', _range(0.0, 1.0)),
+    ('skills_dir', '', 'Folder where taught skills are saved and loaded from at start-up; '
+     'empty = $ROS_HOME/etdmp_ros/skills or ~/.ros/etdmp_ros/skills.', {'read_only': True}),
+    ('teach_skill_name', 'taught', 'Name of the skill a Path on /etdmp/demonstrations becomes '
+     '(replacing a skill of that name).', {}),
+    ('formulation', 'ijspeert', 'DMP formulation.',
+     {'additional_constraints': 'one of ' + ', '.join(FORMULATIONS)}),
+    ('n_basis', 100, 'Basis functions of the forcing term.', _int_range(2, 1000)),
+    ('method', 'etdmp', 'etdmp (Euclidean transformation DMP) or dmp (the plain baseline).',
+     {'additional_constraints': 'one of ' + ', '.join(METHODS)}),
+    ('mode', 1, '3D skills: 1 = Rodrigues rotation, 2 = independent axis (1D rule) + 2D rule.',
+     _int_range(1, 2)),
+    ('independent_axis', 2, 'Mode 2: the axis following the 1D rule (0 x, 1 y, 2 z).',
+     _int_range(0, 2)),
+    ('duration', 0.0, "s; tau of a plan; 0 = the demonstration's own duration.",
+     _range(0.0, 600.0)),
+    ('output_period', 0.01, 's between the poses of a plan.', _range(0.001, 1.0)),
+    ('tool_orientation', list(TOOL_DOWN), 'Tool orientation (x, y, z, w) in base_link of every '
+     'pose of a plan (normalised).', {}),
+    ('obstacle_gamma', 250.0, 'Steering gain gamma (paper Eq. 24).', _range(0.0, 1e5)),
+    ('obstacle_beta', 20.0 / math.pi, 'Steering decay beta (paper Eq. 24).', _range(0.0, 1e3)),
+    ('obstacle_gamma2', 300.0, 'Distance gain gamma2 (paper Eq. 26).', _range(0.0, 1e5)),
+    ('obstacle_k', 0.0, '1/m; distance decay k (paper Eq. 26); 0 = obstacle_k_relative / '
+     '|start - goal|.', _range(0.0, 1e4)),
+    ('obstacle_k_relative', 10.0, 'k times |start - goal| when obstacle_k is 0.',
+     _range(0.0, 1e3)),
+    ('obstacle_margin', 0.5, 'Extra time, as a fraction of tau, of a plan with obstacles.',
+     _range(0.0, 10.0)),
+    ('obstacle_max_age', 2.0, 's; /etdmp/obstacles older than this are ignored; 0 = no limit.',
+     _range(0.0, 86400.0)),
+    ('static_obstacles', [], 'Obstacle points always used, flat [x1, y1, z1, x2, ...] in '
+     'base_link (m).', {'type': _DOUBLE_ARRAY}),
+    ('goal_clearance', 0.02, 'm; a request with an obstacle closer than this to the goal fails.',
+     _range(0.0, 1.0)),
+    ('min_distance', 0.005, 'm; start and goal closer than this fail the request (start equals '
+     'goal).', _range(0.0, 1.0)),
+    ('tool_position_source', 'joint_states', 'Tool position for an empty start frame: '
+     'joint_states (UR10 forward kinematics) or tool_pose (/etdmp/tool_pose).',
+     {'additional_constraints': 'one of ' + ', '.join(TOOL_SOURCES)}),
+    ('tool_state_max_age', 1.0, 's; an older tool state counts as unknown; 0 = no limit.',
+     _range(0.0, 86400.0)),
+    ('goal_max_age', 0.0, 's; an older /etdmp/goal counts as none; 0 = no limit.',
+     _range(0.0, 86400.0)),
+    ('reach_radius', 1.3, 'm; UR10 reach about the shoulder (reach check).', _range(0.1, 5.0)),
+    ('reach_margin', 0.15, 'm subtracted from reach_radius (reach check).', _range(0.0, 1.0)),
+    ('min_reach_radius', 0.2, "m; points closer to the base's z axis are out of reach.",
+     _range(0.0, 1.0)),
+    ('min_height', -0.005, 'm; points below this z (table top z = 0) are out of reach.',
+     _range(-2.0, 2.0)),
+    ('execute', True, 'Publish each plan on /etdmp/path for the controller.', {}),
+    ('publish_markers', True, 'Publish /etdmp/markers (built only while subscribed).', {}),
+    ('task_plane.origin', [0.75, 0.15, 0.0], 'Task plane origin in base_link (m).', {}),
+    ('task_plane.x_axis', [1.0, 0.0, 0.0], 'Task plane x axis in base_link.', {}),
+    ('task_plane.y_axis', [0.0, 1.0, 0.0], 'Task plane y axis in base_link (orthogonal to x).',
+     {}),
+    ('task_plane.scale', 0.02, 'Metres per demo unit of 2D skills.', _range(1e-5, 10.0)),
+    ('tool_offset', [0.0, 0.0, 0.16], 'Tool tip in the flange frame tool0 (m).',
+     {'read_only': True}),
+)
+_DEFAULTS = {name: default for name, default, _, _ in PARAMETERS}
+
+
+def _file_defaults():
+    """
+    Return the defaults, taken where possible from the installed scene.yaml and dmp_server.yaml.
+
+    So a node started without parameter files still uses the one description of the workcell.
+    A file value replaces a built-in default only if it has the same type (ints count as floats).
+    """
+    defaults = dict(_DEFAULTS)
+    try:
+        found = read_parameter_file(config_path('scene.yaml'), NODE_NAME)
+        found.update(read_parameter_file(config_path('dmp_server.yaml'), NODE_NAME))
+    except (OSError, ValueError):   # no share folder (e.g. a bare copy of the module): built-ins
+        return defaults
+    for name, value in found.items():
+        default = defaults.get(name)
+        if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        elif isinstance(default, list) and isinstance(value, list) and default and \
+                isinstance(default[0], float):
+            value = [float(v) if isinstance(v, int) else v for v in value]
+        if name in defaults and type(value) is type(default):
+            defaults[name] = value
+    return defaults
+
+
+def _choice(values, name, choices):
+    if values[name] not in choices:
+        raise ValueError(f'{name} must be one of {", ".join(choices)}, got {values[name]!r}')
+    return values[name]
+
+
+@dataclass(frozen=True, eq=False)
+class Settings:
+    """Everything a request or an input callback needs, validated; replaced whole on change."""
+
+    skill: str
+    formulation: str
+    n_basis: int
+    plan: PlanSettings
+    plane: TaskPlane
+    static_obstacles: np.ndarray
+    obstacle_max_age: float
+    goal_max_age: float
+    tool_position_source: str
+    tool_state_max_age: float
+    teach_skill_name: str
+    recorded_dim: str
+    plane_tolerance: float
+    execute: bool
+    publish_markers: bool
+
+    @classmethod
+    def from_values(cls, values):
+        """Build from {parameter name: value}; raise ValueError saying what is wrong."""
+        check_skill_name(values['skill'])
+        check_skill_name(values['teach_skill_name'])
+        static = np.asarray(values['static_obstacles'], dtype=float)
+        if static.size % 3 or not np.all(np.isfinite(static)):
+            raise ValueError('static_obstacles must be finite numbers x1, y1, z1, x2, ... '
+                             f'(a multiple of 3), got {len(static)} values')
+        gains = ObstacleGains(gamma=values['obstacle_gamma'], beta=values['obstacle_beta'],
+                              gamma2=values['obstacle_gamma2'],
+                              k_relative=values['obstacle_k_relative'])
+        workspace = Workspace(reach=values['reach_radius'], margin=values['reach_margin'],
+                              min_radius=values['min_reach_radius'],
+                              min_height=values['min_height'])
+        plan = PlanSettings(
+            method=_choice(values, 'method', METHODS), mode=values['mode'],
+            independent_axis=values['independent_axis'], duration=values['duration'],
+            output_period=values['output_period'], gains=gains, obstacle_k=values['obstacle_k'],
+            obstacle_margin=values['obstacle_margin'], goal_clearance=values['goal_clearance'],
+            min_distance=values['min_distance'], orientation=values['tool_orientation'],
+            workspace=workspace)
+        plane = TaskPlane.create(values['task_plane.origin'], values['task_plane.x_axis'],
+                                 values['task_plane.y_axis'], values['task_plane.scale'])
+        return cls(
+            skill=values['skill'], formulation=_choice(values, 'formulation', FORMULATIONS),
+            n_basis=values['n_basis'], plan=plan, plane=plane,
+            static_obstacles=static.reshape(-1, 3), obstacle_max_age=values['obstacle_max_age'],
+            goal_max_age=values['goal_max_age'],
+            tool_position_source=_choice(values, 'tool_position_source', TOOL_SOURCES),
+            tool_state_max_age=values['tool_state_max_age'],
+            teach_skill_name=values['teach_skill_name'],
+            recorded_dim=_choice(values, 'recorded_dim', RECORDED_DIMS),
+            plane_tolerance=values['plane_tolerance'], execute=values['execute'],
+            publish_markers=values['publish_markers'])
+
+
+class InvalidConfiguration(Exception):
+    """The node's start-up parameters are unusable (the reason has been logged)."""
+
+
+class _Latest:
+    """A value received on a topic and when (time.monotonic), or nothing yet."""
+
+    __slots__ = ('value', 'received')
+
+    def __init__(self):
+        self.value, self.received = None, None
+
+    def update(self, value):
+        self.value, self.received = value, time.monotonic()
+
+    def fresh(self, max_age):
+        """Return the value if it is not older than max_age seconds (0: any age), else None."""
+        if self.value is None or (max_age > 0.0 and time.monotonic() - self.received > max_age):
+            return None
+        return self.value
+
+    def age(self):
+        return time.monotonic() - self.received
+
+
+class DmpServer(Node):
+    """The /generalize service node: skills, latest inputs, plans, markers."""
+
+    def __init__(self, **kwargs):
+        """Declare parameters, learn the skills, warm up, then start serving."""
+        super().__init__(NODE_NAME, **kwargs)
+        log = self.get_logger()
+        self._defaults = _file_defaults()
+        try:
+            for name, _, description, extra in PARAMETERS:
+                extra = dict(extra)
+                kind = extra.pop('type', None)
+                descriptor = ParameterDescriptor(description=description, **extra)
+                default = self._defaults[name]
+                # An empty list has no ROS type: declare the type alone (unset means empty).
+                self.declare_parameter(name, default if kind is None or default else kind,
+                                       descriptor)
+            self._settings = Settings.from_values(self._values())
+        except (InvalidParameterValueException, InvalidParameterTypeException, ValueError) as err:
+            log.fatal(f'invalid parameter: {err}')
+            raise InvalidConfiguration(str(err)) from None
+        settings = self._settings
+        self._state_lock = threading.Lock()
+        self._core_lock = threading.Lock()
+        self._joint_state = _Latest()
+        self._tool_pose = _Latest()
+        self._goal = _Latest()
+        self._obstacles = _Latest()
+        try:
+            self._model = UR10Model(tool_offset=self.get_parameter('tool_offset').value)
+        except (OSError, ValueError) as err:   # no example-robot-data, or a bad tool_offset
+            log.fatal(f'cannot load the UR10 model: {err}')
+            raise InvalidConfiguration(str(err)) from None
+        skills_dir = self.get_parameter('skills_dir').value
+        self._skills_dir = skills_dir or str(default_skills_dir())
+        self._library = SkillLibrary(settings.formulation, settings.n_basis)
+        self._learn_skills(settings)
+        self._warm_up()
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+        inputs = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(JointState, '/joint_states', self._on_joint_state,
+                                 qos_profile_sensor_data, callback_group=inputs)
+        self.create_subscription(PoseStamped, '/etdmp/tool_pose', self._on_tool_pose,
+                                 qos_profile_sensor_data, callback_group=inputs)
+        self.create_subscription(PointStamped, '/etdmp/goal', self._on_goal, 10,
+                                 callback_group=inputs)
+        self.create_subscription(PoseArray, '/etdmp/obstacles', self._on_obstacles, 10,
+                                 callback_group=inputs)
+        self.create_subscription(Path, '/etdmp/demonstrations', self._on_demonstration, 10,
+                                 callback_group=MutuallyExclusiveCallbackGroup())
+        self._path_pub = self.create_publisher(Path, '/etdmp/path', _LATCHED)
+        self._marker_pub = self.create_publisher(MarkerArray, '/etdmp/markers', _LATCHED)
+        self._pending_markers = None
+        self._marker_trigger = self.create_guard_condition(
+            self._publish_markers, callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(GetPlan, '/generalize', self._on_generalize,
+                            callback_group=ReentrantCallbackGroup())
+        log.info(f'serving /generalize with skill {settings.skill!r} '
+                 f'({settings.plan.method}); skills: {", ".join(self._library.names())}')
+
+    # -- parameters -------------------------------------------------------------------------------
+
+    def _values(self, changes=()):
+        values = {}
+        for name in _DEFAULTS:
+            try:
+                values[name] = self.get_parameter(name).value
+            except ParameterUninitializedException:   # an empty YAML list leaves it unset
+                values[name] = self._defaults[name]
+        for param in changes:
+            unset = param.type_ == param.Type.NOT_SET
+            values[param.name] = self._defaults.get(param.name) if unset else param.value
+        return values
+
+    def _validate_parameters(self, params):
+        try:
+            settings = Settings.from_values(self._values(params))
+        except ValueError as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        if any(p.name == 'skill' for p in params) and settings.skill not in self._library:
+            self.get_logger().warn(f'skill {settings.skill!r} is not known (yet): requests fail '
+                                   'until it is taught; known: '
+                                   f'{", ".join(self._library.names())}')
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params):
+        settings = Settings.from_values(self._values())
+        self._library.formulation, self._library.n_basis = settings.formulation, settings.n_basis
+        self._settings = settings
+
+    # -- skills -------------------------------------------------------------------------------
+
+    def _learn_skills(self, settings):
+        log = self.get_logger()
+        started = time.perf_counter()
+        for name in self.get_parameter('builtin_skills').value:
+            try:
+                self._library.add(name, builtin_demo(name), 'built-in')
+            except ValueError as err:
+                log.error(f'built-in skill {name!r} not learned: {err}')
+        taught = pathlib.Path(self._skills_dir).expanduser()
+        sources = (('demo_files', self._values()['demo_files']),
+                   ('skills_dir', [taught] if taught.is_dir() else []))
+        for what, paths in sources:
+            added, errors = self._library.add_files(
+                paths, settings.plane, mcap_topic=self.get_parameter('mcap_topic').value or None,
+                recorded_dim=settings.recorded_dim, plane_tolerance=settings.plane_tolerance)
+            for message in errors:
+                log.error(f'{what}: demonstration not learned: {message}')
+            for entry in added:
+                log.info(f'learned skill {entry.name!r} ({entry.demo.dim}D, '
+                         f'{entry.demo.n_samples} samples) from {entry.source}')
+        log.info(f'learned {len(self._library)} skills in '
+                 f'{(time.perf_counter() - started) * 1e3:.0f} ms')
+        if settings.skill not in self._library:
+            log.warn(f'the active skill {settings.skill!r} is not known: requests fail until it '
+                     'is taught or the parameter skill is changed')
+
+    def _warm_up(self):
+        """Run a plan per skill so numba compiles (or loads) the rollout before the first call."""
+        started = time.perf_counter()
+        for name in self._library.names():
+            skill = self._library.skill(name)
+            middle = (skill.start + skill.goal) / 2.0 + 0.1 * skill.size
+            try:
+                skill.generalize(skill.start, skill.goal, obstacles=[middle])
+            except ValueError:
+                pass
+        path_from_numpy(np.zeros((2, 3)), np.zeros(2))
+        self.get_logger().info(f'warm-up took {(time.perf_counter() - started) * 1e3:.0f} ms')
+
+    def _on_demonstration(self, msg):
+        settings = self._settings
+        name = settings.teach_skill_name
+        log = self.get_logger()
+        try:
+            frames = {msg.header.frame_id} | {pose.header.frame_id for pose in msg.poses}
+            wrong = sorted(frames - set(BASE_FRAMES))
+            if wrong:
+                raise ValueError(f'frame {wrong[0]!r} is not base_link (no TF here)')
+            t, positions, _ = path_to_numpy(msg)
+            demo = recorded_path_demo(name, positions, t, settings.plane, settings.recorded_dim,
+                                      settings.plane_tolerance)
+            entry = self._library.add(name, demo, 'taught on /etdmp/demonstrations')
+        except ValueError as err:
+            log.error(f'taught demonstration for skill {name!r} rejected: {err}; the skills '
+                      'already learned are kept')
+            return
+        try:
+            saved = f'saved to {save_skill_demo(self._skills_dir, entry.demo)}'
+        except OSError as err:
+            saved = f'NOT saved (it is lost on restart): {err}'
+            log.error(f'taught skill {name!r} {saved}')
+        log.info(f'learned skill {name!r} ({demo.dim}D, {demo.n_samples} samples) from '
+                 f'/etdmp/demonstrations, {saved}')
+
+    # -- inputs -------------------------------------------------------------------------------
+
+    def _frame_ok(self, frame_id, topic):
+        if frame_id in BASE_FRAMES:
+            return True
+        self.get_logger().warn(f'{topic}: ignoring a message in frame {frame_id!r}; only '
+                               'base_link is accepted', throttle_duration_sec=_THROTTLE)
+        return False
+
+    def _on_joint_state(self, msg):
+        try:
+            q, _ = joint_state_arrays(msg)
+        except ValueError as err:
+            self.get_logger().warn(f'/joint_states: ignored: {err}',
+                                   throttle_duration_sec=_THROTTLE)
+            return
+        with self._state_lock:
+            self._joint_state.update(q)
+
+    def _on_tool_pose(self, msg):
+        p = point_to_numpy(msg.pose.position)
+        if self._frame_ok(msg.header.frame_id, '/etdmp/tool_pose') and np.all(np.isfinite(p)):
+            with self._state_lock:
+                self._tool_pose.update(p)
+
+    def _on_goal(self, msg):
+        p = point_to_numpy(msg.point)
+        if not self._frame_ok(msg.header.frame_id, '/etdmp/goal'):
+            return
+        if not np.all(np.isfinite(p)):
+            self.get_logger().warn('/etdmp/goal: NaN or inf goal ignored',
+                                   throttle_duration_sec=_THROTTLE)
+            return
+        with self._state_lock:
+            self._goal.update(p)
+
+    def _on_obstacles(self, msg):
+        points = pose_array_to_numpy(msg)
+        if not self._frame_ok(msg.header.frame_id, '/etdmp/obstacles'):
+            return
+        if not np.all(np.isfinite(points)):
+            self.get_logger().warn('/etdmp/obstacles: message with NaN or inf ignored',
+                                   throttle_duration_sec=_THROTTLE)
+            return
+        with self._state_lock:
+            self._obstacles.update(points)
+
+    def _tool_position(self, settings):
+        source = settings.tool_position_source
+        topic = '/joint_states' if source == 'joint_states' else '/etdmp/tool_pose'
+        with self._state_lock:
+            latest = self._joint_state if source == 'joint_states' else self._tool_pose
+            value = latest.fresh(settings.tool_state_max_age)
+            if value is not None and source == 'joint_states':
+                value = self._model.tool_position(value)
+        if value is None:
+            state = 'none received yet' if latest.value is None else \
+                f'the latest is {latest.age():.1f} s old (tool_state_max_age ' \
+                f'{settings.tool_state_max_age:g} s)'
+            raise ValueError(f'the tool position is unknown ({topic}: {state}); give a start '
+                             'in base_link instead of an empty frame id')
+        return value
+
+    def _perceived_goal(self, settings):
+        with self._state_lock:
+            goal = self._goal.fresh(settings.goal_max_age)
+            if goal is None:
+                if self._goal.value is None:
+                    raise ValueError('no perceived goal yet on /etdmp/goal; give a goal in '
+                                     'base_link instead of an empty frame id')
+                raise ValueError(f'the latest perceived goal is {self._goal.age():.1f} s old '
+                                 f'(goal_max_age {settings.goal_max_age:g} s)')
+            return goal
+
+    def _current_obstacles(self, settings):
+        with self._state_lock:
+            seen = self._obstacles.fresh(settings.obstacle_max_age)
+            stale = seen is None and self._obstacles.value is not None and \
+                len(self._obstacles.value) > 0
+        if stale:
+            self.get_logger().warn('/etdmp/obstacles is older than obstacle_max_age '
+                                   f'{settings.obstacle_max_age:g} s: ignored',
+                                   throttle_duration_sec=_THROTTLE)
+        if seen is None or len(seen) == 0:
+            return settings.static_obstacles
+        return np.concatenate([seen, settings.static_obstacles])
+
+    def _request_point(self, pose_stamped, what, settings):
+        frame = pose_stamped.header.frame_id
+        if frame == '':
+            if what == 'start':
+                return self._tool_position(settings)
+            return self._perceived_goal(settings)
+        if frame != 'base_link':
+            meaning = 'the tool position' if what == 'start' else 'the perceived goal'
+            raise ValueError(f'{what}.header.frame_id {frame!r} is not base_link; only base_link '
+                             f'is accepted (or an empty frame id for {meaning})')
+        return point_to_numpy(pose_stamped.pose.position)
+
+    # -- /generalize ----------------------------------------------------------------------------
+
+    def _on_generalize(self, request, response):
+        settings = self._settings
+        stamp = self.get_clock().now().nanoseconds
+        try:
+            start = self._request_point(request.start, 'start', settings)
+            goal = self._request_point(request.goal, 'goal', settings)
+            obstacles = self._current_obstacles(settings)
+            skill = self._library.skill(settings.skill, settings.formulation, settings.n_basis)
+            with self._core_lock:
+                plan = plan_path(skill, start, goal, obstacles, settings.plan, settings.plane)
+        except ValueError as err:   # PlanningError, UnknownSkillError, DemonstrationError
+            self.get_logger().error(f'/generalize with skill {settings.skill!r}: {err}')
+            response.plan = path_from_numpy(np.zeros((0, 3)), stamp=stamp)
+            return response
+        response.plan = path_from_numpy(plan.positions, plan.t, stamp, 'base_link',
+                                        plan.orientation)
+        if settings.execute:
+            self._path_pub.publish(serialize_path(plan.positions, plan.t, stamp, 'base_link',
+                                                  plan.orientation))
+            if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
+                self._pending_markers = (settings, skill, plan, response.plan.header)
+                self._marker_trigger.trigger()
+        self.get_logger().debug(f'/generalize: {settings.skill} ({plan.method}), '
+                                f'{len(plan.t)} poses over {plan.t[-1]:.2f} s')
+        return response
+
+    # -- markers --------------------------------------------------------------------------------
+
+    def _publish_markers(self):
+        pending, self._pending_markers = self._pending_markers, None
+        if pending is None:
+            return
+        settings, skill, plan, header = pending
+        other = 'dmp' if plan.method == 'etdmp' else 'etdmp'
+        plane = settings.plane if skill.dim == 2 else None
+        with self._core_lock:
+            try:
+                baseline = plan_path(skill, plan.start, plan.goal, plan.obstacles,
+                                     replace(settings.plan, method=other),
+                                     settings.plane).positions
+            except ValueError:   # e.g. the plain DMP refuses a closed letter: show none
+                baseline = None
+            try:
+                demo = place_demo(skill, plan.start, plan.goal, plane)
+            except ValueError:
+                demo = None
+        colours = {'etdmp': (0.1, 0.8, 0.2, 1.0), 'dmp': (1.0, 0.5, 0.0, 1.0)}
+        markers = MarkerArray(markers=[
+            _marker(header, 'demo', Marker.LINE_STRIP, demo, (0.6, 0.6, 0.6, 0.8), 0.003),
+            _marker(header, f'plan_{plan.method}', Marker.LINE_STRIP, plan.positions,
+                    colours[plan.method], 0.005),
+            _marker(header, f'plan_{other}', Marker.LINE_STRIP, baseline, colours[other],
+                    0.003),
+            _marker(header, 'obstacles', Marker.SPHERE_LIST, plan.obstacles,
+                    (0.9, 0.1, 0.1, 0.9), 0.03),
+            _marker(header, 'start_goal', Marker.SPHERE_LIST, np.stack([plan.start, plan.goal]),
+                    (0.2, 0.4, 1.0, 1.0), 0.015),
+        ])
+        self._marker_pub.publish(markers)
+
+
+def _marker(header, ns, kind, points, rgba, size):
+    """Return a base_link Marker showing ``points`` (n, 3), or deleting ``ns`` when None/empty."""
+    marker = Marker(header=header, ns=ns, id=0, type=kind)
+    if points is None or len(points) == 0:
+        marker.action = Marker.DELETE
+        return marker
+    marker.action = Marker.ADD
+    marker.pose.orientation.w = 1.0
+    marker.scale.x = marker.scale.y = marker.scale.z = float(size)
+    marker.color.r, marker.color.g, marker.color.b, marker.color.a = (float(c) for c in rgba)
+    marker.points = points_from_numpy(points)
+    return marker
+
+
+def main(args=None):
+    """Run the dmp_server node until Ctrl-C."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = DmpServer()
+        executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except InvalidConfiguration:
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,380 @@
+"""
+perception: the goal marker and the obstacles from the RealSense-style camera (SPEC §4-5).
+
+``ros2 run etdmp_ros perception --ros-args --params-file config/scene.yaml --params-file
+config/perception.yaml``. Subscribes ``/camera/camera/color/image_raw`` (rgb8),
+``/camera/camera/aligned_depth_to_color/image_raw`` (16UC1, mm, 0 = no data) and
+``/camera/camera/color/camera_info``; matches them by stamp (:class:`FrameSynchronizer`: no
+message_filters here) and runs :class:`etdmp_ros.robot.Detector` (the ROS-free vision) on the
+newest complete frame. Publishes, stamped with the image's stamp, in base_link:
+
+- ``/etdmp/goal`` (geometry_msgs/PointStamped): centre of the goal marker's top face; nothing
+  when no goal is visible (and a throttled warning);
+- ``/etdmp/obstacles`` (geometry_msgs/PoseArray): centres of the obstacles' top faces, every
+  processed frame, empty when none are visible;
+- ``/etdmp/detections/image`` (sensor_msgs/Image rgb8): the colour image annotated, at most
+  ``debug_image_rate`` and only while someone subscribes.
+
+Latest-only: image subscriptions keep the last 2 messages and the synchronizer drops every set
+older than the one processed, so a slow machine skips frames instead of falling behind. Bad input
+(unsupported encodings, sizes that do not match camera_info, stamps that never match) is
+skipped with a throttled warning; the node keeps running.
+
+Parameters: the camera pose and the object sizes from config/scene.yaml (read-only), colours,
+thresholds and rates from config/perception.yaml (changeable at runtime, validated).
+"""
+
+from dataclasses import dataclass
+import time
+
+from etdmp_ros._paths import config_path
+from etdmp_ros.robot import (detector_from_parameters, FrameSynchronizer, read_parameter_file)
+from etdmp_ros.ros_conversions import (image_from_msg, image_msg, intrinsics_from_camera_info,
+                                       pose_array_from_numpy, stamp_to_ns)
+from geometry_msgs.msg import PointStamped, PoseArray
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image
+
+NODE_NAME = 'perception'
+COLOR_TOPIC = '/camera/camera/color/image_raw'
+DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
+INFO_TOPIC = '/camera/camera/color/camera_info'
+GOAL_TOPIC = '/etdmp/goal'
+OBSTACLES_TOPIC = '/etdmp/obstacles'
+DEBUG_IMAGE_TOPIC = '/etdmp/detections/image'
+BASE_FRAME = 'base_link'
+COLOR_ENCODINGS = ('rgb8', 'bgr8')
+DEPTH_ENCODINGS = ('16UC1', 'mono16')
+# Without a processed frame for this long while images arrive, say why (s).
+STALL_WARNING = 2.0
+
+# Workcell parameters from config/scene.yaml: read-only (the simulation renders with them).
+SCENE = {
+    'camera.position': 'm, [x, y, z] of the colour optical frame in base_link',
+    'camera.orientation': 'quaternion [x, y, z, w] of the colour optical frame in base_link',
+    'goal_marker.radius': 'm, radius of the goal marker disc',
+    'obstacle.radius': 'm, radius of the obstacle cylinders',
+    'obstacle.height': 'm, height of the obstacle cylinders',
+}
+# Node parameters: name -> (description, range or None). All can change at runtime except
+# reliable_images.
+NODE_PARAMETERS = {
+    'goal_hsv_low': ('[h, s, v] lower corner of the goal colour (OpenCV: H 0..179)', None),
+    'goal_hsv_high': ('[h, s, v] upper corner of the goal colour; h < low h wraps', None),
+    'obstacle_hsv_low': ('[h, s, v] lower corner of the obstacle colour', None),
+    'obstacle_hsv_high': ('[h, s, v] upper corner of the obstacle colour; h < low h wraps',
+                          None),
+    'min_blob_area': ('px; smaller colour blobs are ignored', (1, 1_000_000)),
+    'min_depth_pixels': ('a blob needs this many pixels with depth', (1, 1_000_000)),
+    'top_band': ('m; band below the highest points taken as the top face', (1e-4, 0.1)),
+    'occlusion_gap': ('m; outline next to something nearer by more: occlusion edge',
+                      (1e-3, 1.0)),
+    'min_rim_points': ('rim pixels needed for the circle fit (else top-face centroid)',
+                       (3, 100_000)),
+    'max_rim_rms': ('m; a worse rim fit flags overlapping objects', (1e-4, 0.1)),
+    'stamp_tolerance': ('s; colour, depth and camera_info stamps of one frame', (0.0, 1.0)),
+    'match_camera_info': ('match camera_info by stamp (else use the latest one)', None),
+    'max_rate': ('Hz; process at most this many frames per second (0: every frame)',
+                 (0.0, 1000.0)),
+    'debug_image_rate': ('Hz; annotated image at most this often, when subscribed (0: never)',
+                         (0.0, 1000.0)),
+    'warn_period': ('s; repeated warnings at most this often', (0.0, 3600.0)),
+    'reliable_images': ('reliable image subscriptions (false: best effort)', None),
+}
+ARRAYS = ('goal_hsv_low', 'goal_hsv_high', 'obstacle_hsv_low', 'obstacle_hsv_high')
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything a frame needs, replaced whole when parameters change."""
+
+    detector: object
+    tolerance_ns: int
+    match_camera_info: bool
+    min_period: float
+    debug_period: float
+    warn_period: float
+
+    @classmethod
+    def from_parameters(cls, p):
+        """Return the settings of flat parameter values; ValueError if one is invalid."""
+        detector = detector_from_parameters(p)
+        rates = {}
+        for name in ('max_rate', 'debug_image_rate'):
+            rates[name] = float(p[name])
+            if not rates[name] >= 0:
+                raise ValueError(f'{name} must be >= 0 Hz, got {p[name]}')
+        if not 0 <= float(p['stamp_tolerance']) <= 1.0:
+            raise ValueError(f'stamp_tolerance must be in [0, 1] s, got {p["stamp_tolerance"]}')
+        return cls(detector=detector,
+                   tolerance_ns=round(float(p['stamp_tolerance']) * 1e9),
+                   match_camera_info=bool(p['match_camera_info']),
+                   min_period=1.0 / rates['max_rate'] if rates['max_rate'] > 0 else 0.0,
+                   debug_period=(1.0 / rates['debug_image_rate']
+                                 if rates['debug_image_rate'] > 0 else -1.0),
+                   warn_period=float(p['warn_period']))
+
+
+def _descriptor(description, value, value_range, read_only, dynamic=False):
+    descriptor = ParameterDescriptor(description=description, read_only=read_only,
+                                     dynamic_typing=dynamic)
+    if value_range is not None:
+        if isinstance(value_range[0], int):
+            descriptor.integer_range = [IntegerRange(from_value=value_range[0],
+                                                     to_value=value_range[1], step=1)]
+        else:
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=value_range[0], to_value=value_range[1], step=0.0)]
+    return descriptor
+
+
+def _parameter_value(value):
+    """Return a parameter value as plain Python (arrays as lists)."""
+    return list(value) if hasattr(value, '__len__') and not isinstance(value, str) else value
+
+
+class PerceptionNode(Node):
+    """Camera topics in, goal and obstacles in base_link out; the vision is the Detector's."""
+
+    def __init__(self, **kwargs):
+        """Declare parameters, build the detector, create subscriptions and publishers."""
+        super().__init__(NODE_NAME, **kwargs)
+        self._declare_parameters()
+        self.settings = Settings.from_parameters(self._values())
+        self._sync = self._synchronizer(self.settings)
+        self._latest_info = None
+        self._last_processed = -float('inf')
+        self._last_debug = -float('inf')
+        self._started = time.monotonic()
+        self._arrivals = {}      # stream -> (monotonic arrival, stamp ns) of the last message
+        self.frames = 0
+        self._goal_seen = False
+        self._warned = {}        # throttle key -> monotonic time of the last such warning
+
+        reliability = (ReliabilityPolicy.RELIABLE if self.get_parameter('reliable_images').value
+                       else ReliabilityPolicy.BEST_EFFORT)
+        images = QoSProfile(depth=2, reliability=reliability)
+        self.create_subscription(Image, COLOR_TOPIC, self._on_color, images)
+        self.create_subscription(Image, DEPTH_TOPIC, self._on_depth, images)
+        self.create_subscription(CameraInfo, INFO_TOPIC, self._on_info,
+                                 QoSProfile(depth=5, reliability=reliability))
+        self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, 10)
+        self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, 10)
+        self._debug_pub = self.create_publisher(Image, DEBUG_IMAGE_TOPIC, 1)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.create_timer(1.0, self._check_inputs)
+        d = self.settings.detector
+        self.get_logger().info(
+            f'perception ready: camera at {list(d.camera_pose.position)} in {BASE_FRAME}, goal '
+            f'HSV {d.goal.color.low}..{d.goal.color.high}, obstacles HSV '
+            f'{d.obstacle.color.low}..{d.obstacle.color.high}, stamp tolerance '
+            f'{self.settings.tolerance_ns * 1e-9:g} s')
+
+    # --------------------------------------------------------------------------- parameters
+    def _declare_parameters(self):
+        defaults = read_parameter_file(config_path('scene.yaml'), NODE_NAME)
+        defaults.update(read_parameter_file(config_path('perception.yaml'), NODE_NAME))
+        for name, description in SCENE.items():
+            value = defaults.get(name)
+            if isinstance(value, list):
+                value = [float(v) for v in value]
+            elif isinstance(value, int):
+                value = float(value)
+            self.declare_parameter(name, value,
+                                   _descriptor(f'{description} (config/scene.yaml)', value, None,
+                                               read_only=True))
+        for name, (description, value_range) in NODE_PARAMETERS.items():
+            value = defaults.get(name)
+            if value_range is not None and isinstance(value_range[0], float) and \
+                    isinstance(value, int):
+                value = float(value)
+            # HSV corners: integers, but `ros2 param set` users may type floats; validated below.
+            self.declare_parameter(name, value, _descriptor(
+                description, value, value_range, read_only=name == 'reliable_images',
+                dynamic=name in ARRAYS))
+
+    def _values(self, updates=()):
+        values = {name: _parameter_value(self.get_parameter(name).value)
+                  for name in (*SCENE, *NODE_PARAMETERS)}
+        for parameter in updates:
+            values[parameter.name] = _parameter_value(parameter.value)
+        return values
+
+    def _validate_parameters(self, parameters):
+        try:
+            Settings.from_parameters(self._values(parameters))
+        except (TypeError, ValueError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters):
+        old = self.settings
+        self.settings = Settings.from_parameters(self._values())
+        if (self.settings.tolerance_ns, self.settings.match_camera_info) != \
+                (old.tolerance_ns, old.match_camera_info):
+            self._sync = self._synchronizer(self.settings)
+        self.get_logger().info('parameters changed: ' + ', '.join(
+            f'{p.name} = {_parameter_value(p.value)}' for p in parameters))
+
+    @staticmethod
+    def _synchronizer(settings):
+        streams = ('color', 'depth', 'info') if settings.match_camera_info else ('color', 'depth')
+        return FrameSynchronizer(streams, settings.tolerance_ns)
+
+    # ------------------------------------------------------------------------------- inputs
+    def _on_color(self, msg):
+        self._add('color', msg)
+
+    def _on_depth(self, msg):
+        self._add('depth', msg)
+
+    def _on_info(self, msg):
+        self._latest_info = msg
+        if self.settings.match_camera_info:
+            self._add('info', msg)
+        else:
+            self._arrivals['info'] = (time.monotonic(), stamp_to_ns(msg.header.stamp))
+
+    def _add(self, stream, msg):
+        stamp = stamp_to_ns(msg.header.stamp)
+        self._arrivals[stream] = (time.monotonic(), stamp)
+        frame = self._sync.add(stream, stamp, msg)
+        if frame is None:
+            return
+        now = time.monotonic()
+        if now - self._last_processed < self.settings.min_period:
+            return
+        self._last_processed = now
+        self._process(*frame)
+
+    def _warn(self, text, key=None, error=False):
+        """
+        Log a warning unless the same one (``key``, default the text) was logged lately.
+
+        At most one per ``warn_period``. (rclpy's own throttle is per call site, so different
+        problems would hide each other, and its period cannot change at runtime.)
+        """
+        key = text if key is None else key
+        now = time.monotonic()
+        if now - self._warned.get(key, -float('inf')) < self.settings.warn_period:
+            return
+        self._warned[key] = now
+        if len(self._warned) > 100:   # texts with changing numbers: forget old keys
+            self._warned = {k: t for k, t in self._warned.items()
+                            if now - t < self.settings.warn_period}
+        (self.get_logger().error if error else self.get_logger().warning)(text)
+
+    def _check_inputs(self):
+        """Say why no frame is processed: nothing arrives, or the stamps never match."""
+        now = time.monotonic()
+        if now - max(self._last_processed, self._started) < STALL_WARNING:
+            return
+        streams = ('color', 'depth', 'info')
+        missing = [s for s in streams if s not in self._arrivals or
+                   now - self._arrivals[s][0] > STALL_WARNING]
+        if missing:
+            topics = dict(zip(streams, (COLOR_TOPIC, DEPTH_TOPIC, INFO_TOPIC)))
+            self._warn(f'no frame processed: nothing received for {STALL_WARNING:g} s on '
+                       + ', '.join(topics[s] for s in missing))
+        else:
+            stamps = ', '.join(f'{s} {self._arrivals[s][1] * 1e-9:.3f} s' for s in streams)
+            self._warn(f'no frame processed: colour, depth and camera_info stamps do not match '
+                       f'within stamp_tolerance {self.settings.tolerance_ns * 1e-9:g} s '
+                       f'(latest: {stamps})', key='stamps')
+
+    # ---------------------------------------------------------------------------- a frame
+    def _process(self, stamp_ns, messages):
+        settings = self.settings
+        color_msg, depth_msg = messages['color'], messages['depth']
+        try:
+            info = messages.get('info', self._latest_info)
+            if info is None:
+                raise ValueError(f'no camera_info received yet on {INFO_TOPIC}')
+            if color_msg.encoding not in COLOR_ENCODINGS:
+                raise ValueError(f'colour image encoding {color_msg.encoding!r}, expected rgb8')
+            if depth_msg.encoding not in DEPTH_ENCODINGS:
+                raise ValueError(f'depth image encoding {depth_msg.encoding!r}, expected 16UC1 '
+                                 '(millimetres)')
+            rgb = image_from_msg(color_msg)
+            depth = image_from_msg(depth_msg)
+            intrinsics = intrinsics_from_camera_info(info)
+            bgr = color_msg.encoding == 'bgr8'
+            detections = settings.detector.detect(rgb, depth, intrinsics, bgr=bgr)
+        except ValueError as exc:
+            self._warn(f'frame skipped: {exc}')
+            return
+        except Exception as exc:   # noqa: B902 - a frame must never take the node down
+            self._warn(f'frame skipped: {type(exc).__name__}: {exc}', error=True)
+            return
+        self.frames += 1
+        stamp = color_msg.header.stamp
+        if detections.goal is not None:
+            goal = PointStamped()
+            goal.header.stamp = stamp
+            goal.header.frame_id = BASE_FRAME
+            goal.point.x, goal.point.y, goal.point.z = (float(v)
+                                                        for v in detections.goal.position)
+            self._goal_pub.publish(goal)
+            if not self._goal_seen:
+                self._goal_seen = True
+                self.get_logger().info('goal marker at {:.3f} {:.3f} {:.3f} m'.format(
+                    *detections.goal.position))
+        self._obstacles_pub.publish(pose_array_from_numpy(detections.obstacle_positions(),
+                                                          frame_id=BASE_FRAME, stamp=stamp))
+        self._warn_about(detections)
+        self._publish_debug_image(detections, rgb, intrinsics, color_msg, bgr)
+
+    def _warn_about(self, detections):
+        if detections.goal is None:
+            reasons = [r.reason for r in detections.rejected if r.kind == 'goal']
+            if reasons:
+                self._warn('goal marker seen but not located: ' + '; '.join(reasons),
+                           key='goal')
+            else:
+                self._warn(f'no goal marker visible: nothing published on {GOAL_TOPIC}',
+                           key='goal')
+        merged = sum(not d.single for d in detections.obstacles)
+        if merged:
+            self._warn(f'{merged} obstacle blob(s) do not fit one cylinder (obstacles '
+                       'overlapping in the image?): each reported once', key='merged')
+
+    def _publish_debug_image(self, detections, rgb, intrinsics, color_msg, bgr):
+        period = self.settings.debug_period
+        now = time.monotonic()
+        if period < 0 or now - self._last_debug < period or \
+                self._debug_pub.get_subscription_count() == 0:
+            return
+        self._last_debug = now
+        image = self.settings.detector.annotate(rgb, detections, intrinsics, bgr=bgr)
+        self._debug_pub.publish(image_msg(image, color_msg.encoding, color_msg.header.stamp,
+                                          color_msg.header.frame_id))
+
+
+def main(args=None):
+    """Run the perception node until Ctrl-C."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = PerceptionNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException) as exc:   # bad parameter: say which, no traceback
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

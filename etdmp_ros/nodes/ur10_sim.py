@@ -1,0 +1,385 @@
+"""
+ur10_sim: the MuJoCo UR10 workcell (:class:`etdmp_ros.robot.UR10Sim`) as a ROS 2 node.
+
+Subscribes ``/forward_velocity_controller/commands`` (std_msgs/Float64MultiArray, 6 joint
+velocities in rad/s, UR order). Publishes, stamped with the simulated time:
+
+- ``/joint_states``, ``/clock`` and the ground truth (``/ur10_sim/ground_truth/goal``,
+  ``.../obstacles``, ``.../tool_tip``, in base_link) at ``control_rate``;
+- ``/camera/camera/color/image_raw`` (rgb8), ``/camera/camera/aligned_depth_to_color/image_raw``
+  (16UC1, mm) and their ``camera_info`` at ``camera_rate``, frame ``camera_color_optical_frame``.
+
+The simulation runs in its own thread, one control period per tick: apply the latest command
+(and scene changes), step the physics, publish, render when a camera frame is due, then sleep
+to keep ``real_time_factor``. The executor thread only receives commands and parameter changes,
+validates them and hands them over. Parameters: config/scene.yaml and config/ur10_sim.yaml
+(both read from the package's share folder as defaults); ``goal_position``,
+``obstacle_positions``, ``real_time_factor`` and ``watchdog_timeout`` can be changed at runtime.
+"""
+
+import threading
+import time
+
+from etdmp_ros._paths import config_path
+from etdmp_ros.robot import (MAX_OBSTACLES, parse_goal_position, parse_obstacle_positions,
+                             read_parameter_file, SCENE_PARAMETERS, SceneConfig, UR10Sim)
+from etdmp_ros.ros_conversions import (camera_info_msg, image_msg, joint_state_msg,
+                                       ns_to_stamp, pose_array_from_numpy,
+                                       velocity_command_array)
+from geometry_msgs.msg import PointStamped, PoseArray
+import numpy as np
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Float64MultiArray
+import yaml
+
+NODE_NAME = 'ur10_sim'
+OPTICAL_FRAME = 'camera_color_optical_frame'
+COMMAND_TOPIC = '/forward_velocity_controller/commands'
+COLOR_TOPIC = '/camera/camera/color/image_raw'
+COLOR_INFO_TOPIC = '/camera/camera/color/camera_info'
+DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
+DEPTH_INFO_TOPIC = '/camera/camera/aligned_depth_to_color/camera_info'
+GOAL_TOPIC = '/ur10_sim/ground_truth/goal'
+OBSTACLES_TOPIC = '/ur10_sim/ground_truth/obstacles'
+TOOL_TIP_TOPIC = '/ur10_sim/ground_truth/tool_tip'
+# Parameters that may change while running; the others need a rebuild of the model.
+DYNAMIC = ('goal_position', 'obstacle_positions', 'real_time_factor', 'watchdog_timeout')
+# Fell this far behind real time (overload, debugger): restart pacing instead of bursting.
+MAX_LAG = 0.25
+
+SCENE_DESCRIPTIONS = {
+    'goal_position': '[x, y, z] m in base_link: centre of the top face of the goal marker; '
+                     'moves it at runtime',
+    'obstacle_positions': '[x1, y1, z1, x2, ...] m in base_link: centres of the top faces of '
+                          f'the obstacle cylinders (at most {MAX_OBSTACLES}); moves them at '
+                          'runtime',
+}
+# Node-only parameters: name -> (description, range (min, max) or None).
+NODE_PARAMETERS = {
+    'control_rate': ('Hz of /joint_states, /clock and ground truth; commands apply at these '
+                     'ticks', (1.0, 2000.0)),
+    'physics_timestep': ('s per physics step; the control period is a whole number of them',
+                         (1e-4, 0.02)),
+    'real_time_factor': ('simulated s per wall s; 0 = as fast as possible', (0.0, 100.0)),
+    'watchdog_timeout': ('s of simulated time without a command before braking to zero; '
+                         '0 = never (the last command applies forever)', (0.0, 60.0)),
+    'camera_rate': ('Hz of the camera topics; 0 = no camera', (0.0, 90.0)),
+    'image_width': ('camera image width in pixels', (16, 4096)),
+    'image_height': ('camera image height in pixels', (16, 4096)),
+    'fovy_deg': ('vertical field of view of the colour camera in degrees', (1.0, 170.0)),
+    'depth_min': ('m; nearer depth reads 0 (no data)', (0.0, 65.0)),
+    'depth_max': ('m; farther depth reads 0 (no data)', (0.0, 65.0)),
+    'depth_noise': ('m, standard deviation of the depth noise at 1 m (grows with z^2)',
+                    (0.0, 1.0)),
+    'multisamples': ('MSAA samples of the colour image (0 = fastest)', (0, 16)),
+}
+
+
+def _descriptor(name, value, description, value_range=None, read_only=True, dynamic=False):
+    descriptor = ParameterDescriptor(name=name, description=description, read_only=read_only,
+                                     dynamic_typing=dynamic)
+    if value_range is not None:
+        if isinstance(value, int):
+            descriptor.integer_range = [IntegerRange(from_value=int(value_range[0]),
+                                                     to_value=int(value_range[1]), step=1)]
+        else:
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(value_range[0]), to_value=float(value_range[1]), step=0.0)]
+    return descriptor
+
+
+def _typed(value):
+    """Return a YAML default with ints in float lists made floats (ROS types lists strictly)."""
+    if isinstance(value, list) and any(isinstance(v, float) for v in value):
+        return [float(v) for v in value]
+    return value
+
+
+class UR10SimNode(Node):
+    """The simulation node: a thin shell translating topics and parameters to :class:`UR10Sim`."""
+
+    def __init__(self, **kwargs):
+        """Declare parameters, build the simulation, create publishers and the subscription."""
+        super().__init__(NODE_NAME, **kwargs)
+        self._declare_parameters()
+        p = {name: self.get_parameter(name).value for name in self._declared}
+        if p['obstacle_positions'] is None:   # `obstacle_positions: []` in YAML: rcl leaves it
+            p['obstacle_positions'] = []      # untyped (NOT_SET); the user meant no obstacles
+        scene = SceneConfig.from_parameters(p)
+        if p['depth_min'] >= p['depth_max']:
+            raise ValueError(f'depth_min ({p["depth_min"]}) must be below depth_max '
+                             f'({p["depth_max"]})')
+        self.sim = UR10Sim(scene, timestep=p['physics_timestep'],
+                           watchdog_timeout=p['watchdog_timeout'],
+                           image_size=(p['image_width'], p['image_height']),
+                           fovy_deg=p['fovy_deg'], depth_range=(p['depth_min'], p['depth_max']),
+                           depth_noise=p['depth_noise'], multisamples=p['multisamples'])
+        self.steps_per_tick = max(1, round(1.0 / (p['control_rate'] * self.sim.timestep)))
+        self.tick_period = self.steps_per_tick * self.sim.timestep
+        if abs(self.tick_period * p['control_rate'] - 1.0) > 1e-6:
+            self.get_logger().warning(
+                f'control_rate {p["control_rate"]} Hz is not a whole number of physics steps '
+                f'of {self.sim.timestep} s: running at {1.0 / self.tick_period:.3f} Hz')
+        self.camera_period = 1.0 / p['camera_rate'] if p['camera_rate'] > 0 else 0.0
+        self.real_time_factor = p['real_time_factor']
+
+        self._lock = threading.Lock()
+        self._pending_command = None
+        self._pending_goal = None
+        self._pending_obstacles = None
+        self._stop = threading.Event()
+        self._thread = None
+        self.failed = False
+        self._commands_seen = False
+        self._watchdog_was_active = self.sim.watchdog_active
+        self._next_camera_time = 0.0
+        self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
+                      'publish_state': 0.0, 'ticks': 0, 'frames': 0}
+
+        reliable = QoSProfile(depth=10)
+        images = QoSProfile(depth=2)   # frames are big: never queue more than one behind
+        self._joint_pub = self.create_publisher(JointState, '/joint_states', reliable)
+        self._clock_pub = self.create_publisher(Clock, '/clock', reliable)
+        self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, reliable)
+        self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, reliable)
+        self._tool_pub = self.create_publisher(PointStamped, TOOL_TIP_TOPIC, reliable)
+        if self.camera_period:
+            self._color_pub = self.create_publisher(Image, COLOR_TOPIC, images)
+            self._depth_pub = self.create_publisher(Image, DEPTH_TOPIC, images)
+            self._color_info_pub = self.create_publisher(CameraInfo, COLOR_INFO_TOPIC, reliable)
+            self._depth_info_pub = self.create_publisher(CameraInfo, DEPTH_INFO_TOPIC, reliable)
+            self._camera_info = camera_info_msg(self.sim.intrinsics, frame_id=OPTICAL_FRAME)
+        self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, reliable)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        k = self.sim.intrinsics
+        self.get_logger().info(
+            f'UR10 workcell ready: control {1.0 / self.tick_period:g} Hz, camera '
+            f'{p["camera_rate"]:g} Hz {k.width}x{k.height} (f = {k.fx:.1f} px), watchdog '
+            f'{self.sim.watchdog_timeout:g} s, real-time factor {self.real_time_factor:g}')
+
+    # --------------------------------------------------------------------------- parameters
+    def _declare_parameters(self):
+        defaults = read_parameter_file(config_path('scene.yaml'), NODE_NAME)
+        defaults.update(read_parameter_file(config_path('ur10_sim.yaml'), NODE_NAME))
+        self._declared = []
+        for name in SCENE_PARAMETERS:
+            dynamic = name in DYNAMIC
+            # Dynamic typing: `ros2 param set` types "[1, 0, 0]" as integer[], "[0.7, 0.2, 0]"
+            # as a string and "[]" as bool[]; _number_list takes them all as numbers.
+            descriptor = _descriptor(name, None, SCENE_DESCRIPTIONS.get(
+                name, 'workcell (config/scene.yaml); fixed while running'),
+                read_only=not dynamic, dynamic=dynamic)
+            self.declare_parameter(name, _typed(defaults.get(name)), descriptor)
+            self._declared.append(name)
+        for name, (description, value_range) in NODE_PARAMETERS.items():
+            value = defaults.get(name)
+            if isinstance(value_range[0], float) and isinstance(value, int):
+                value = float(value)
+            descriptor = _descriptor(name, value, description, value_range,
+                                     read_only=name not in DYNAMIC)
+            self.declare_parameter(name, value, descriptor)
+            self._declared.append(name)
+
+    def _validate_parameters(self, parameters):
+        for parameter in parameters:
+            try:
+                if parameter.name == 'goal_position':
+                    parse_goal_position(_number_list(parameter))
+                elif parameter.name == 'obstacle_positions':
+                    points = parse_obstacle_positions(_number_list(parameter))
+                    if len(points) > MAX_OBSTACLES:
+                        raise ValueError(f'at most {MAX_OBSTACLES} obstacles, got {len(points)}')
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters):
+        with self._lock:
+            for parameter in parameters:
+                if parameter.name == 'goal_position':
+                    self._pending_goal = parse_goal_position(_number_list(parameter))
+                elif parameter.name == 'obstacle_positions':
+                    self._pending_obstacles = parse_obstacle_positions(_number_list(parameter))
+                elif parameter.name == 'real_time_factor':
+                    self.real_time_factor = float(parameter.value)
+                elif parameter.name == 'watchdog_timeout':
+                    self.sim.watchdog_timeout = float(parameter.value)
+
+    # ------------------------------------------------------------------------------ commands
+    def _on_command(self, msg):
+        try:
+            velocities = velocity_command_array(msg)
+        except ValueError as exc:
+            self.get_logger().warning(f'velocity command rejected (not applied): {exc}',
+                                      throttle_duration_sec=1.0)
+            return
+        clamped = self.sim.validate_velocity_command(velocities)
+        if np.any(clamped != velocities):
+            self.get_logger().warning('velocity command beyond the UR10 limits '
+                                      f'{np.round(self.sim.velocity_limits, 3).tolist()} rad/s: '
+                                      'clamped', throttle_duration_sec=1.0)
+        with self._lock:
+            self._pending_command = clamped
+
+    # ---------------------------------------------------------------------------- simulation
+    def start(self):
+        """Start the simulation thread."""
+        self._thread = threading.Thread(target=self._run, name='ur10_sim', daemon=True)
+        self._thread.start()
+
+    def stop(self):
+        """Stop the simulation thread (waits for the current tick) and free the camera."""
+        self._stop.set()
+        if self._thread is None:
+            self.sim.close()   # run_for() rendered in this thread
+        else:
+            self._thread.join(timeout=5.0)
+
+    def _run(self):
+        try:
+            wall_start, sim_start = time.monotonic(), self.sim.time
+            while not self._stop.is_set():
+                self.tick()
+                rtf = self.real_time_factor
+                if rtf <= 0:
+                    continue
+                delay = wall_start + (self.sim.time - sim_start) / rtf - time.monotonic()
+                if delay > 0:
+                    self._stop.wait(delay)
+                elif delay < -MAX_LAG:
+                    wall_start, sim_start = time.monotonic(), self.sim.time
+        except Exception as exc:   # noqa: B902 - report why the simulation stopped, then exit
+            if self._stop.is_set() or not self.context.ok():
+                return   # shutting down (Ctrl-C): publishing may fail, that is expected
+            self.failed = True
+            self.get_logger().fatal(f'simulation stopped: {type(exc).__name__}: {exc}')
+            self.context.try_shutdown()
+        finally:
+            self.sim.close()   # the OpenGL context is current in this thread only
+
+    def run_for(self, duration):
+        """Run ``duration`` s of simulated time in the calling thread, unpaced (benchmarks)."""
+        end = self.sim.time + duration - 1e-9
+        while self.sim.time < end:
+            self.tick()
+
+    def tick(self):
+        """Run one control period: take inputs, step, publish; render if a frame is due."""
+        sim, stats = self.sim, self.stats
+        with self._lock:
+            command, self._pending_command = self._pending_command, None
+            goal, self._pending_goal = self._pending_goal, None
+            obstacles, self._pending_obstacles = self._pending_obstacles, None
+        if command is not None:
+            sim.set_velocity_command(command)
+            if not self._commands_seen or self._watchdog_was_active:
+                if self._commands_seen:
+                    self.get_logger().info('velocity commands resumed')
+                self._commands_seen = True
+        if goal is not None:
+            sim.set_goal(goal)
+        if obstacles is not None:
+            sim.set_obstacles(obstacles)
+
+        c0 = time.process_time()
+        sim.step(self.steps_per_tick)
+        c1 = time.process_time()
+        if sim.watchdog_active and not self._watchdog_was_active and self._commands_seen:
+            self.get_logger().warning(f'no velocity command for {sim.watchdog_timeout:g} s: '
+                                      'braking to zero until the next one')
+        self._watchdog_was_active = sim.watchdog_active
+        stamp = ns_to_stamp(round(sim.time * 1e9))
+        self._publish_state(stamp)
+        c2 = time.process_time()
+        stats['physics'] += c1 - c0
+        stats['publish_state'] += c2 - c1
+        stats['ticks'] += 1
+        if self.camera_period and sim.time >= self._next_camera_time - 1e-9:
+            self._next_camera_time += self.camera_period
+            if self._next_camera_time < sim.time:   # fell behind: skip, never burst
+                self._next_camera_time = sim.time + self.camera_period
+            rgb, depth = sim.render_rgb_depth()
+            c3 = time.process_time()
+            self._publish_images(stamp, rgb, depth)
+            stats['render'] += c3 - c2
+            stats['publish_images'] += time.process_time() - c3
+            stats['frames'] += 1
+
+    def _publish_state(self, stamp):
+        sim = self.sim
+        self._joint_pub.publish(joint_state_msg(sim.q, sim.qd, stamp=stamp))
+        self._clock_pub.publish(Clock(clock=stamp))
+        self._goal_pub.publish(_point_stamped(sim.goal_position, stamp))
+        self._tool_pub.publish(_point_stamped(sim.tool_tip_position, stamp))
+        obstacles = pose_array_from_numpy(sim.obstacle_positions, frame_id='base_link')
+        obstacles.header.stamp = stamp
+        self._obstacles_pub.publish(obstacles)
+
+    def _publish_images(self, stamp, rgb, depth):
+        self._color_pub.publish(image_msg(rgb, 'rgb8', stamp, OPTICAL_FRAME))
+        self._depth_pub.publish(image_msg(depth, '16UC1', stamp, OPTICAL_FRAME))
+        self._camera_info.header.stamp = stamp
+        self._color_info_pub.publish(self._camera_info)
+        self._depth_info_pub.publish(self._camera_info)
+
+
+def _number_list(parameter):
+    """Return a parameter's value as a list of floats; ValueError for non-numeric types."""
+    if parameter.type_ in (Parameter.Type.DOUBLE_ARRAY, Parameter.Type.INTEGER_ARRAY):
+        return [float(v) for v in parameter.value]
+    if parameter.type_ == Parameter.Type.STRING:   # "[0.7, 0.2, 0]": ints and floats mixed
+        try:
+            value = yaml.safe_load(parameter.value)
+        except yaml.YAMLError:
+            value = None
+        if isinstance(value, list) and all(isinstance(v, (int, float)) and
+                                           not isinstance(v, bool) for v in value):
+            return [float(v) for v in value]
+    if parameter.type_ in (Parameter.Type.BOOL_ARRAY, Parameter.Type.STRING_ARRAY,
+                           Parameter.Type.BYTE_ARRAY) and len(parameter.value) == 0:
+        return []   # `ros2 param set ... "[]"` types an empty list as bool[]
+    raise ValueError(f'{parameter.name} must be a list of numbers (e.g. [0.7, 0.2, 0.0]), got '
+                     f'{parameter.type_.name.lower()} {parameter.value!r}')
+
+
+def _point_stamped(position, stamp):
+    msg = PointStamped()
+    msg.header.stamp = stamp
+    msg.header.frame_id = 'base_link'
+    msg.point.x, msg.point.y, msg.point.z = (float(v) for v in position)
+    return msg
+
+
+def main(args=None):
+    """Run the ur10_sim node until Ctrl-C."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = UR10SimNode()
+        node.start()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, ParameterException) as exc:   # bad parameter: say which, no traceback
+        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
+        return 1
+    finally:
+        if node is not None:
+            node.stop()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 1 if node is not None and node.failed else 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

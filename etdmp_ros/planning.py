@@ -1,0 +1,282 @@
+"""
+Planning for the DMP server: (skill, start, goal, obstacles, settings) → a timed base_link path.
+
+One function, :func:`plan_path`, does what a ``/generalize`` request needs after its inputs have
+been resolved to base_link points: map them into the skill's space, check the request, call the
+ET-DMP core and map the result back.
+
+- 2D skills (2 coordinates, demo units) run in the task plane (:class:`TaskPlane`): start, goal
+  and obstacles are projected onto it, the path lies on it. 3D skills use base_link directly.
+- Checks, each a :class:`PlanningError` whose message is the reason given to the user: NaN or inf,
+  start = goal (closer than ``min_distance``), an obstacle on the goal (closer than
+  ``goal_clearance``), a goal or a path point outside the :class:`Workspace`, and whatever the
+  core refuses (``GeneralizationError``).
+- Timing: samples every ``output_period`` seconds from 0 to ``tau (1 + margin)``, with ``tau`` the
+  ``duration`` setting (0: the demonstration's own duration) and ``margin`` the
+  ``obstacle_margin`` when there are obstacles (a detour arrives later), else 0.
+"""
+
+from dataclasses import dataclass, field, replace
+
+from etdmp_ros.dmp import euclidean_transform, GeneralizationError, METHODS, ObstacleGains
+import numpy as np
+
+#: Tool orientation (x, y, z, w) in base_link that points the tool's z axis down (-z of
+#: base_link), as at the scene's initial joint positions: the pen/stirrer points at the table.
+TOOL_DOWN = (-0.7071067811865476, 0.7071067811865476, 0.0, 0.0)
+
+
+class PlanningError(ValueError):
+    """A request that cannot be planned; the message says why (it is logged for the user)."""
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """
+    A simple, honest reach criterion for the UR10's tool tip; not inverse kinematics.
+
+    A point ``p`` (base_link) passes when
+
+    - ``|p - shoulder| <= reach - margin``: the UR10's reach is 1.3 m (datasheet) about the
+      shoulder, whose lift axis is 0.1273 m above the base (the URDF's shoulder_pan joint);
+      the margin leaves room for the wrist and the tool (default 0.15 m);
+    - its distance from the base's z axis is at least ``min_radius``: close to that axis the arm
+      is near its shoulder singularity and cannot move the tool freely;
+    - ``z >= min_height``: not below the table top (z = 0), up to a small tolerance.
+
+    Passing is necessary, not sufficient: the controller's IK has the last word (orientation,
+    joint limits).
+    """
+
+    shoulder: tuple = (0.0, 0.0, 0.1273)
+    reach: float = 1.3
+    margin: float = 0.15
+    min_radius: float = 0.2
+    min_height: float = -0.005
+
+    def __post_init__(self):
+        """Validate the numbers."""
+        shoulder = np.asarray(self.shoulder, dtype=float)
+        if shoulder.shape != (3,) or not np.all(np.isfinite(shoulder)):
+            raise ValueError(f'workspace shoulder must be 3 finite numbers, got {self.shoulder!r}')
+        for name in ('reach', 'margin', 'min_radius', 'min_height'):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f'workspace {name} must be finite')
+        if not self.reach - self.margin > self.min_radius >= 0.0:
+            raise ValueError(f'workspace needs reach - margin > min_radius >= 0, got reach '
+                             f'{self.reach}, margin {self.margin}, min_radius {self.min_radius}')
+
+    def violation(self, points):
+        """
+        Return (index, reason) of the first point (n, 3) outside the workspace, or None.
+
+        The reason names the criterion and the numbers.
+        """
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        limit = self.reach - self.margin
+        dist = np.linalg.norm(points - np.asarray(self.shoulder), axis=1)
+        radius = np.hypot(points[:, 0], points[:, 1])
+        checks = (
+            (dist > limit, lambda i: f'{dist[i]:.3f} m from the shoulder, more than the reach '
+                                     f'{self.reach:g} m minus margin {self.margin:g} m'),
+            (radius < self.min_radius, lambda i: f'{radius[i]:.3f} m from the base axis, closer '
+                                                 f'than {self.min_radius:g} m'),
+            (points[:, 2] < self.min_height, lambda i: f'below the table (z = {points[i, 2]:.3f} '
+                                                       f'm < {self.min_height:g} m)'),
+        )
+        first = None
+        for bad, reason in checks:
+            hits = np.flatnonzero(bad)
+            if hits.size and (first is None or hits[0] < first[0]):
+                first = (int(hits[0]), reason(int(hits[0])))
+        return first
+
+
+def _quaternion(value):
+    q = np.asarray(value, dtype=float)
+    if q.shape != (4,) or not np.all(np.isfinite(q)):
+        raise ValueError(f'tool_orientation must be 4 finite numbers (x, y, z, w), got {value!r}')
+    norm = np.linalg.norm(q)
+    if not norm > 1e-6:
+        raise ValueError('tool_orientation must be a non-zero quaternion (x, y, z, w)')
+    return tuple(float(c) for c in q / norm)
+
+
+@dataclass(frozen=True)
+class PlanSettings:
+    """
+    How to plan (every field is a dmp_server parameter of the same name).
+
+    ``obstacle_k`` is in 1/m; 0 keeps the core's default, ``k = gains.k_relative / |x0 - g|``.
+    ``orientation`` is normalised. Construction raises ValueError for bad values.
+    """
+
+    method: str = 'etdmp'
+    mode: int = 1
+    independent_axis: int = 2
+    duration: float = 0.0
+    output_period: float = 0.01
+    gains: ObstacleGains = field(default_factory=ObstacleGains)
+    obstacle_k: float = 0.0
+    obstacle_margin: float = 0.5
+    goal_clearance: float = 0.02
+    min_distance: float = 0.005
+    orientation: tuple = TOOL_DOWN
+    workspace: Workspace = field(default_factory=Workspace)
+
+    def __post_init__(self):
+        """Validate and normalise."""
+        if self.method not in METHODS:
+            raise ValueError(f'method must be one of {METHODS}, got {self.method!r}')
+        if self.mode not in (1, 2):
+            raise ValueError(f'mode must be 1 or 2, got {self.mode!r}')
+        if self.independent_axis not in (0, 1, 2):
+            raise ValueError(f'independent_axis must be 0, 1 or 2, got {self.independent_axis!r}')
+        positive = ('output_period',)
+        non_negative = ('duration', 'obstacle_k', 'obstacle_margin', 'goal_clearance',
+                        'min_distance')
+        for name in positive + non_negative:
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0.0 or (name in positive and value == 0.0):
+                bound = '> 0' if name in positive else '>= 0'
+                raise ValueError(f'{name} must be {bound}, got {value!r}')
+        self.gains.validate()
+        object.__setattr__(self, 'orientation', _quaternion(self.orientation))
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """
+    A planned tool path in base_link.
+
+    ``t`` (n,) seconds from the start; ``positions``, ``velocities`` (n, 3); ``orientation``
+    (x, y, z, w) for every pose; ``start``, ``goal`` and ``obstacles`` (m, 3) as used (projected
+    onto the task plane for 2D skills); ``trajectory``: the core's result in the skill's space.
+    """
+
+    t: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    orientation: tuple
+    start: np.ndarray
+    goal: np.ndarray
+    obstacles: np.ndarray
+    method: str
+    trajectory: object
+
+
+def _points(value, what, shape):
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise PlanningError(f'{what} must be numbers, got {value!r}') from None
+    if shape == (3,) and array.shape != (3,):
+        raise PlanningError(f'{what} must be a point (x, y, z), got shape {array.shape}')
+    if shape != (3,):
+        array = array.reshape(-1, 3) if array.size else np.zeros((0, 3))
+    if not np.all(np.isfinite(array)):
+        raise PlanningError(f'{what} contains NaN or inf')
+    return array
+
+
+class _Space:
+    """The skill's coordinates: demo units in the task plane (2D) or base_link metres (3D)."""
+
+    def __init__(self, skill, plane):
+        if skill.dim == 2:
+            if plane is None:
+                raise PlanningError('a 2D skill needs a task plane')
+            self.plane, self.scale = plane, plane.scale
+        elif skill.dim == 3:
+            self.plane, self.scale = None, 1.0
+        else:
+            raise PlanningError(f'a skill must have 2 or 3 coordinates, this one has {skill.dim}')
+
+    def inward(self, points):
+        return points if self.plane is None else self.plane.to_plane(points)
+
+    def outward(self, points):
+        return points if self.plane is None else self.plane.from_plane(points)
+
+    def outward_vectors(self, vectors):
+        return vectors if self.plane is None else (self.scale * vectors) @ self.plane.axes
+
+
+def _fmt(point):
+    return '(' + ', '.join(f'{c:.3f}' for c in point) + ')'
+
+
+def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None):
+    """
+    Plan ``skill`` (an ``etdmp_ros.dmp.Skill``) from ``start`` to ``goal`` around ``obstacles``.
+
+    ``start``, ``goal``: base_link points (3,); ``obstacles``: (m, 3) base_link points;
+    ``settings``: PlanSettings; ``plane``: the TaskPlane (needed for 2D skills). Returns a Plan;
+    raises PlanningError with the reason when the request cannot be served.
+    """
+    settings = PlanSettings() if settings is None else settings
+    start = _points(start, 'start', (3,))
+    goal = _points(goal, 'goal', (3,))
+    obstacles = _points(obstacles, 'obstacles', None)
+    space = _Space(skill, plane)
+    start_s, goal_s, obstacles_s = (space.inward(p) for p in (start, goal, obstacles))
+    start_b, goal_b, obstacles_b = (space.outward(p) for p in (start_s, goal_s, obstacles_s))
+    where = ' (projected onto the task plane)' if space.plane is not None else ''
+
+    outside = settings.workspace.violation(goal_b)
+    if outside is not None:
+        raise PlanningError(f"goal {_fmt(goal_b)}{where} is out of the UR10's reach: "
+                            f'{outside[1]}')
+    gap = float(np.linalg.norm(start_b - goal_b))
+    if gap < settings.min_distance:
+        raise PlanningError(f'start equals goal{where}: they are {gap * 1000:.1f} mm apart, less '
+                            f'than min_distance {settings.min_distance * 1000:g} mm; there is no '
+                            'movement to make')
+    if len(obstacles_b):
+        to_goal = np.linalg.norm(obstacles_b - goal_b, axis=1)
+        i = int(np.argmin(to_goal))
+        if to_goal[i] < settings.goal_clearance:
+            raise PlanningError(f'obstacle {_fmt(obstacles_b[i])}{where} lies on the goal: '
+                                f'{to_goal[i] * 1000:.1f} mm from it, less than goal_clearance '
+                                f'{settings.goal_clearance * 1000:g} mm')
+
+    gains = settings.gains
+    if settings.obstacle_k > 0.0:   # 1/m → 1/skill unit: exp(-k d) with d = d_units * scale
+        gains = replace(gains, k=settings.obstacle_k * space.scale)
+    try:
+        traj = skill.generalize(
+            start_s, goal_s, obstacles_s, method=settings.method, mode=settings.mode,
+            independent_axis=settings.independent_axis, dt=settings.output_period,
+            tau=settings.duration or None,
+            margin=settings.obstacle_margin if len(obstacles_s) else 0.0, gains=gains)
+    except GeneralizationError as err:
+        raise PlanningError(str(err)) from None
+    positions = space.outward(traj.x)
+    outside = settings.workspace.violation(positions)
+    if outside is not None:
+        i, reason = outside
+        raise PlanningError(f"the plan leaves the UR10's reach at t = {traj.t[i]:.2f} s, "
+                            f'{_fmt(positions[i])}: {reason}')
+    return Plan(traj.t, positions, space.outward_vectors(traj.v), settings.orientation,
+                start_b, goal_b, obstacles_b, settings.method, traj)
+
+
+def place_demo(skill, start, goal, plane=None):
+    """
+    Return the demonstration (T, 3) rotated and uniformly scaled so it runs from start to goal.
+
+    This is where ET-DMP's plan lies without obstacles (mode 1): the demonstration drawn in
+    place, for display. ``start``, ``goal``: base_link points; ``plane`` for 2D skills.
+    """
+    space = _Space(skill, plane)
+    start_s, goal_s = space.inward(_points(start, 'start', (3,))), space.inward(
+        _points(goal, 'goal', (3,)))
+    i_demo = skill.start - skill.goal
+    i_current = start_s - goal_s
+    try:
+        transform = euclidean_transform(i_demo, i_current, size=skill.size)
+    except GeneralizationError as err:
+        raise PlanningError(str(err)) from None
+    ratio = np.linalg.norm(i_current) / np.linalg.norm(i_demo)
+    # Row-vector form of x = g + ratio R^T (y - g_D).
+    return space.outward(goal_s + ratio * (skill.demo - skill.goal) @ transform.R)

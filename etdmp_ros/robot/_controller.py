@@ -1,0 +1,548 @@
+"""
+Trajectory following for the UR10 tool tip: closed-loop differential IK with a state machine.
+
+:class:`TrajectoryController` is stepped once per control period with the measured joint
+positions ``q`` and their measurement time ``t`` and returns a :class:`Command`. The joint
+velocity command is
+
+    xi = ( (p_d(t_b) - p_d(t_a)) / T + K_p (p_d(t_a) - p_hat),
+           log(R_d(t_b) R_d(t_a)^T) / T + K_o log(R_d(t_a) R_hat^T) )
+    qd = DifferentialIK.solve(q_hat, J(q_hat + qd_prev T / 2), xi, qd_prev)
+
+with ``T`` the control period, ``d`` the actuation delay, ``t_a = t + age + d`` the time the
+command starts to act and ``t_b = t_a + T`` the time the next one replaces it. The feed-forward
+is the reference's secant over exactly the period the command acts, and the Jacobian is taken
+halfway through that period (midpoint rule), so a kinematic plant follows the reference to
+second order. ``q_hat`` is where the commands already sent take the joints by ``t_a`` (a Smith
+predictor: the delay of a velocity-commanded robot is compensated, not fought by the feedback).
+``(p_hat, R_hat)`` is the tool pose at ``q_hat``.
+
+The delay ``d`` is estimated online by :class:`DelayEstimator` (0 to 2 periods, fractional: it
+also absorbs the lag of the joints' velocity servos) from how the joints actually moved after
+each command; ``actuation_delay`` is its starting value (one period by default, what a
+ros2_control velocity interface does).
+
+States (``Command.status``): ``idle``, ``approaching`` (a minimum-jerk move from the tool to the
+path's first pose at a safe speed), ``tracking``, ``holding`` (the last pose, for ``hold_time``),
+``paused``, ``halted-singularity``, ``halted-joint-limit``, ``unreachable`` (a path that fails
+:meth:`TrajectoryController.check`, or a tracking error above ``max_tracking_error``) and
+``stale-input``. Halts and the end of a path brake at the acceleration limits to zero; pause and
+lost input send zero at once. Pausing freezes the path clock; resuming approaches the pose where
+the path was paused and goes on, the path clock ramping back to full speed (minimum-jerk rate).
+"""
+
+from dataclasses import dataclass, fields
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from . import _ik_fast
+from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, HALT_SINGULARITY
+from ._trajectory import MinimumJerkMove
+from ._ur10 import JOINT_NAMES, UR10Model
+
+IDLE = 'idle'
+APPROACHING = 'approaching'
+TRACKING = 'tracking'
+HOLDING = 'holding'
+PAUSED = 'paused'
+HALTED_SINGULARITY = 'halted-singularity'
+HALTED_JOINT_LIMIT = 'halted-joint-limit'
+UNREACHABLE = 'unreachable'
+STALE_INPUT = 'stale-input'
+STATUSES = (IDLE, APPROACHING, TRACKING, HOLDING, PAUSED, HALTED_SINGULARITY,
+            HALTED_JOINT_LIMIT, UNREACHABLE, STALE_INPUT)
+#: States in which the controller commands motion along a reference.
+MOVING = (APPROACHING, TRACKING, HOLDING)
+
+#: Tool speeds below these count as "at rest" when a path starts (m/s, rad/s).
+REST_SPEED = 1e-3
+REST_ANGULAR_SPEED = 1e-2
+
+
+@dataclass
+class ControllerConfig:
+    """
+    Settings of :class:`TrajectoryController` (units: s, m, rad).
+
+    Gains are in 1/s: an error decays as ``exp(-gain t)``. ``actuation_delay`` ``None`` means one
+    control period (a ros2_control velocity interface applies a command at its next update);
+    with ``estimate_delay`` it is only the starting value of :class:`DelayEstimator`.
+    ``velocity_scale`` multiplies the UR10 velocity limits (<= 1).
+    """
+
+    rate: float = 125.0
+    position_gain: float = 50.0
+    orientation_gain: float = 50.0
+    actuation_delay: float = None
+    velocity_scale: float = 1.0
+    acceleration_limits: tuple = DEFAULT_ACCELERATION_LIMITS
+    joint_limit_margin: float = 0.05
+    singular_value_threshold: float = 0.08
+    max_damping: float = 0.08
+    condition_slowdown: float = 20.0
+    condition_halt: float = 50.0
+    posture: tuple = None
+    posture_gain: float = 0.0
+    approach_speed: float = 0.1
+    approach_angular_speed: float = 0.5
+    approach_acceleration: float = 0.5
+    approach_tolerance: float = 0.002
+    approach_angle_tolerance: float = 0.02
+    resume_ramp_time: float = 0.5
+    hold_time: float = 0.5
+    max_tracking_error: float = 0.05
+    estimate_delay: bool = True
+
+    def validate(self):
+        """Raise ValueError naming the first setting out of range."""
+        positive = ('rate', 'position_gain', 'orientation_gain', 'approach_speed',
+                    'approach_angular_speed', 'approach_acceleration', 'max_tracking_error')
+        non_negative = ('approach_tolerance', 'approach_angle_tolerance', 'resume_ramp_time',
+                        'hold_time', 'posture_gain')
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in positive and not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f'{f.name} must be a positive number, got {value!r}')
+            if f.name in non_negative and not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f'{f.name} must be >= 0, got {value!r}')
+        if not 0.0 < self.velocity_scale <= 1.0:
+            raise ValueError(f'velocity_scale must be in (0, 1], got {self.velocity_scale!r}')
+        if self.actuation_delay is not None and not 0.0 <= self.actuation_delay < 1.0:
+            raise ValueError(f'actuation_delay must be in [0, 1) s, got {self.actuation_delay!r}')
+        if self.position_gain * self.period > 1.0 or self.orientation_gain * self.period > 1.0:
+            raise ValueError('position_gain and orientation_gain must not exceed the control rate '
+                             f'{self.rate:g} Hz (gain * period > 1 is unstable)')
+
+    @property
+    def period(self):
+        """Return the control period in seconds."""
+        return 1.0 / self.rate
+
+
+@dataclass(slots=True)
+class Command:
+    """
+    What one control step returns.
+
+    ``qd``: joint velocities to send (rad/s, UR joint order). ``status``/``reason``: the state
+    and, for halts and rejections, why. ``tool_position``/``tool_rotation``: forward kinematics
+    of the measured joints. ``reference_position``/``reference_rotation``: where the tool should
+    be now (``None`` when not following a reference); ``tracking_error``: the distance from the
+    reference position to the tool tip (m, NaN without reference).
+    """
+
+    qd: np.ndarray
+    status: str
+    reason: str
+    tool_position: np.ndarray
+    tool_rotation: np.ndarray
+    reference_position: np.ndarray = None
+    reference_rotation: np.ndarray = None
+    tracking_error: float = float('nan')
+    condition: float = float('nan')
+    extra: dict = None
+
+
+class DelayEstimator:
+    """
+    Estimate the actuation delay, in control periods, from how the joints actually moved.
+
+    Between two measurements one control period apart, the joints move by ``T u`` where ``u``
+    is the command in force. With a delay of ``d = i + f`` periods that is the blend
+    ``(1 - f) u_(k-1-i) + f u_(k-2-i)`` of the commands sent before; the delay (0 to 2 periods,
+    steps of 1/8, refined by a parabola) is the one whose predicted displacements matched best,
+    with exponential forgetting. A fractional delay also absorbs the lag of the joints' velocity
+    servos. Until the commands have changed enough to tell delays apart, ``prior`` is used.
+    """
+
+    GRID = np.linspace(0.0, 2.0, 17)
+    #: Accumulated squared command change (rad^2, times T^2) needed before estimates count.
+    MIN_EXCITATION = 1e-10
+
+    def __init__(self, prior, period, forgetting=0.98, fast=None):
+        """Start from ``prior`` periods; ``forgetting`` per step (0.98: about 50 steps)."""
+        self.fast = _ik_fast.AVAILABLE if fast is None else fast
+        self.period = float(period)
+        self.prior = float(prior)
+        self.delay = float(prior)
+        self.forgetting = float(forgetting)
+        self._index = np.floor(self.GRID).astype(np.int64)
+        self._frac = self.GRID - self._index
+        self.reset()
+
+    def reset(self):
+        """Forget the history (not the current estimate)."""
+        self._commands = np.zeros((4, 6))        # newest first: u_(k-1), u_(k-2), ...
+        self._costs = np.zeros(len(self.GRID))
+        self._excitation = 0.0
+        self._q = None
+        self._t = None
+
+    def update(self, q, t):
+        """Take the measurement ``q`` at ``t``; return the delay estimate in periods."""
+        T = self.period
+        if self._q is not None and abs(t - self._t - T) < 0.25 * T:
+            u = self._commands
+            if self.fast:
+                change, best = _ik_fast.delay_costs(u, self._index, self._frac, q - self._q, T,
+                                                    self.forgetting, self._costs)
+            else:
+                f = self._frac[:, None]
+                models = T * ((1.0 - f) * u[self._index] + f * u[self._index + 1])
+                residual = np.sum((models - (q - self._q)) ** 2, axis=1)
+                self._costs = self.forgetting * self._costs + residual
+                change = float(np.sum((T * (u[0] - u[1])) ** 2))
+                best = np.argmin(self._costs)
+            self._excitation = self.forgetting * self._excitation + change
+            if self._excitation > self.MIN_EXCITATION:
+                self.delay = self._refine(int(best))
+        self._q, self._t = q, t
+        return self.delay
+
+    def _refine(self, k):
+        if k == 0 or k == len(self.GRID) - 1:
+            return float(self.GRID[k])
+        c0, c1, c2 = self._costs[k - 1:k + 2]
+        curvature = c0 - 2.0 * c1 + c2
+        shift = 0.5 * (c0 - c2) / curvature if curvature > 0.0 else 0.0
+        return float(self.GRID[k] + np.clip(shift, -0.5, 0.5) * (self.GRID[1] - self.GRID[0]))
+
+    def in_flight(self, delay):
+        """
+        Return the joint motion still to come from commands already sent, until the next one acts.
+
+        With a delay of ``delay`` periods, command ``u_(k-1-m)`` acts over ``[(delay - 1 - m) T,
+        (delay - m) T]`` after the measurement; the part of it before ``delay T`` counts.
+        """
+        if self.fast:
+            out = np.empty(6)
+            _ik_fast.in_flight(self._commands, float(delay), self.period, out)
+            return out
+        m = np.arange(len(self._commands))
+        overlap = np.clip(np.minimum(delay - m, delay) - np.maximum(delay - 1.0 - m, 0.0), 0.0,
+                          1.0)
+        return self.period * (overlap @ self._commands)
+
+    def record(self, command):
+        """Note the command sent after the latest measurement."""
+        self._commands[1:] = self._commands[:-1].copy()
+        self._commands[0] = command
+
+
+def _ramp_integral(u, ramp):
+    """Return path time elapsed after ``u`` s of a clock whose rate ramps 0 -> 1 in ``ramp`` s."""
+    if ramp <= 0.0 or u >= ramp:
+        return u - 0.5 * ramp if ramp > 0.0 else u
+    x = u / ramp
+    # Integral of the minimum-jerk rate 10x^3 - 15x^4 + 6x^5.
+    return ramp * x ** 4 * (2.5 - 3.0 * x + x * x)
+
+
+class TrajectoryController:
+    """
+    Follow tool pose trajectories with the UR10 (ROS-free; one instance per robot).
+
+    Not thread-safe: a node calls :meth:`step`, :meth:`follow`, :meth:`set_paused` and the other
+    state changes under one lock. :meth:`check` uses its own model and may run concurrently.
+    """
+
+    def __init__(self, model, config=None, fast=None):
+        """
+        Build the controller for a :class:`UR10Model` (its tool offset defines the tool tip).
+
+        ``fast``: numba kernels for the step (default when numba is there), or numpy only.
+        """
+        self.fast = _ik_fast.AVAILABLE if fast is None else bool(fast)
+        self.config = ControllerConfig() if config is None else config
+        self.config.validate()
+        c = self.config
+        self.period = c.period
+        self.delay = self.period if c.actuation_delay is None else float(c.actuation_delay)
+        self.delay_estimator = DelayEstimator(self.delay / self.period, self.period,
+                                              fast=self.fast)
+        self.ik = self._make_ik(model)
+        self._check_ik = self._make_ik(UR10Model(tool_offset=model.tool_offset))
+        self._previous = np.zeros(6)
+        self._status, self._reason = IDLE, ''
+        self._path = None            # the PoseTrajectory being executed
+        self._approach = None        # MinimumJerkMove to the path (None: none needed)
+        self._path_start = 0.0       # path time at which the schedule enters the path
+        self._ramp = 0.0             # duration of the path clock's ramp-in (resume)
+        self._t_start = None         # measurement time of the schedule's start
+        self._pending = None         # (path, path time) to start at the next step
+        self._paused = False
+        self._last_theta = 0.0
+        self._t_last = None
+        self._slowed = None              # condition number while slowing for a singularity
+
+    def _make_ik(self, model):
+        c = self.config
+        return DifferentialIK(
+            model, self.period, velocity_limits=model.velocity_limits * c.velocity_scale,
+            acceleration_limits=c.acceleration_limits, joint_limit_margin=c.joint_limit_margin,
+            singular_value_threshold=c.singular_value_threshold, max_damping=c.max_damping,
+            condition_slowdown=c.condition_slowdown, condition_halt=c.condition_halt,
+            posture=c.posture, posture_gain=c.posture_gain)
+
+    # -- state changes ---------------------------------------------------------------------------
+
+    @property
+    def status(self):
+        """Return the current state (one of STATUSES)."""
+        return self._status
+
+    @property
+    def reason(self):
+        """Return why the controller halted or rejected a path ('' otherwise)."""
+        return self._reason
+
+    @property
+    def previous_command(self):
+        """Return a copy of the last joint velocity command (rad/s)."""
+        return self._previous.copy()
+
+    def follow(self, path):
+        """Execute ``path`` (a PoseTrajectory) from the next step on, replacing any other."""
+        self._pending = (path, 0.0)
+
+    def cancel(self, reason=''):
+        """Stop following (brake to zero at the acceleration limits) and become idle."""
+        self._pending = None
+        self._path = None
+        if self._status != PAUSED:
+            self._set(IDLE, reason)
+
+    def reject(self, reason):
+        """Refuse the path just received (``reason`` says why): brake to zero, ``unreachable``."""
+        self._pending = None
+        self._path = None
+        self._set(UNREACHABLE, reason)
+
+    def set_paused(self, paused):
+        """Pause (zero command at once, path clock frozen) or resume (approach back, go on)."""
+        if paused and not self._paused:
+            self._paused = True
+            if self._pending is None and self._path is not None:
+                tau = 0.0
+                if self._approach is None or self._last_theta >= self._approach.duration:
+                    tau = min(self._path_time(self._last_theta), self._path.duration)
+                self._pending = (self._path, tau)
+            self._path = None
+            self._previous = np.zeros(6)
+            self._set(PAUSED)
+        elif not paused and self._paused:
+            self._paused = False
+            # The next step starts the schedule and reports its real phase.
+            self._set(APPROACHING if self._pending is not None else IDLE)
+
+    @property
+    def paused(self):
+        """Return True while paused."""
+        return self._paused
+
+    def input_lost(self, reason):
+        """Joint states went stale: zero command at once, drop the path, ``stale-input``."""
+        self.delay_estimator.reset()
+        self._pending = None
+        self._path = None
+        self._previous = np.zeros(6)
+        self._set(STALE_INPUT, reason)
+
+    def shutdown(self):
+        """Return the zero command to send before exiting (and forget everything)."""
+        self._pending = None
+        self._path = None
+        self._previous = np.zeros(6)
+        self._set(IDLE, 'shutdown')
+        return np.zeros(6)
+
+    def _set(self, status, reason=''):
+        self._status, self._reason = status, reason
+
+    # -- the schedule: approach, then the path (with a ramp-in on resume), then hold --------------
+
+    def _path_time(self, theta):
+        t_app = self._approach.duration if self._approach is not None else 0.0
+        return self._path_start + _ramp_integral(max(theta - t_app, 0.0), self._ramp)
+
+    def _reference(self, theta):
+        """Return (p, R, phase, path time) of the schedule at ``theta`` s after its start."""
+        if self._approach is not None and theta < self._approach.duration:
+            p, rot = self._approach.pose(theta)
+            return p, rot, APPROACHING, self._path_start
+        tau = self._path_time(theta)
+        p, rot = self._path.pose(tau, self.fast)
+        return p, rot, TRACKING if tau < self._path.duration else HOLDING, tau
+
+    def _start(self, t, p, rot, jac):
+        path, tau0 = self._pending
+        self._pending = None
+        c = self.config
+        p1, rot1 = path.pose(tau0)
+        twist = jac @ self._previous
+        v0, w0 = twist[:3], twist[3:]
+        moving = np.linalg.norm(v0) > REST_SPEED or np.linalg.norm(w0) > REST_ANGULAR_SPEED
+        far = (np.linalg.norm(p1 - p) > c.approach_tolerance
+               or np.linalg.norm(pin.log3(rot1 @ rot.T)) > c.approach_angle_tolerance)
+        self._approach = None
+        if far or moving:
+            self._approach = MinimumJerkMove.plan(
+                p, rot, p1, rot1, c.approach_speed, c.approach_angular_speed,
+                c.approach_acceleration, v0=v0, w0=w0)
+        # A path entered while it moves (a resume mid-path) starts with its clock ramping in.
+        starts_moving = tau0 < path.duration and np.linalg.norm(path.velocity(tau0)) > REST_SPEED
+        self._ramp = c.resume_ramp_time if starts_moving else 0.0
+        self._path, self._path_start, self._t_start = path, tau0, t
+        self._last_theta = 0.0
+        self._slowed = None
+
+    # -- one control period ----------------------------------------------------------------------
+
+    def step(self, q, t, age=0.0):
+        """
+        Return the :class:`Command` for joints ``q`` (rad) measured at time ``t`` (s).
+
+        ``age``: how long ago (s) the measurement was taken when this step runs (0 in a loop
+        that measures and commands at once); it adds to the look-ahead.
+        """
+        q = np.asarray(q, dtype=float)
+        if self.config.estimate_delay:
+            self.delay = self.delay_estimator.update(q, t) * self.period
+        command = self._step(q, t, age)
+        self.delay_estimator.record(self._previous)
+        return command
+
+    def _step(self, q, t, age):
+        """Compute the command (see :meth:`step`)."""
+        if self._t_last is not None and t < self._t_last - 1e-9:
+            self.input_lost(f'joint state time went back from {self._t_last:.3f} to {t:.3f} s')
+        self._t_last = t
+        if self._status == STALE_INPUT:
+            self._set(IDLE)
+        p, rot, jac = self.ik.kinematics(q)
+        if self._paused:
+            self._previous = np.zeros(6)
+            self._set(PAUSED)
+            return Command(np.zeros(6), PAUSED, '', p, rot)
+        if self._pending is not None:
+            self._start(t, p, rot, jac)
+        if self._path is None:
+            self._previous = self.ik.brake(self._previous)
+            return Command(self._previous.copy(), self._status, self._reason, p, rot)
+
+        c = self.config
+        theta = t - self._t_start
+        self._last_theta = theta
+        p_ref, rot_ref, phase, tau = self._reference(theta)
+        d = p_ref - p
+        error = math.sqrt(d @ d)
+        if phase == HOLDING and tau >= self._path.duration + c.hold_time:
+            return self._stop(IDLE, '', p, rot, p_ref, rot_ref, error)
+        if error > c.max_tracking_error:
+            too_far = (f'tracking error {error * 1000:.0f} mm exceeds max_tracking_error '
+                       f'{c.max_tracking_error * 1000:.0f} mm (at path time {tau:.2f} s)')
+            if self._slowed is not None:    # the lag is the singularity slow-down's doing
+                return self._stop(HALTED_SINGULARITY, f'slowed down near a singularity (Jacobian'
+                                  f' condition number {self._slowed:.1f} > '
+                                  f'{c.condition_slowdown:g}): {too_far}', p, rot, p_ref, rot_ref,
+                                  error)
+            return self._stop(UNREACHABLE, too_far, p, rot, p_ref, rot_ref, error)
+
+        age = min(max(age, 0.0), 0.5)
+        lookahead = age + self.delay
+        # Smith predictor: where the commands already sent take the joints before this one acts.
+        q_hat = q + self.delay_estimator.in_flight(self.delay / self.period)
+        if age > 0.0:
+            q_hat += self._previous * age
+        p_hat, rot_hat, _ = self.ik.kinematics(q_hat)
+        # The Jacobian halfway through the period the command acts (midpoint rule): the
+        # secant of the reference is matched to second order, not just first.
+        jac = self.ik.jacobian(q_hat + (0.5 * self.period) * self._previous)
+        p_a, rot_a, _, _ = self._reference(theta + lookahead)
+        p_b, rot_b, _, _ = self._reference(theta + lookahead + self.period)
+        xi = np.empty(6)
+        if self.fast:
+            _ik_fast.twist(p_a, rot_a, p_b, rot_b, p_hat, rot_hat, self.period, c.position_gain,
+                           c.orientation_gain, xi)
+        else:
+            xi[:3] = (p_b - p_a) / self.period + c.position_gain * (p_a - p_hat)
+            xi[3:] = (pin.log3(rot_b @ rot_a.T) / self.period
+                      + c.orientation_gain * pin.log3(rot_a @ rot_hat.T))
+        result = self.ik.solve(q_hat, jac, xi, self._previous, self.fast)
+        self._previous = result.qd
+        self._slowed = result.condition if result.singularity_scale < 1.0 else None
+        if result.halt is not None:
+            self._path = None
+            self._set(HALTED_SINGULARITY if result.halt == HALT_SINGULARITY
+                      else HALTED_JOINT_LIMIT, result.reason)
+        else:
+            self._set(phase)
+        return Command(result.qd.copy(), self._status, self._reason, p, rot, p_ref, rot_ref,
+                       error, result.condition,
+                       {'scale': result.scale, 'damping': result.damping})
+
+    def _stop(self, status, reason, p, rot, p_ref, rot_ref, error):
+        self._path = None
+        self._set(status, reason)
+        self._previous = self.ik.brake(self._previous)
+        return Command(self._previous.copy(), status, reason, p, rot, p_ref, rot_ref, error)
+
+    # -- feasibility of a path before it is executed ----------------------------------------------
+
+    def check(self, path, q, max_samples=200):
+        """
+        Return why ``path`` cannot be executed from joints ``q``, or '' if it can.
+
+        Solves position IK (damped Newton, warm-started along the way) for the straight approach
+        from the tool to the first pose and for up to ``max_samples`` poses of the path; fails on
+        a pose out of reach, beyond a joint limit (with margin) or at a singularity (condition
+        number at the halt threshold). Uses its own model: safe beside :meth:`step`.
+        """
+        ik = self._check_ik
+        q = np.array(q, dtype=float)
+        p0, rot0, _ = ik.kinematics(q)
+        p1, rot1 = path.pose(0.0)
+        n_app = int(np.ceil(np.linalg.norm(p1 - p0) / 0.02))
+        angle = pin.log3(rot1 @ rot0.T)
+        targets = [(f'approach point {k}/{n_app}', p0 + (p1 - p0) * k / n_app,
+                    pin.exp3(angle * k / n_app) @ rot0) for k in range(1, n_app)]
+        idx = np.arange(len(path.t))
+        if len(idx) > max_samples:
+            idx = np.unique(np.linspace(0, len(idx) - 1, max_samples).round().astype(int))
+        targets += [(f'pose #{i} (t = {path.t[i]:.2f} s)', path.positions[i], path.rotations[i])
+                    for i in idx]
+        for name, p, rot in targets:
+            q, residual = self._solve_pose(ik, q, p, rot)
+            where = f'{name} at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m'
+            if residual > 1e-4:
+                return (f'{where} is out of reach: the closest the UR10 gets is '
+                        f'{residual * 1000:.1f} mm away')
+            bad = np.flatnonzero((q < ik.lower) | (q > ik.upper))
+            if len(bad):
+                j = int(bad[0])
+                return (f'{where} needs {JOINT_NAMES[j]} at {q[j]:+.3f} rad, within '
+                        f'{ik.joint_limit_margin:g} rad of its limits [{ik.model.lower[j]:+.3f}, '
+                        f'{ik.model.upper[j]:+.3f}]')
+            kappa = ik.condition(q)
+            if kappa >= ik.condition_halt:
+                return (f'{where} is at a singular configuration (Jacobian condition number '
+                        f'{kappa:.0f} >= {ik.condition_halt:g})')
+        return ''
+
+    @staticmethod
+    def _solve_pose(ik, q, p, rot, iterations=60):
+        """Damped Newton IK for one pose; return (q, remaining error, position and angle, m)."""
+        for _ in range(iterations):
+            pc, rc, jac = ik.kinematics(q)
+            err = np.r_[p - pc, pin.log3(rot @ rc.T)]
+            norm = float(np.linalg.norm(err))
+            if norm < 1e-6:
+                break
+            step = jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), err)
+            step_norm = np.linalg.norm(step)
+            if step_norm > 0.3:
+                step *= 0.3 / step_norm
+            q = q + step
+        return q, norm

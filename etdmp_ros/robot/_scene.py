@@ -1,0 +1,206 @@
+"""
+The workcell description shared by every node (``config/scene.yaml``), read without ROS.
+
+Parameter files have the ROS 2 layout (``<node or /**>: ros__parameters: {...}``); nested keys
+become dotted parameter names (``camera.position``), exactly as ``--params-file`` declares them.
+:class:`SceneConfig` is the validated scene: the simulation builds from it, and the nodes build
+it from their parameters with :meth:`SceneConfig.from_parameters`.
+
+Objects and the point that stands for each (all in base_link, metres; table top is z = 0):
+
+- goal marker: a flat disc of radius ``goal_marker.radius``, 2 mm thick; ``goal_position`` is the
+  centre of its TOP face (default z = 0.002: the disc lies on the table).
+- obstacles: upright cylinders of radius ``obstacle.radius`` and height ``obstacle.height``;
+  each position in ``obstacle_positions`` is the centre of a cylinder's TOP face (z equal to the
+  height: it stands on the table). The top face is what a camera above sees.
+- bottle: an open cylindrical container standing on the table at ``bottle.position`` [x, y];
+  its mouth is at z = ``bottle.height`` (the built-in "stir" demo's origin is on the bottle axis
+  at the mouth).
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+import yaml
+
+from ._camera import CameraPose
+from .._paths import config_path
+
+# Scene keys (flat ROS parameter names) that SceneConfig.from_parameters reads.
+SCENE_PARAMETERS = (
+    'tool_offset', 'initial_joint_positions', 'task_plane.origin',
+    'camera.position', 'camera.orientation',
+    'table.center', 'table.size', 'table.height', 'table.color',
+    'whiteboard.size', 'whiteboard.color',
+    'bottle.position', 'bottle.radius', 'bottle.height', 'bottle.color',
+    'goal_position', 'goal_marker.radius', 'goal_marker.color',
+    'obstacle_positions', 'obstacle.radius', 'obstacle.height', 'obstacle.color',
+)
+GOAL_MARKER_THICKNESS = 0.002
+
+
+def read_parameter_file(path, node_name=None):
+    """
+    Return the parameters of a ROS 2 parameter file as a flat dict ``{'a.b': value}``.
+
+    Sections ``/**`` and, if given, ``node_name`` / ``/node_name`` are merged in that order (a
+    node's own section wins), as rcl does for ``--params-file``.
+    """
+    with open(path, encoding='utf-8') as f:
+        doc = yaml.safe_load(f) or {}
+    sections = ['/**']
+    if node_name:
+        sections += [node_name, '/' + node_name]
+    flat = {}
+    for section in sections:
+        params = (doc.get(section) or {}).get('ros__parameters') or {}
+        flat.update(_flatten(params))
+    return flat
+
+
+def _flatten(tree, prefix=''):
+    flat = {}
+    for key, value in tree.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, dict):
+            flat.update(_flatten(value, name + '.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+def _vector(name, value, size=None, multiple_of=None):
+    try:
+        array = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a list of numbers, got {value!r}') from None
+    if size is not None and array.size != size:
+        raise ValueError(f'{name} must have {size} values, got {array.size}')
+    if multiple_of is not None and array.size % multiple_of:
+        raise ValueError(f'{name} must have a multiple of {multiple_of} values '
+                         f'(x1, y1, z1, x2, ...), got {array.size}')
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f'{name} must be finite, got {array.tolist()}')
+    return array
+
+
+def _positive(name, value):
+    value = float(value)
+    if not math.isfinite(value) or value <= 0.0:
+        raise ValueError(f'{name} must be a positive number, got {value}')
+    return value
+
+
+def _color(name, value):
+    rgb = _vector(name, value)
+    if rgb.size not in (3, 4) or np.any(rgb < 0.0) or np.any(rgb > 1.0):
+        raise ValueError(f'{name} must be [r, g, b] (or rgba) in 0..1, got {rgb.tolist()}')
+    return np.append(rgb[:3], rgb[3] if rgb.size == 4 else 1.0)
+
+
+def parse_goal_position(value):
+    """Return ``goal_position`` as a float array (3,); ValueError if not 3 finite numbers."""
+    return _vector('goal_position', value, size=3)
+
+
+def parse_obstacle_positions(value):
+    """
+    Return ``obstacle_positions`` (flat [x1, y1, z1, x2, ...]) as an array (N, 3).
+
+    An empty list means no obstacles. ValueError if the length is not a multiple of 3 or a value
+    is not finite.
+    """
+    return _vector('obstacle_positions', value, multiple_of=3).reshape(-1, 3)
+
+
+@dataclass(frozen=True, eq=False)
+class SceneConfig:
+    """
+    The validated workcell: robot start, tool, table, objects and camera pose (base_link, m).
+
+    Build it with :func:`load_scene` (from ``config/scene.yaml``) or
+    :meth:`from_parameters` (from a node's parameters); the constructor takes the values
+    as they are and :meth:`from_parameters` validates them. Colours are rgba in 0..1.
+    """
+
+    tool_offset: np.ndarray
+    initial_joint_positions: np.ndarray
+    task_plane_origin: np.ndarray
+    camera_pose: CameraPose
+    table_center: np.ndarray
+    table_size: np.ndarray
+    table_height: float
+    table_color: np.ndarray
+    whiteboard_size: np.ndarray
+    whiteboard_color: np.ndarray
+    bottle_position: np.ndarray
+    bottle_radius: float
+    bottle_height: float
+    bottle_color: np.ndarray
+    goal_position: np.ndarray
+    goal_radius: float
+    goal_color: np.ndarray
+    obstacle_positions: np.ndarray
+    obstacle_radius: float
+    obstacle_height: float
+    obstacle_color: np.ndarray
+
+    @classmethod
+    def from_parameters(cls, params):
+        """
+        Return the scene from flat parameter names (those of :data:`SCENE_PARAMETERS`).
+
+        Raises ValueError naming the first missing or invalid parameter.
+        """
+        missing = [name for name in SCENE_PARAMETERS if name not in params]
+        if missing:
+            raise ValueError(f'scene parameters missing: {", ".join(missing)}')
+        p = params
+        try:
+            camera_pose = CameraPose(_vector('camera.position', p['camera.position'], 3),
+                                     _vector('camera.orientation', p['camera.orientation'], 4))
+        except ValueError as exc:
+            raise ValueError(f'camera pose: {exc}') from None
+        whiteboard = _vector('whiteboard.size', p['whiteboard.size'], 2)
+        if np.any(whiteboard < 0):
+            raise ValueError(f'whiteboard.size must be >= 0, got {whiteboard.tolist()}')
+        return cls(
+            tool_offset=_vector('tool_offset', p['tool_offset'], 3),
+            initial_joint_positions=_vector('initial_joint_positions',
+                                            p['initial_joint_positions'], 6),
+            task_plane_origin=_vector('task_plane.origin', p['task_plane.origin'], 3),
+            camera_pose=camera_pose,
+            table_center=_vector('table.center', p['table.center'], 2),
+            table_size=np.array([_positive('table.size', v)
+                                 for v in _vector('table.size', p['table.size'], 2)]),
+            table_height=_positive('table.height', p['table.height']),
+            table_color=_color('table.color', p['table.color']),
+            whiteboard_size=whiteboard,
+            whiteboard_color=_color('whiteboard.color', p['whiteboard.color']),
+            bottle_position=_vector('bottle.position', p['bottle.position'], 2),
+            bottle_radius=_positive('bottle.radius', p['bottle.radius']),
+            bottle_height=_positive('bottle.height', p['bottle.height']),
+            bottle_color=_color('bottle.color', p['bottle.color']),
+            goal_position=parse_goal_position(p['goal_position']),
+            goal_radius=_positive('goal_marker.radius', p['goal_marker.radius']),
+            goal_color=_color('goal_marker.color', p['goal_marker.color']),
+            obstacle_positions=parse_obstacle_positions(p['obstacle_positions']),
+            obstacle_radius=_positive('obstacle.radius', p['obstacle.radius']),
+            obstacle_height=_positive('obstacle.height', p['obstacle.height']),
+            obstacle_color=_color('obstacle.color', p['obstacle.color']),
+        )
+
+
+def load_scene(path=None, overrides=None):
+    """
+    Return the :class:`SceneConfig` of a scene parameter file (default: ``config/scene.yaml``).
+
+    ``overrides`` is an optional dict of flat parameter names replacing file values, e.g.
+    ``{'goal_position': [0.7, 0.2, 0.002]}``.
+    """
+    if path is None:
+        path = config_path('scene.yaml')
+    params = read_parameter_file(path)
+    params.update(overrides or {})
+    return SceneConfig.from_parameters(params)

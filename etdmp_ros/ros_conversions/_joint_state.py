@@ -1,0 +1,81 @@
+"""
+sensor_msgs/JointState <-> arrays, and the UR joint velocity command (std_msgs/Float64MultiArray).
+
+Joint states are matched by NAME (the UR driver publishes them in alphabetical order, not in
+UR order); commands are positional, in UR joint order (``JOINT_NAMES``), as the UR ROS 2
+driver's ``forward_velocity_controller`` expects.
+"""
+
+import array
+
+import numpy as np
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from ..robot._ur10 import JOINT_NAMES
+
+
+def _doubles(values):
+    data = array.array('d')
+    data.frombytes(np.ascontiguousarray(values, dtype=np.float64).reshape(-1).view(np.uint8))
+    return data
+
+
+def joint_state_msg(positions, velocities=None, efforts=None, names=JOINT_NAMES, stamp=None):
+    """
+    Return a sensor_msgs/JointState for ``names`` (default: the UR10's, in UR order).
+
+    ``stamp``: a builtin_interfaces/Time (e.g. ``ns_to_stamp(t_ns)``), or None for zero.
+    """
+    msg = JointState()
+    if stamp is not None:
+        msg.header.stamp = stamp
+    msg.name = list(names)
+    msg.position = _doubles(positions)
+    if velocities is not None:
+        msg.velocity = _doubles(velocities)
+    if efforts is not None:
+        msg.effort = _doubles(efforts)
+    return msg
+
+
+def joint_state_arrays(msg, names=JOINT_NAMES):
+    """
+    Return ``(positions, velocities)`` of ``names`` from a JointState, reordered to ``names``.
+
+    ``velocities`` is None if the message has none. Raises ValueError if a joint is missing,
+    the arrays' lengths disagree with ``name`` or a value is not finite.
+    """
+    n = len(msg.name)
+    if len(msg.position) != n or len(msg.velocity) not in (0, n):
+        raise ValueError(f'joint state has {n} names, {len(msg.position)} positions and '
+                         f'{len(msg.velocity)} velocities')
+    index = {name: i for i, name in enumerate(msg.name)}
+    missing = [name for name in names if name not in index]
+    if missing:
+        raise ValueError(f'joint state lacks joints {missing} (has {list(msg.name)})')
+    order = [index[name] for name in names]
+    positions = np.asarray(msg.position, dtype=float)[order]
+    velocities = np.asarray(msg.velocity, dtype=float)[order] if len(msg.velocity) else None
+    if not np.all(np.isfinite(positions)) or \
+            (velocities is not None and not np.all(np.isfinite(velocities))):
+        raise ValueError('joint state holds NaN or infinite values')
+    return positions, velocities
+
+
+def velocity_command_msg(velocities):
+    """Return the Float64MultiArray command of joint velocities (rad/s, UR joint order)."""
+    msg = Float64MultiArray()
+    msg.data = _doubles(velocities)
+    return msg
+
+
+def velocity_command_array(msg, size=len(JOINT_NAMES)):
+    """Return the velocities (size,) of a Float64MultiArray command; ValueError if malformed."""
+    data = np.asarray(msg.data, dtype=float)
+    if data.shape != (size,):
+        raise ValueError(f'velocity command must have {size} values (UR joint order), '
+                         f'got {data.size}')
+    if not np.all(np.isfinite(data)):
+        raise ValueError(f'velocity command must be finite, got {data.tolist()}')
+    return data

@@ -1,0 +1,368 @@
+"""
+The skills the DMP server knows, learned from recorded demonstrations (no ROS needed here).
+
+Where demonstrations come from:
+
+- the built-in demos (``etdmp_ros.dmp.builtin_demo``);
+- files: ``.csv``, ``.npy``, ``.npz`` (``etdmp_ros.dmp.load_demo``) and rosbag2 ``.mcap``
+  recordings of a ``geometry_msgs/msg/PoseStamped`` topic (one sample per message, timed by the
+  header stamps, or by the recording times when the stamps are unset) or a ``nav_msgs/msg/Path``
+  topic (the last Path in the file, timed by its poses' stamps);
+- paths taught at runtime (the DMP server's ``/etdmp/demonstrations`` topic), persisted as CSV.
+
+What a demonstration's coordinates mean is given by its dimension, one rule for every source:
+
+- 2 coordinates: a 2D skill in demo units (letters, wiping), executed in the task plane;
+- 3 coordinates: a 3D skill in base_link metres (stirring), used directly.
+
+A recorded or taught path is a sequence of base_link positions (metres). It becomes a 2D skill
+(its projection onto the task plane, in demo units; see :mod:`etdmp_ros.task_plane`) or a 3D skill
+according to ``recorded_dim``: ``'2d'``, ``'3d'`` or ``'auto'`` (2D when the path is flat and
+parallel to the task plane: its distances to the plane spread over at most ``plane_tolerance``
+metres, so a letter written 5 cm above the table is still a letter). Positions must be given in
+``base_link`` (an empty frame id counts as base_link): no TF is available to transform others.
+A path whose poses all carry the same stamp (unset) is taken as sampled uniformly over 1 s, the
+convention of ``load_demo`` for files without times.
+"""
+
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+import re
+import threading
+
+from etdmp_ros.dmp import (Demonstration, DemonstrationError, FORMULATIONS, learn, load_demo,
+                           save_demo)
+import numpy as np
+
+#: File types a demonstration can be read from.
+SUFFIXES = ('.csv', '.npy', '.npz', '.mcap')
+#: How a recorded base_link path becomes a skill (see the module docstring).
+RECORDED_DIMS = ('auto', '2d', '3d')
+#: rosbag2 schema names of the message types a demonstration can be recorded as.
+POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+PATH = 'nav_msgs/msg/Path'
+BASE_FRAMES = ('', 'base_link')
+
+# Skill names become file names in the skills folder: keep them portable and path-free.
+_NAME = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,63}\Z')
+
+
+class UnknownSkillError(ValueError):
+    """A skill name that the library does not know (the message lists the known ones)."""
+
+
+def check_skill_name(name):
+    """Return ``name`` if it is a valid skill name, else raise ValueError saying why."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise ValueError(f'skill name {name!r} is not valid: use 1-64 letters, digits, "_" or '
+                         '"-", starting with a letter or digit')
+    return name
+
+
+def default_skills_dir(environ=None):
+    """Return where taught skills are kept: ``$ROS_HOME/etdmp_ros/skills`` or ``~/.ros/...``."""
+    environ = os.environ if environ is None else environ
+    ros_home = environ.get('ROS_HOME')
+    base = Path(ros_home) if ros_home else Path(environ.get('HOME', '~')).expanduser() / '.ros'
+    return base / 'etdmp_ros' / 'skills'
+
+
+def demonstration_files(paths):
+    """
+    Expand files and folders into the list of demonstration files to read, in order.
+
+    A folder contributes its files with a known suffix (sorted, not recursive, hidden files
+    skipped). A file is kept as given whatever its suffix, so that loading it reports a clear
+    error; a missing path raises DemonstrationError.
+    """
+    files = []
+    for entry in paths:
+        path = Path(entry).expanduser()
+        if path.is_dir():
+            files.extend(sorted(p for p in path.iterdir() if p.is_file() and
+                                p.suffix.lower() in SUFFIXES and not p.name.startswith('.')))
+        elif path.exists():
+            files.append(path)
+        else:
+            raise DemonstrationError(f'{path}: no such file or folder')
+    return files
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedPath:
+    """Positions (n, 3) in base_link recorded on ``topic``, with times ``t`` (n,) or None."""
+
+    positions: np.ndarray
+    t: np.ndarray | None
+    topic: str
+
+
+def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tolerance=0.01):
+    """
+    Turn a base_link path (n, 3) with times ``t`` (n,) or None into a Demonstration.
+
+    The result is 2D (demo units on ``plane``, a TaskPlane) or 3D (metres), following
+    ``recorded_dim`` (see the module docstring). Times that are all equal count as unset.
+    Raises DemonstrationError if the path is unusable.
+    """
+    if recorded_dim not in RECORDED_DIMS:
+        raise DemonstrationError(f'recorded_dim must be one of {RECORDED_DIMS}, '
+                                 f'got {recorded_dim!r}')
+    positions = np.asarray(positions, dtype=float)
+    where = f'demonstration {name!r}'
+    if positions.ndim != 2 or positions.shape[1] != 3:
+        raise DemonstrationError(f'{where}: expected (n, 3) base_link positions, got shape '
+                                 f'{positions.shape}')
+    if not np.all(np.isfinite(positions)):
+        raise DemonstrationError(f'{where}: positions contain NaN or inf')
+    if t is not None:
+        t = np.asarray(t, dtype=float)
+        if t.size and np.all(t == t.flat[0]):
+            t = None
+        elif t.size:
+            t = t - t.flat[0]
+    dim = recorded_dim
+    if dim == 'auto':
+        heights = plane.distance(positions) if len(positions) else np.zeros(1)
+        dim = '2d' if np.ptp(heights) <= plane_tolerance else '3d'
+    if dim == '2d':
+        positions = plane.to_plane(positions)
+    return Demonstration(name, positions, t)
+
+
+def read_mcap_path(path, topic=None):
+    """
+    Read the base_link positions of a PoseStamped or Path topic from a rosbag2 ``.mcap`` file.
+
+    ``topic`` may be None when the file holds exactly one such topic. Raises
+    DemonstrationError (missing reader package, unreadable file, no or ambiguous topic, wrong
+    frame, no samples).
+    """
+    path = Path(path)
+    try:
+        from mcap.reader import make_reader
+        from mcap_ros2.decoder import DecoderFactory
+    except ImportError:
+        raise DemonstrationError(f'{path}: reading .mcap files needs the Python package '
+                                 'mcap-ros2-support (pip install mcap-ros2-support)') from None
+    try:
+        with open(path, 'rb') as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            topics = _mcap_topics(reader)
+            chosen = _choose_topic(path, topics, topic)
+            kind = topics[chosen]
+            records = [(message.log_time, decoded) for _, _, message, decoded in
+                       reader.iter_decoded_messages(topics=[chosen])]
+    except DemonstrationError:
+        raise
+    except OSError as err:
+        raise DemonstrationError(f'{path}: cannot read: {err.strerror or err}') from None
+    except Exception as err:   # noqa: B902 - the mcap readers raise many types on corrupt files
+        raise DemonstrationError(f'{path}: not a readable rosbag2 .mcap file '
+                                 f'({type(err).__name__}: {err})') from None
+    if not records:
+        raise DemonstrationError(f'{path}: topic {chosen!r} holds no messages')
+    if kind == POSE_STAMPED:
+        frames = {msg.header.frame_id for _, msg in records}
+        positions = [_xyz(msg.pose.position) for _, msg in records]
+        stamps = np.array([_stamp(msg.header.stamp) for _, msg in records])
+        if np.all(stamps == stamps[0]):   # unset header stamps: use the recording times
+            stamps = np.array([log_time * 1e-9 for log_time, _ in records])
+    else:
+        last = records[-1][1]   # the most recent plan/path recorded on the topic
+        frames = {last.header.frame_id} | {pose.header.frame_id for pose in last.poses}
+        positions = [_xyz(pose.pose.position) for pose in last.poses]
+        stamps = np.array([_stamp(pose.header.stamp) for pose in last.poses])
+    wrong = sorted(frames - set(BASE_FRAMES))
+    if wrong:
+        raise DemonstrationError(f'{path}: topic {chosen!r} is in frame {wrong[0]!r}; only '
+                                 'base_link recordings can be used (no TF here)')
+    return RecordedPath(np.array(positions, dtype=float).reshape(-1, 3), stamps, chosen)
+
+
+def _mcap_topics(reader):
+    """Return {topic: schema name} of the PoseStamped/Path channels in an mcap file."""
+    summary = reader.get_summary()
+    if summary is not None:
+        pairs = [(channel.topic, summary.schemas.get(channel.schema_id))
+                 for channel in summary.channels.values()]
+    else:   # no summary section (e.g. an interrupted recording): scan the records once
+        pairs = {channel.topic: schema for schema, channel, _ in reader.iter_messages()}.items()
+    return {topic: schema.name for topic, schema in pairs
+            if schema is not None and schema.name in (POSE_STAMPED, PATH)}
+
+
+def _choose_topic(path, topics, topic):
+    if topic:
+        if topic not in topics:
+            raise DemonstrationError(f'{path}: no {POSE_STAMPED} or {PATH} topic named '
+                                     f'{topic!r} (found: {", ".join(sorted(topics)) or "none"})')
+        return topic
+    if len(topics) != 1:
+        found = ', '.join(sorted(topics)) or 'none'
+        raise DemonstrationError(f'{path}: cannot tell which topic to learn from: the file holds '
+                                 f'{len(topics)} {POSE_STAMPED} or {PATH} topics ({found}); '
+                                 'name one (parameter mcap_topic)')
+    return next(iter(topics))
+
+
+def _xyz(point):
+    return (point.x, point.y, point.z)
+
+
+def _stamp(stamp):
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def load_demonstration(path, plane, name=None, mcap_topic=None, recorded_dim='auto',
+                       plane_tolerance=0.01):
+    """
+    Read one demonstration file (``.csv``, ``.npy``, ``.npz`` or ``.mcap``).
+
+    The name defaults to the file's stem. ``.mcap`` recordings are base_link paths turned into
+    2D or 3D demonstrations by :func:`recorded_path_demo` (``plane``, ``recorded_dim``,
+    ``plane_tolerance``). Raises DemonstrationError.
+    """
+    path = Path(path)
+    name = path.stem if name is None else name
+    if path.suffix.lower() != '.mcap':
+        return load_demo(path, name=name)
+    recorded = read_mcap_path(path, mcap_topic)
+    try:
+        return recorded_path_demo(name, recorded.positions, recorded.t, plane, recorded_dim,
+                                  plane_tolerance)
+    except DemonstrationError as err:
+        raise DemonstrationError(f'{path} (topic {recorded.topic!r}): {err}') from None
+
+
+def save_skill_demo(skills_dir, demo):
+    """
+    Write ``demo`` to ``<skills_dir>/<demo.name>.csv`` (with a ``t`` column) and return the path.
+
+    The file is replaced atomically, so a crash never leaves a half-written skill behind.
+    """
+    check_skill_name(demo.name)
+    folder = Path(skills_dir).expanduser()
+    folder.mkdir(parents=True, exist_ok=True)
+    target = folder / f'{demo.name}.csv'
+    partial = folder / f'.{demo.name}.partial.csv'   # hidden: never loaded as a skill
+    save_demo(partial, demo)
+    os.replace(partial, target)
+    return target
+
+
+@dataclass(eq=False)
+class SkillEntry:
+    """A named demonstration, where it came from, and the skills learned from it."""
+
+    name: str
+    demo: Demonstration
+    source: str
+    _learned: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def planar(self):
+        """Return True for a 2D skill (task plane, demo units), False for 3D (base_link)."""
+        return self.demo.dim == 2
+
+
+class SkillLibrary:
+    """
+    Named skills, each learned from one demonstration; safe to use from several threads.
+
+    :meth:`add` learns the demonstration at once (so a bad one is rejected before it replaces
+    anything); :meth:`skill` returns the learned skill for a formulation and number of basis
+    functions, learning and caching it on first use.
+    """
+
+    def __init__(self, formulation='ijspeert', n_basis=100):
+        """Create an empty library that learns with ``formulation`` and ``n_basis``."""
+        if formulation not in FORMULATIONS:
+            raise ValueError(f'formulation must be one of {FORMULATIONS}, got {formulation!r}')
+        self.formulation = formulation
+        self.n_basis = int(n_basis)
+        self._entries = {}
+        self._lock = threading.RLock()
+
+    def __len__(self):
+        """Return the number of skills."""
+        with self._lock:
+            return len(self._entries)
+
+    def __contains__(self, name):
+        """Return True if a skill of that name is known."""
+        with self._lock:
+            return name in self._entries
+
+    def names(self):
+        """Return the known skill names, sorted."""
+        with self._lock:
+            return sorted(self._entries)
+
+    def add(self, name, demo, source):
+        """
+        Learn ``demo`` (a Demonstration) as skill ``name`` and return its SkillEntry.
+
+        Replaces a skill of the same name only if learning succeeds. Raises DemonstrationError
+        (or ValueError for a bad name) and leaves the library unchanged on failure.
+        """
+        check_skill_name(name)
+        if not isinstance(demo, Demonstration):
+            raise TypeError(f'expected a Demonstration, got {type(demo).__name__}')
+        if demo.dim not in (2, 3):
+            raise DemonstrationError(
+                f'demonstration {name!r} has {demo.dim} coordinate(s); a skill needs 2 (a task '
+                'plane skill in demo units) or 3 (a base_link skill in metres)')
+        if demo.name != name:
+            demo = Demonstration(name, demo.positions, demo.t)
+        entry = SkillEntry(name, demo, str(source))
+        key = (self.formulation, self.n_basis)
+        entry._learned[key] = learn(demo, n_basis=self.n_basis, formulation=self.formulation)
+        with self._lock:
+            self._entries[name] = entry
+        return entry
+
+    def get(self, name):
+        """Return the SkillEntry of ``name`` or raise UnknownSkillError listing the known ones."""
+        with self._lock:
+            entry = self._entries.get(name)
+            if entry is None:
+                raise UnknownSkillError(f'unknown skill {name!r}; known skills: '
+                                        f'{", ".join(sorted(self._entries)) or "none"}')
+            return entry
+
+    def skill(self, name, formulation=None, n_basis=None):
+        """Return the learned Skill of ``name`` (learned on first use for these settings)."""
+        entry = self.get(name)
+        key = (formulation or self.formulation, int(n_basis or self.n_basis))
+        with self._lock:
+            learned = entry._learned.get(key)
+            if learned is None:
+                learned = learn(entry.demo, n_basis=key[1], formulation=key[0])
+                entry._learned[key] = learned
+            return learned
+
+    def add_files(self, paths, plane, mcap_topic=None, recorded_dim='auto', plane_tolerance=0.01):
+        """
+        Learn every demonstration file in ``paths`` (files or folders), named by file stem.
+
+        Returns (added SkillEntries, error messages); a bad file is reported and skipped, the
+        others are still learned.
+        """
+        added, errors = [], []
+        for entry in paths:
+            try:
+                files = demonstration_files([entry])
+            except DemonstrationError as err:
+                errors.append(str(err))
+                continue
+            for path in files:
+                try:
+                    demo = load_demonstration(path, plane, mcap_topic=mcap_topic,
+                                              recorded_dim=recorded_dim,
+                                              plane_tolerance=plane_tolerance)
+                    added.append(self.add(path.stem, demo, str(path)))
+                except ValueError as err:   # DemonstrationError, or a stem that is no name
+                    errors.append(str(err) if str(path) in str(err) else f'{path}: {err}')
+        return added, errors

@@ -1,0 +1,120 @@
+"""
+The controller driving the MuJoCo simulation in-process (no ROS): tracking, limits, halts.
+
+Each control period: read the simulated joints, step the controller, command the velocities,
+advance the physics one period (commands act at once, so ``actuation_delay = 0``). The tool
+tip is measured independently of the controller: Pinocchio forward kinematics of the simulated
+joints (``UR10Sim.tool_tip_position`` is the site before the last physics step, as MuJoCo's
+``mj_step`` leaves it), against the plan evaluated at the path time found from the controller's
+reference, which must itself be the plan at nominal speed.
+"""
+
+from controller_plans import (g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET)
+from etdmp_ros.robot import (ControllerConfig, PoseTrajectory, TrajectoryController, UR10Model,
+                             UR10Sim)
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope='module')
+def ur10():
+    return UR10Model(tool_offset=TOOL_OFFSET)
+
+
+@pytest.fixture(scope='module')
+def sim():
+    with UR10Sim(watchdog_timeout=0.0) as s:
+        yield s
+
+
+def drive(sim, controller, q0, duration, ur10):
+    """Run the closed loop; return a dict of arrays (one row per control period)."""
+    sim.reset(q0)
+    T = controller.period
+    rows = {'t': [], 'q': [], 'qd': [], 'status': [], 'tool': [], 'ref': [], 'reason': []}
+    for _ in range(int(round(duration / T))):
+        q, t = sim.q, sim.time
+        command = controller.step(q, t)
+        sim.set_velocity_command(command.qd)
+        rows['t'].append(t)
+        rows['q'].append(q)
+        rows['qd'].append(command.qd)
+        rows['status'].append(command.status)
+        rows['reason'].append(command.reason)
+        rows['tool'].append(ur10.frame_pose(q)[0])
+        rows['ref'].append(command.reference_position if command.reference_position is not None
+                           else np.full(3, np.nan))
+        sim.advance(T)
+        if command.status == 'idle' and len(rows['t']) > 3 and not np.any(command.qd):
+            break
+    return {k: np.array(v) for k, v in rows.items()}
+
+
+def tracking_errors(path, run):
+    """Return the true tool-tip errors (m) over the tracking phase, after checking the timing."""
+    tracking = run['status'] == 'tracking'
+    t, ref, tool = run['t'][tracking], run['ref'][tracking], run['tool'][tracking]
+    t0 = path_time_offset(path, t, ref)
+    plan = np.array([path.pose(s - t0)[0] for s in t])
+    # The controller's reference is the plan at its nominal speed (no slowed clock hiding lag).
+    assert np.max(np.linalg.norm(ref - plan, axis=1)) < 1e-6
+    assert t[-1] - t[0] == pytest.approx(path.duration, abs=2 * (t[1] - t[0]))
+    return np.linalg.norm(tool - plan, axis=1)
+
+
+def assert_within_limits(controller, run):
+    ik = controller.ik
+    qd = run['qd']
+    assert np.all(np.abs(qd) <= ik.velocity_limits * (1 + 1e-9))
+    change = np.abs(np.diff(np.vstack([np.zeros(6), qd]), axis=0)) / controller.period
+    assert np.all(change <= ik.acceleration_limits * (1 + 1e-9))
+    assert np.all(run['q'] >= ik.model.lower) and np.all(run['q'] <= ik.model.upper)
+
+
+@pytest.mark.parametrize('rate', [125.0, 500.0])
+def test_letter_g_in_mujoco(sim, ur10, rate):
+    path = g_plan()[0]
+    controller = TrajectoryController(ur10, ControllerConfig(rate=rate, actuation_delay=0.0))
+    controller.follow(path)
+    run = drive(sim, controller, Q_INITIAL, 10.0, ur10)
+    errors = tracking_errors(path, run)
+    rms = np.sqrt(np.mean(errors ** 2))
+    print(f'G in MuJoCo at {rate:g} Hz: RMS {rms * 1e3:.3f} mm, max {errors.max() * 1e3:.3f} mm')
+    assert rms <= 0.1e-3 and errors.max() <= 0.5e-3
+    assert_within_limits(controller, run)
+    assert run['status'][-1] == 'idle' and not np.any(run['qd'][-1])
+    np.testing.assert_allclose(run['tool'][-1], path.positions[-1], atol=0.1e-3)
+
+
+def test_stirring_in_mujoco(sim, ur10):
+    path = stir_plan()[0]
+    controller = TrajectoryController(ur10, ControllerConfig(rate=125.0, actuation_delay=0.0))
+    controller.follow(path)
+    run = drive(sim, controller, Q_INITIAL, 15.0, ur10)
+    errors = tracking_errors(path, run)
+    rms = np.sqrt(np.mean(errors ** 2))
+    print(f'stirring in MuJoCo: RMS {rms * 1e3:.3f} mm, max {errors.max() * 1e3:.3f} mm')
+    assert rms <= 0.1e-3 and errors.max() <= 0.5e-3
+    assert_within_limits(controller, run)
+    np.testing.assert_allclose(run['tool'][-1], path.positions[-1], atol=0.1e-3)
+
+
+def test_singularity_halt_in_mujoco(sim, ur10):
+    q_a = Q_INITIAL.copy()
+    q_a[4] = -0.8
+    q_b = q_a.copy()
+    q_b[4] = 0.4                                     # through wrist_2 = 0: wrist singularity
+    t = np.linspace(0.0, 4.0, 401)
+    poses = [ur10.frame_pose(q_a + (q_b - q_a) * s / t[-1]) for s in t]
+    path = PoseTrajectory(t, [p for p, _ in poses], [r for _, r in poses])
+    controller = TrajectoryController(ur10, ControllerConfig(rate=125.0, actuation_delay=0.0))
+    assert 'singular' in controller.check(path, q_a)  # refused up front by the node ...
+    controller.follow(path)                           # ... and halted if executed anyway
+    run = drive(sim, controller, q_a, 7.0, ur10)
+    assert run['status'][-1] == 'halted-singularity'
+    assert 'condition number' in run['reason'][-1]
+    assert_within_limits(controller, run)
+    assert not np.any(run['qd'][-1])
+    assert np.max(np.abs(run['q'][:, 4])) < 0.9 and run['q'][-1, 4] < -0.05
+    sim.advance(0.5)                                  # stays put after the halt
+    np.testing.assert_allclose(sim.q, run['q'][-1], atol=2e-3)

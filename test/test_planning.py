@@ -1,0 +1,184 @@
+"""Planning for /generalize without ROS: task plane mapping, checks, and the core's plan mapped."""
+
+import math
+
+from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains
+from etdmp_ros.planning import (place_demo, plan_path, PlanningError, PlanSettings, TOOL_DOWN,
+                                Workspace)
+from etdmp_ros.robot import UR10Model
+from etdmp_ros.task_plane import TaskPlane
+import numpy as np
+import pytest
+
+PLANE = TaskPlane.create([0.75, 0.15, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.02)
+# A whiteboard: vertical, facing the robot, 40 cm above the table.
+WALL = TaskPlane.create([0.9, 0.0, 0.4], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], 0.01)
+START, GOAL = np.array([0.80, 0.20, 0.0]), np.array([0.74, 0.15, 0.0])
+
+
+@pytest.fixture(scope='module')
+def g_skill():
+    return learn(builtin_demo('G'))
+
+
+def test_task_plane_maps_to_demo_units_and_back():
+    p = np.array([[0.95, 0.05, 0.3], [0.75, 0.15, -0.1]])
+    uv = PLANE.to_plane(p)
+    np.testing.assert_allclose(uv, [[10.0, -5.0], [0.0, 0.0]])
+    np.testing.assert_allclose(PLANE.from_plane(uv), p * [1, 1, 0])
+    np.testing.assert_allclose(PLANE.distance(p), [0.3, -0.1])
+    q = WALL.from_plane([[3.0, 4.0]])
+    np.testing.assert_allclose(q, [[0.9, -0.03, 0.44]])
+    np.testing.assert_allclose(WALL.normal, [-1.0, 0.0, 0.0])
+    unnormalised = TaskPlane.create([0, 0, 0], [2.0, 0.0, 0.0], [0.0, 0.5, 0.0], 1.0)
+    np.testing.assert_allclose(unnormalised.axes, [[1, 0, 0], [0, 1, 0]])
+
+
+@pytest.mark.parametrize('args, message', [
+    (([0, 0], [1, 0, 0], [0, 1, 0], 0.02), 'origin must be 3'),
+    (([0, 0, 0], [1, 0, 0], [1, 0.01, 0], 0.02), 'orthogonal'),
+    (([0, 0, 0], [0, 0, 0], [0, 1, 0], 0.02), 'x_axis must not be zero'),
+    (([0, 0, math.nan], [1, 0, 0], [0, 1, 0], 0.02), 'finite'),
+    (([0, 0, 0], [1, 0, 0], [0, 1, 0], 0.0), 'scale'),
+])
+def test_task_plane_refuses_bad_parameters(args, message):
+    with pytest.raises(ValueError, match=message):
+        TaskPlane.create(*args)
+
+
+def test_2d_plan_is_the_core_plan_in_the_task_plane(g_skill):
+    above = START + [0.0, 0.0, 0.08]
+    plan = plan_path(g_skill, above, GOAL, plane=PLANE)
+    np.testing.assert_allclose(plan.positions[0], START, atol=1e-12)    # projected start
+    assert np.linalg.norm(plan.positions[-1] - GOAL) < 1e-3
+    np.testing.assert_allclose(PLANE.distance(plan.positions), 0.0, atol=1e-12)
+    core = g_skill.generalize(PLANE.to_plane(START), PLANE.to_plane(GOAL), dt=0.01)
+    np.testing.assert_allclose(plan.positions, PLANE.from_plane(core.x), atol=1e-12)
+    np.testing.assert_allclose(plan.velocities[:, :2], core.v * 0.02, atol=1e-12)
+    np.testing.assert_allclose(plan.t, core.t)
+    assert nrmse(PLANE.to_plane(plan.positions), g_skill.demo) < 0.005
+    assert plan.orientation == pytest.approx(TOOL_DOWN)
+    # The same request in demo units on a vertical whiteboard: the same letter there.
+    on_wall = plan_path(g_skill, WALL.from_plane(PLANE.to_plane(START)),
+                        WALL.from_plane(PLANE.to_plane(GOAL)), plane=WALL)
+    np.testing.assert_allclose(WALL.to_plane(on_wall.positions),
+                               PLANE.to_plane(plan.positions), atol=1e-9)
+
+
+def test_timing_orientation_and_method_settings(g_skill):
+    settings = PlanSettings(duration=5.0, output_period=0.01, orientation=(0, 0, 0, 2.0),
+                            method='dmp')
+    plan = plan_path(g_skill, START, GOAL, settings=settings, plane=PLANE)
+    assert len(plan.t) == 501 and plan.t[-1] == pytest.approx(5.0)
+    assert plan.orientation == (0.0, 0.0, 0.0, 1.0)
+    core = g_skill.generalize(PLANE.to_plane(START), PLANE.to_plane(GOAL), method='dmp',
+                              tau=5.0, dt=0.01)
+    np.testing.assert_allclose(plan.positions, PLANE.from_plane(core.x), atol=1e-12)
+
+
+def test_3d_skill_uses_base_link_coordinates():
+    stir = learn(builtin_demo('stir'))
+    mouth = np.array([0.70, -0.30, 0.20])
+    start, goal = mouth + stir.start + [0.02, 0.0, 0.05], mouth + stir.goal
+    for mode in (1, 2):
+        plan = plan_path(stir, start, goal, settings=PlanSettings(mode=mode))
+        np.testing.assert_allclose(plan.positions[0], start, atol=1e-12)
+        assert np.linalg.norm(plan.positions[-1] - goal) < 1e-3
+        core = stir.generalize(start, goal, mode=mode, dt=0.01)
+        np.testing.assert_allclose(plan.positions, core.x, atol=1e-12)
+    assert nrmse(plan_path(stir, start, goal).positions, stir.demo) < 0.005
+
+
+def test_obstacles_are_projected_avoided_and_k_is_in_metres(g_skill):
+    free = plan_path(g_skill, START, GOAL, plane=PLANE)
+    obstacles = free.positions[[60, 120]] + [0.0, 0.0, 0.08]     # cylinder tops on the path
+    plan = plan_path(g_skill, START, GOAL, obstacles, plane=PLANE)
+    size = np.ptp(free.positions, axis=0).max()
+    gap = np.linalg.norm(plan.positions[:, None] - (obstacles * [1, 1, 0])[None], axis=2).min()
+    assert gap > 0.05 * size
+    assert np.linalg.norm(plan.positions[-1] - GOAL) < 1e-3
+    assert plan.t[-1] == pytest.approx(1.5 * g_skill.tau)        # obstacle_margin 0.5
+    np.testing.assert_allclose(plan.obstacles, obstacles * [1, 1, 0], atol=1e-12)
+    # obstacle_k is 1/m: the core's default k = 10 / |x0 - g| written in 1/m is the same plan.
+    k_metres = 10.0 / np.linalg.norm(START - GOAL)
+    same = plan_path(g_skill, START, GOAL, obstacles, plane=PLANE,
+                     settings=PlanSettings(obstacle_k=k_metres))
+    np.testing.assert_allclose(same.positions, plan.positions, atol=1e-9)
+    weaker = plan_path(g_skill, START, GOAL, obstacles, plane=PLANE,
+                       settings=PlanSettings(gains=ObstacleGains(gamma=0.0, gamma2=0.0)))
+    np.testing.assert_allclose(weaker.positions[:201], free.positions, atol=1e-9)
+
+
+@pytest.mark.parametrize('start, goal, obstacles, message', [
+    ([math.nan, 0.2, 0.0], GOAL, (), 'start contains NaN or inf'),
+    (START, [0.7, -math.inf, 0.0], (), 'goal contains NaN or inf'),
+    (START, GOAL, [[0.7, 0.1, math.nan]], 'obstacles contains NaN'),
+    (GOAL + [0.0, 0.0, 0.2], GOAL, (), r'start equals goal \(projected onto the task plane\)'),
+    (START, [1.5, 0.0, 0.0], (), r"goal \(1.500, 0.000, 0.000\) .* out of the UR10's reach: "
+                                 r'1.5\d\d m from the shoulder'),
+    (START, [0.1, 0.05, 0.0], (), 'from the base axis, closer than 0.2 m'),
+    (START, GOAL, [GOAL + [0.01, 0.0, 0.08]], r'lies on the goal: 10.0 mm from it'),
+    ([1.05, -0.3, 0.0], [1.05, -0.15, 0.0], (),
+     r"the plan leaves the UR10's reach at t = 0.27 s, \(1.107, -0.303, 0.000\): 1.155 m"),
+])
+def test_bad_requests_are_refused_with_the_reason(g_skill, start, goal, obstacles, message):
+    with pytest.raises(PlanningError, match=message):
+        plan_path(g_skill, start, goal, obstacles, plane=PLANE)
+
+
+def test_core_refusals_and_wrong_dimensions_become_planning_errors(g_skill):
+    # A 'U': it starts and ends at the same height, which the plain DMP cannot scale.
+    s = np.linspace(0.0, 1.0, 100)
+    u_skill = learn(Demonstration('U', np.column_stack([2.0 * s, -np.sin(np.pi * s)])))
+    plan_path(u_skill, START, GOAL, plane=PLANE)    # ET-DMP can
+    with pytest.raises(PlanningError, match='plain DMP cannot'):
+        plan_path(u_skill, START, GOAL, plane=PLANE, settings=PlanSettings(method='dmp'))
+    with pytest.raises(PlanningError, match='needs a task plane'):
+        plan_path(g_skill, START, GOAL)
+    line = learn(np.linspace(0.0, 1.0, 20))
+    with pytest.raises(PlanningError, match='2 or 3 coordinates'):
+        plan_path(line, START, GOAL, plane=PLANE)
+    stir = learn(builtin_demo('stir'))
+    with pytest.raises(PlanningError, match='below the table'):
+        plan_path(stir, [0.7, 0.0, 0.1], [0.7, 0.0, -0.2])
+
+
+def test_workspace_criterion_matches_the_ur10_model():
+    workspace = Workspace()
+    # The shoulder centre of the criterion is the URDF's shoulder_pan joint placement.
+    model = UR10Model().model
+    np.testing.assert_allclose(workspace.shoulder,
+                               model.jointPlacements[1].translation, atol=1e-9)
+    # The scene's tool position at its initial joints is reachable.
+    tool = UR10Model(tool_offset=(0, 0, 0.16)).tool_position([0.0, -1.2, 1.9, -2.27, -1.57, 0])
+    assert workspace.violation(tool) is None
+    index, reason = workspace.violation([[0.5, 0, 0], [0.05, 0.05, 0.1], [1.3, 0.0, 0.1]])
+    assert index == 1 and 'base axis' in reason
+    assert workspace.violation([[0.5, 0.0, -0.02]])[1].startswith('below the table')
+    with pytest.raises(ValueError, match='reach - margin > min_radius'):
+        Workspace(reach=0.3, margin=0.2)
+
+
+@pytest.mark.parametrize('kwargs, message', [
+    ({'method': 'rrt'}, 'method must be one of'),
+    ({'mode': 3}, 'mode must be 1 or 2'),
+    ({'independent_axis': 3}, 'independent_axis'),
+    ({'output_period': 0.0}, 'output_period must be > 0'),
+    ({'duration': -1.0}, 'duration must be >= 0'),
+    ({'goal_clearance': math.nan}, 'goal_clearance'),
+    ({'orientation': (0, 0, 0, 0)}, 'non-zero quaternion'),
+    ({'orientation': (0, 0, 1)}, '4 finite numbers'),
+    ({'gains': ObstacleGains(gamma=-1.0)}, 'gamma must be finite and >= 0'),
+])
+def test_settings_refuse_bad_values(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        PlanSettings(**kwargs)
+
+
+def test_demo_placed_between_start_and_goal(g_skill):
+    placed = place_demo(g_skill, START + [0, 0, 0.1], GOAL, PLANE)
+    np.testing.assert_allclose(placed[[0, -1]], [START, GOAL], atol=1e-12)
+    plan = plan_path(g_skill, START, GOAL, plane=PLANE)
+    assert nrmse(placed, plan.positions) < 0.005
+    with pytest.raises(PlanningError, match='start equals goal'):
+        place_demo(g_skill, GOAL, GOAL, PLANE)

@@ -1,0 +1,223 @@
+"""Skill library: demonstrations from every source become skills; bad ones replace nothing."""
+
+from pathlib import Path
+
+from etdmp_ros.dmp import (builtin_demo, builtin_demo_names, Demonstration, DemonstrationError,
+                           load_demo, nrmse, save_demo)
+from etdmp_ros.skill_library import (default_skills_dir, demonstration_files, load_demonstration,
+                                     read_mcap_path, recorded_path_demo, save_skill_demo,
+                                     SkillLibrary, UnknownSkillError)
+from etdmp_ros.task_plane import TaskPlane
+from mcap_ros2.writer import Writer
+import numpy as np
+import pytest
+
+# Message definitions as rosbag2 stores them in .mcap schemas (ros2msg, dependencies appended).
+_SEP = '=' * 80 + '\n'
+_HEADER_DEPS = (_SEP + 'MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n' +
+                _SEP + 'MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n')
+_POSE_DEPS = (_SEP + 'MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n' +
+              _SEP + 'MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n' +
+              _SEP + 'MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\n'
+              'float64 w 1\n')
+POSE_STAMPED_MSGDEF = 'std_msgs/Header header\ngeometry_msgs/Pose pose\n' + _HEADER_DEPS + \
+    _POSE_DEPS
+PATH_MSGDEF = ('std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n' + _HEADER_DEPS +
+               _SEP + 'MSG: geometry_msgs/PoseStamped\nstd_msgs/Header header\n'
+               'geometry_msgs/Pose pose\n' + _POSE_DEPS)
+
+PLANE = TaskPlane.create([0.75, 0.15, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.02)
+TILTED = TaskPlane.create([0.5, 0.0, 0.3], [0.0, 1.0, 0.0], [-np.sqrt(0.5), 0.0, np.sqrt(0.5)],
+                          0.01)
+
+
+def _pose(p, stamp_ns, frame='base_link'):
+    return {'header': {'stamp': {'sec': stamp_ns // 10**9, 'nanosec': stamp_ns % 10**9},
+                       'frame_id': frame},
+            'pose': {'position': dict(zip('xyz', (float(c) for c in p))),
+                     'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}}}
+
+
+def write_mcap(path, topics):
+    """Write {topic: (kind, [(log_time_ns, message dict), ...])} as a rosbag2 .mcap."""
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        schemas = {'pose': writer.register_msgdef('geometry_msgs/msg/PoseStamped',
+                                                  POSE_STAMPED_MSGDEF),
+                   'path': writer.register_msgdef('nav_msgs/msg/Path', PATH_MSGDEF)}
+        for topic, (kind, messages) in topics.items():
+            for k, (log_time, msg) in enumerate(messages):
+                writer.write_message(topic, schemas[kind], msg, log_time=log_time, sequence=k)
+        writer.finish()
+
+
+def letter_path(n=80, height=0.05):
+    """Return a curvy stroke (n, 3) in base_link, flat at ``height`` above the task plane."""
+    s = np.linspace(0.0, 1.0, n)
+    return np.column_stack([0.70 + 0.1 * s, 0.10 + 0.05 * np.sin(6 * s), np.full(n, height)])
+
+
+def test_builtin_demos_are_learned_and_unknown_names_are_listed():
+    library = SkillLibrary()
+    for name in builtin_demo_names():
+        entry = library.add(name, builtin_demo(name), 'built-in')
+        assert entry.planar == (builtin_demo(name).dim == 2)
+    assert library.names() == sorted(builtin_demo_names())
+    skill = library.skill('G')
+    assert nrmse(skill.reproduce().x, builtin_demo('G').positions) < 0.005
+    assert library.skill('G') is skill                      # learned once per setting
+    hoffmann = library.skill('G', formulation='hoffmann')
+    assert hoffmann is not skill and hoffmann.formulation == 'hoffmann'
+    with pytest.raises(UnknownSkillError, match="unknown skill 'Q'; known skills: G, P"):
+        library.get('Q')
+
+
+def test_a_bad_demonstration_never_replaces_a_learned_skill():
+    library = SkillLibrary()
+    good = library.add('mine', builtin_demo('P'), 'first')
+    still = Demonstration('mine', np.ones((20, 2)))         # does not move
+    with pytest.raises(DemonstrationError, match='does not move'):
+        library.add('mine', still, 'second')
+    with pytest.raises(DemonstrationError, match='has 4 coordinate'):
+        library.add('mine', Demonstration('mine', np.random.default_rng(0).random((20, 4))), 'x')
+    for bad in ('', '../etc', 'a b', 'x' * 65, '.hidden'):
+        with pytest.raises(ValueError, match='not valid'):
+            library.add(bad, builtin_demo('G'), 'x')
+    assert library.get('mine') is good and library.names() == ['mine']
+
+
+def test_files_and_folders_are_learned_and_bad_files_reported(tmp_path):
+    folder = tmp_path / 'demos'
+    folder.mkdir()
+    save_demo(folder / 'wave.csv', Demonstration('w', np.column_stack(
+        [np.linspace(0, 5, 50), np.sin(np.linspace(0, 5, 50))]), np.linspace(0, 1, 50)))
+    np.save(folder / 'spiral.npy', np.column_stack(
+        [np.cos(np.linspace(0, 6, 60)), np.sin(np.linspace(0, 6, 60)), np.linspace(0, 1, 60)]))
+    (folder / 'short.csv').write_text('x,y\n1,2\n3,4\n')
+    (folder / 'notes.txt').write_text('not a demonstration')
+    (folder / '.hidden.csv').write_text('garbage')
+    library = SkillLibrary()
+    added, errors = library.add_files([folder, tmp_path / 'missing.csv'], PLANE)
+    assert sorted(e.name for e in added) == ['spiral', 'wave']
+    assert library.get('spiral').demo.dim == 3 and library.get('wave').planar
+    assert len(errors) == 2
+    assert 'short.csv' in errors[0] and 'at least 10 samples' in errors[0]
+    assert 'missing.csv' in errors[1] and 'no such file' in errors[1]
+    assert demonstration_files([folder]) == [folder / 'short.csv', folder / 'spiral.npy',
+                                             folder / 'wave.csv']
+
+
+def test_recorded_path_becomes_2d_when_flat_else_3d():
+    path = letter_path()          # 5 cm above the table: flat and parallel to the plane
+    demo = recorded_path_demo('flat', path, np.linspace(0, 2, len(path)), PLANE)
+    assert demo.dim == 2
+    np.testing.assert_allclose(demo.positions, (path[:, :2] - [0.75, 0.15]) / 0.02, atol=1e-12)
+    np.testing.assert_allclose(demo.t, np.linspace(0, 2, len(path)))
+    tilted = path + np.column_stack([np.zeros((len(path), 2)), np.linspace(0, 0.05, len(path))])
+    assert recorded_path_demo('up', tilted, None, PLANE).dim == 3
+    np.testing.assert_allclose(recorded_path_demo('up', tilted, None, PLANE).positions, tilted)
+    assert recorded_path_demo('up', tilted, None, PLANE, recorded_dim='2d').dim == 2
+    assert recorded_path_demo('flat', path, None, PLANE, recorded_dim='3d').dim == 3
+    # In a tilted plane, "flat" means parallel to that plane.
+    on_tilted = TILTED.from_plane(np.column_stack([np.linspace(0, 9, 30),
+                                                   np.sin(np.linspace(0, 3, 30))]))
+    demo = recorded_path_demo('t', on_tilted + 0.02 * TILTED.normal, None, TILTED)
+    assert demo.dim == 2
+    np.testing.assert_allclose(TILTED.from_plane(demo.positions), on_tilted, atol=1e-12)
+
+
+def test_recorded_path_times_unset_stamps_and_errors():
+    path = letter_path(20)
+    assert recorded_path_demo('a', path, np.zeros(20), PLANE).duration == pytest.approx(1.0)
+    t = np.linspace(5.0, 7.0, 20)
+    assert recorded_path_demo('a', path, t, PLANE).duration == pytest.approx(2.0)
+    t[7] = t[6]
+    with pytest.raises(DemonstrationError, match='time does not increase'):
+        recorded_path_demo('a', path, t, PLANE)
+    with pytest.raises(DemonstrationError, match='5 samples'):
+        recorded_path_demo('a', path[:5], None, PLANE)
+    with pytest.raises(DemonstrationError, match='NaN'):
+        recorded_path_demo('a', np.where(np.arange(60).reshape(20, 3) == 7, np.nan, path),
+                           None, PLANE)
+    with pytest.raises(DemonstrationError, match='recorded_dim'):
+        recorded_path_demo('a', path, None, PLANE, recorded_dim='4d')
+
+
+def test_mcap_pose_stamped_topic_is_read_with_header_stamps(tmp_path):
+    path = letter_path(40)
+    stamps = (10**9 * np.linspace(100.0, 101.95, 40)).astype(np.int64)
+    log_times = stamps + 5_000_000          # recorded a little later than stamped
+    other = [(int(t), _pose([0, 0, 0], int(t), 'odom')) for t in log_times[:3]]
+    write_mcap(tmp_path / 'rec.mcap', {
+        '/tool_pose': ('pose', [(int(lt), _pose(p, int(st))) for p, st, lt in
+                                zip(path, stamps, log_times)]),
+        '/other': ('pose', other)})
+    recorded = read_mcap_path(tmp_path / 'rec.mcap', '/tool_pose')
+    np.testing.assert_allclose(recorded.positions, path)
+    np.testing.assert_allclose(recorded.t - recorded.t[0], (stamps - stamps[0]) * 1e-9,
+                               atol=1e-6)
+    with pytest.raises(DemonstrationError, match='2 geometry_msgs/msg/PoseStamped or nav_msgs'):
+        read_mcap_path(tmp_path / 'rec.mcap')
+    with pytest.raises(DemonstrationError, match="frame 'odom'"):
+        read_mcap_path(tmp_path / 'rec.mcap', '/other')
+    with pytest.raises(DemonstrationError, match="named '/nope'.*found: /other, /tool_pose"):
+        read_mcap_path(tmp_path / 'rec.mcap', '/nope')
+    demo = load_demonstration(tmp_path / 'rec.mcap', PLANE, mcap_topic='/tool_pose')
+    assert demo.name == 'rec' and demo.dim == 2 and demo.duration == pytest.approx(1.95)
+
+
+def test_mcap_unset_stamps_use_the_recording_times(tmp_path):
+    path = letter_path(30) + np.column_stack([np.zeros((30, 2)), np.linspace(0, 0.2, 30)])
+    log_times = (10**9 * np.linspace(3.0, 4.5, 30)).astype(np.int64)
+    write_mcap(tmp_path / 'up.mcap', {'/pen': ('pose', [(int(lt), _pose(p, 0)) for p, lt in
+                                                        zip(path, log_times)])})
+    demo = load_demonstration(tmp_path / 'up.mcap', PLANE)     # the only topic
+    assert demo.dim == 3 and demo.duration == pytest.approx(1.5)
+    np.testing.assert_allclose(demo.positions, path)
+
+
+def test_mcap_path_topic_uses_the_last_path(tmp_path):
+    first, last = letter_path(15), letter_path(25, height=0.0)
+
+    def path_msg(points, t0):
+        return {'header': {'stamp': {'sec': t0, 'nanosec': 0}, 'frame_id': 'base_link'},
+                'poses': [_pose(p, t0 * 10**9 + k * 50_000_000) for k, p in enumerate(points)]}
+    write_mcap(tmp_path / 'plans.mcap', {'/plan': ('path', [(1, path_msg(first, 1)),
+                                                            (2, path_msg(last, 2))])})
+    library = SkillLibrary()
+    added, errors = library.add_files([tmp_path / 'plans.mcap'], PLANE)
+    assert errors == [] and added[0].name == 'plans'
+    demo = library.get('plans').demo
+    assert demo.n_samples == 25 and demo.duration == pytest.approx(1.2)
+    np.testing.assert_allclose(PLANE.from_plane(demo.positions), last, atol=1e-12)
+
+
+def test_broken_mcap_files_are_refused_with_a_reason(tmp_path):
+    (tmp_path / 'junk.mcap').write_bytes(b'\x89MCAP0\r\n' + b'\x00' * 40)
+    (tmp_path / 'text.mcap').write_text('hello')
+    write_mcap(tmp_path / 'empty.mcap', {})
+    library = SkillLibrary()
+    added, errors = library.add_files([tmp_path], PLANE)
+    assert added == [] and len(errors) == 3
+    assert all('.mcap' in e for e in errors)
+    assert any('empty.mcap' in e and '0 geometry_msgs' in e for e in errors)
+    assert any('not a readable rosbag2 .mcap' in e for e in errors)
+
+
+def test_taught_skills_persist_exactly(tmp_path):
+    demo = recorded_path_demo('zed', letter_path(), np.linspace(0, 2, 80), PLANE)
+    saved = save_skill_demo(tmp_path / 'skills', demo)
+    assert saved == tmp_path / 'skills' / 'zed.csv'
+    assert [p.name for p in (tmp_path / 'skills').iterdir()] == ['zed.csv']
+    assert saved.read_text().splitlines()[0] == 't,x,y'
+    back = load_demo(saved)
+    np.testing.assert_array_equal(back.positions, demo.positions)
+    np.testing.assert_array_equal(back.t, demo.t)
+    library = SkillLibrary()
+    added, errors = library.add_files([tmp_path / 'skills'], PLANE)
+    assert errors == [] and [e.name for e in added] == ['zed'] and library.get('zed').planar
+
+
+def test_default_skills_dir_follows_ros_home():
+    assert default_skills_dir({'ROS_HOME': '/x/ros'}) == Path('/x/ros/etdmp_ros/skills')
+    assert default_skills_dir({'HOME': '/home/u'}) == Path('/home/u/.ros/etdmp_ros/skills')

@@ -1,0 +1,238 @@
+"""
+The ur10_sim node as a user runs it: the installed executable in its own process, rclpy here.
+
+The node starts from the colcon install with the shipped parameter files (as ``ros2 run`` with
+``--params-file``); this process subscribes and publishes like ``ros2 topic echo/pub`` and sets
+parameters through the SetParameters service, as ``ros2 param set`` does. Rates are checked on
+the messages' stamps (simulated time), so a loaded machine slows the test, not breaks it.
+"""
+
+import threading
+import time
+
+from conftest import NodeProcess
+from etdmp_ros.robot import CameraIntrinsics, JOINT_NAMES, UR10Model
+from etdmp_ros.ros_conversions import (image_from_msg, intrinsics_from_camera_info,
+                                       stamp_to_ns)
+from geometry_msgs.msg import PointStamped, PoseArray
+import numpy as np
+import pytest
+from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Float64MultiArray
+
+STARTUP = 40.0
+TOPICS = {
+    '/joint_states': JointState,
+    '/camera/camera/color/image_raw': Image,
+    '/camera/camera/aligned_depth_to_color/image_raw': Image,
+    '/camera/camera/color/camera_info': CameraInfo,
+    '/ur10_sim/ground_truth/goal': PointStamped,
+    '/ur10_sim/ground_truth/obstacles': PoseArray,
+    '/ur10_sim/ground_truth/tool_tip': PointStamped,
+}
+
+
+class Client:
+    """rclpy in this process (own context, spinning in a thread), recording every topic."""
+
+    def __init__(self):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('ur10_sim_test_client', context=self.context)
+        self.lock = threading.Lock()
+        self.messages = {topic: [] for topic in TOPICS}
+        for topic, msg_type in TOPICS.items():
+            self.node.create_subscription(msg_type, topic, self._recorder(topic), 50)
+        self.command_pub = self.node.create_publisher(
+            Float64MultiArray, '/forward_velocity_controller/commands', 10)
+        self.parameters = self.node.create_client(SetParameters, '/ur10_sim/set_parameters')
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _recorder(self, topic):
+        def record(msg):
+            with self.lock:
+                self.messages[topic].append((time.monotonic(), msg))
+        return record
+
+    def _spin(self):
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:   # noqa: B902 - context shut down while waiting
+                break
+
+    def close(self):
+        """Stop spinning and shut the context down."""
+        rclpy.shutdown(context=self.context)
+        self._thread.join(timeout=5)
+        self.node.destroy_node()
+
+    def received(self, topic, since=0.0):
+        """Return the messages of ``topic`` received after ``since`` (monotonic)."""
+        with self.lock:
+            return [m for t, m in self.messages[topic] if t >= since]
+
+    def wait_for(self, predicate, timeout, what, sim):
+        """Wait until ``predicate()``; fail saying ``what`` (with the node's log)."""
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                pytest.fail(f'timed out waiting for {what}\n{sim.log()}')
+            time.sleep(0.01)
+
+    def joint_state(self):
+        """Return (stamp s, q, qd) of the newest joint state."""
+        msg = self.received('/joint_states')[-1]
+        return stamp_to_ns(msg.header.stamp) * 1e-9, np.array(msg.position), \
+            np.array(msg.velocity)
+
+    def command(self, qd, duration=0.0, rate=50.0):
+        """Publish the velocity command ``qd`` (any length) repeatedly for ``duration`` s."""
+        end = time.monotonic() + duration
+        while True:
+            self.command_pub.publish(Float64MultiArray(data=[float(v) for v in qd]))
+            if time.monotonic() >= end:
+                return
+            time.sleep(1.0 / rate)
+
+    def set_parameter(self, name, value):
+        """Set one array parameter of /ur10_sim as `ros2 param set` would; return the result."""
+        assert self.parameters.wait_for_service(timeout_sec=10)
+        if isinstance(value, str):          # what ros2 param set sends for "[0.6, 0.1, 0]"
+            v = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+        elif len(value) == 0:               # ros2 param set's YAML parsing types [] as bool[]
+            v = ParameterValue(type=ParameterType.PARAMETER_BOOL_ARRAY, bool_array_value=[])
+        elif all(isinstance(x, int) for x in value):
+            v = ParameterValue(type=ParameterType.PARAMETER_INTEGER_ARRAY,
+                               integer_array_value=value)
+        else:
+            v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
+                               double_array_value=[float(x) for x in value])
+        future = self.parameters.call_async(
+            SetParameters.Request(parameters=[ParameterMsg(name=name, value=v)]))
+        deadline = time.monotonic() + 10
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return future.result().results[0]
+
+
+@pytest.fixture
+def launch(colcon_install, ros_env, tmp_path):
+    """Return ``start(overrides)``: run ur10_sim and a client; both stop at the test's end."""
+    started = []
+
+    def start(overrides):
+        sim = NodeProcess(colcon_install, ros_env, tmp_path, 'ur10_sim', overrides)
+        client = Client()
+        started.append((sim, client))
+        client.wait_for(lambda: len(client.received('/joint_states')) > 10, STARTUP,
+                        'the first joint states', sim)
+        return sim, client
+
+    yield start
+    for sim, client in started:
+        client.close()
+        code = sim.stop()
+        log = sim.log()
+        assert code == 0, log                       # Ctrl-C is a clean exit
+        assert 'Traceback' not in log, log
+
+
+def test_publishes_joint_states_camera_and_ground_truth(launch):
+    sim, client = launch({})
+    start = time.monotonic()
+    client.wait_for(lambda: len(client.received('/camera/camera/color/image_raw', start)) >= 10,
+                    20.0, '10 camera frames', sim)
+    # Joint states: the UR joints at 125 Hz of simulated time, stamps = /clock's time.
+    states = client.received('/joint_states', start)
+    assert all(list(m.name) == list(JOINT_NAMES) for m in states)
+    assert all(len(m.position) == 6 and len(m.velocity) == 6 for m in states)
+    stamps = np.array([stamp_to_ns(m.header.stamp) for m in states]) * 1e-9
+    assert np.allclose(np.diff(stamps), 1 / 125.0, atol=1e-6)
+    # Ground truth: the tool tip is the forward kinematics of the joint states.
+    model = UR10Model(tool_offset=(0.0, 0.0, 0.16))
+    by_stamp = {stamp_to_ns(m.header.stamp): np.array(m.position) for m in states}
+    tips = [m for m in client.received('/ur10_sim/ground_truth/tool_tip', start)
+            if stamp_to_ns(m.header.stamp) in by_stamp]
+    assert tips and all(m.header.frame_id == 'base_link' for m in tips)
+    tip = tips[-1]
+    p = np.array([tip.point.x, tip.point.y, tip.point.z])
+    assert np.linalg.norm(p - model.tool_position(by_stamp[stamp_to_ns(tip.header.stamp)])) < 1e-6
+    goal = client.received('/ur10_sim/ground_truth/goal')[-1].point
+    assert np.allclose([goal.x, goal.y, goal.z], [0.68, 0.28, 0.002])
+    obstacles = client.received('/ur10_sim/ground_truth/obstacles')[-1]
+    assert len(obstacles.poses) == 2 and obstacles.header.frame_id == 'base_link'
+    # Camera: 30 Hz of simulated time, images and camera_info that agree.
+    colors = client.received('/camera/camera/color/image_raw', start)
+    frame_stamps = np.array([stamp_to_ns(m.header.stamp) for m in colors]) * 1e-9
+    # Frames are rendered on control ticks (8 ms of simulated time) as close to 30 Hz as that
+    # grid allows: 32 or 40 ms apart. A loaded machine may drop a frame in transport, so look at
+    # the grid and the typical spacing rather than the mean.
+    gaps = np.diff(frame_stamps)
+    assert np.allclose(gaps * 125.0, np.round(gaps * 125.0), atol=0.01)
+    assert gaps.min() >= 0.032 - 1e-6 and np.median(gaps) <= 0.040 + 1e-6
+    color, info = colors[-1], client.received('/camera/camera/color/camera_info')[-1]
+    depth = client.received('/camera/camera/aligned_depth_to_color/image_raw')[-1]
+    assert (color.encoding, depth.encoding) == ('rgb8', '16UC1')
+    for msg in (color, depth, info):
+        assert msg.header.frame_id == 'camera_color_optical_frame'
+        assert (msg.width, msg.height) == (640, 480)
+    assert intrinsics_from_camera_info(info) == CameraIntrinsics.from_fovy(640, 480, 42.5)
+    rgb, depth_mm = image_from_msg(color), image_from_msg(depth)
+    assert rgb.shape == (480, 640, 3) and rgb.std() > 10          # a scene, not a blank
+    assert depth_mm.dtype == np.uint16 and 500 < np.median(depth_mm[depth_mm > 0]) < 3000
+
+
+def test_commands_watchdog_and_runtime_parameters(launch):
+    sim, client = launch({'camera_rate': 0.0})
+    # A velocity command moves the joint at that velocity.
+    client.command([0.2, 0.0, 0.0, 0.0, 0.0, 0.0], duration=0.3)
+    t0, q0, _ = client.joint_state()
+    client.command([0.2, 0.0, 0.0, 0.0, 0.0, 0.0], duration=0.7)
+    t1, q1, qd1 = client.joint_state()
+    assert (q1[0] - q0[0]) / (t1 - t0) == pytest.approx(0.2, rel=0.02)
+    assert qd1[0] == pytest.approx(0.2, rel=0.02)
+    assert np.allclose(qd1[1:], 0.0, atol=1e-3)
+    # The watchdog (0.1 s) brakes once commands stop.
+    time.sleep(0.5)
+    _, q2, qd2 = client.joint_state()
+    assert np.abs(qd2).max() < 1e-3
+    assert q2[0] - q1[0] < 0.2 * 0.5                 # stopped well before 0.5 s of motion
+    client.wait_for(lambda: 'braking' in sim.log(), 5.0, 'the watchdog warning', sim)
+    # Bad commands are rejected (with a warning), never applied.
+    for bad in ([0.3] * 5, [0.3] * 7, [0.3, float('nan'), 0, 0, 0, 0], [float('inf')] * 6):
+        client.command(bad, duration=0.2)
+    time.sleep(0.1)
+    _, q3, qd3 = client.joint_state()
+    assert np.abs(qd3).max() < 1e-6 and np.abs(q3 - q2).max() < 1e-6
+    assert 'velocity command rejected' in sim.log()
+    # goal_position / obstacle_positions move the objects (ros2 param set's service).
+    result = client.set_parameter('goal_position', [0.6, -0.1, 0.002])
+    assert result.successful, result.reason
+    client.wait_for(lambda: abs(client.received('/ur10_sim/ground_truth/goal')[-1].point.x - 0.6)
+                    < 1e-9, 5.0, 'the goal to move', sim)
+    goal = client.received('/ur10_sim/ground_truth/goal')[-1].point
+    assert np.allclose([goal.x, goal.y, goal.z], [0.6, -0.1, 0.002])
+    for name, bad in (('goal_position', [0.6, 0.1]), ('obstacle_positions', [0.5, 0.1]),
+                      ('goal_position', [0.6, float('nan'), 0.0])):
+        result = client.set_parameter(name, bad)
+        assert not result.successful and result.reason
+    for name, bad in (('goal_position', '[0.6, 0.1]'), ('goal_position', 'home')):
+        result = client.set_parameter(name, bad)
+        assert not result.successful and result.reason
+    assert client.set_parameter('goal_position', '[0.65, 0.1, 0]').successful     # mixed
+    client.wait_for(lambda: abs(client.received('/ur10_sim/ground_truth/goal')[-1].point.x
+                                - 0.65) < 1e-9, 5.0, 'the goal to move again', sim)
+    assert client.set_parameter('obstacle_positions', [1, 0, 0]).successful       # integers
+    client.wait_for(lambda: len(client.received('/ur10_sim/ground_truth/obstacles')[-1].poses)
+                    == 1, 5.0, 'one obstacle', sim)
+    assert client.set_parameter('obstacle_positions', []).successful
+    client.wait_for(lambda: len(client.received('/ur10_sim/ground_truth/obstacles')[-1].poses)
+                    == 0, 5.0, 'no obstacles', sim)
