@@ -40,6 +40,7 @@ setup(
             'ur10_sim = etdmp_ros.nodes.ur10_sim:main',
             'dmp_server = etdmp_ros.nodes.dmp_server:main',
             'controller = etdmp_ros.nodes.controller:main',
+            'bringup = etdmp_ros.nodes.bringup:main',
             'perception = etdmp_ros.nodes.perception:main',
         ],
     },
