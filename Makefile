@@ -9,16 +9,17 @@ PIP_VERSION := 26.3
 STAMP       := $(VENV)/.installed
 PYTEST_ARGS ?= -q test
 LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
-BENCH       := test/benchmarks/bench_core.py
 
-.PHONY: venv test demo docs bench bench-core clean distclean help
+.PHONY: venv test demo reproduce docs bench clean distclean help
 .DEFAULT_GOAL := help
 
 help:
-	@echo "make demo       headless demo (builds .venv/ on first use)"
+	@echo "make demo       headless closed-loop demo: the UR10 writes a G (SKILL=W|P|R|wipe|stir, METHOD=dmp)"
+	@echo "make reproduce  the paper's letter experiments, offline -> out/reproduce/"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
 	@echo "make docs       regenerate the README pictures in docs/img/"
-	@echo "make bench      core benchmarks vs movement-primitives and pydmps ($(BENCH), own .venv-bench/)"
+	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
+	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make clean      remove build outputs and caches; make distclean also removes .venv*/"
 
@@ -42,28 +43,26 @@ $(STAMP): requirements.txt setup.py setup.cfg | $(VENV_PY)
 test: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
 
+# The closed loop: camera -> perception -> /generalize -> controller -> MuJoCo UR10 (out/demo/).
+SKILL  ?= G
+METHOD ?= etdmp
 demo: $(STAMP)
-	@if [ -d "$(LETTERS_DIR)" ]; then \
-	  echo "Reproducing the paper's letter experiments from $(LETTERS_DIR) -> out/reproduce/"; \
-	  MUJOCO_GL=egl $(VENV)/bin/etdmp reproduce --letters-dir "$(LETTERS_DIR)" \
-	    --table "$(LETTERS_DIR)/table2.json" --out out/reproduce; \
-	else \
-	  echo "$(LETTERS_DIR) not found (the paper's letter data set sits beside the repository);"; \
-	  echo "generalizing the built-in letter G instead -> out/demo/"; \
-	  mkdir -p out/demo; \
-	  MUJOCO_GL=egl $(VENV)/bin/etdmp generalize --skill G --start 5 5 --goal 0 0 --method etdmp \
-	    --plot out/demo/G.png --json out/demo/G.json; \
-	fi
+	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo --skill $(SKILL) --method $(METHOD) --out out/demo
 
-# README pictures: the paper reproduction's figures and one built-in generalization.
-docs: $(STAMP)
+# The paper's letter experiments, offline (Figs. 5, 7-8, 13 and metrics.json in out/reproduce/).
+reproduce: $(STAMP)
+	@test -d "$(LETTERS_DIR)" || { echo "error: $(LETTERS_DIR) not found (the paper's letter data set sits beside the repository)" >&2; exit 1; }
 	$(VENV)/bin/etdmp reproduce --letters-dir "$(LETTERS_DIR)" \
 	  --table "$(LETTERS_DIR)/table2.json" --out out/reproduce
+
+# README pictures: the paper reproduction's figures and one built-in generalization.
+docs: reproduce
 	mkdir -p docs/img
 	cp out/reproduce/fig5_generalization.png out/reproduce/fig7_8_obstacles.png \
 	  out/reproduce/fig13_nrmse.png docs/img/
 	$(VENV)/bin/etdmp generalize --skill G --start -6 4 --goal 0 0 --obstacle -7.6 -4.4 \
 	  --plot docs/img/generalize_G.png
+	MUJOCO_GL=egl $(VENV_PY) tools/render_scene.py
 
 # The benchmark's own environment: the project's pins plus the peer libraries it compares
 # against (movement-primitives, pydmps), which never enter .venv/.
@@ -81,10 +80,13 @@ $(BENCH_STAMP): requirements.txt $(BENCH_REQ) setup.py setup.cfg
 	  --no-deps --no-build-isolation -e .
 	@touch $@
 
-bench: bench-core
+BENCHMARKS := core sim dmp_server controller perception
 
-bench-core: $(BENCH_STAMP)
-	$(BENCH_VENV)/bin/python $(BENCH) $(BENCH_ARGS)
+bench: $(addprefix bench-,$(BENCHMARKS))
+
+# make bench-core, bench-sim, bench-dmp_server, bench-controller, bench-perception
+bench-%: $(BENCH_STAMP)
+	MUJOCO_GL=egl $(BENCH_VENV)/bin/python test/benchmarks/bench_$*.py $(BENCH_ARGS)
 
 clean:
 	rm -rf out build install log .pytest_cache *.egg-info

@@ -13,7 +13,7 @@ from pathlib import Path as FsPath
 import time
 
 from conftest import NodeProcess
-from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, save_demo
+from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains, save_demo
 from etdmp_ros.robot import JOINT_NAMES, UR10Model
 from etdmp_ros.ros_conversions import (joint_state_msg, path_from_numpy, path_to_numpy,
                                        pose_array_from_numpy)
@@ -36,6 +36,9 @@ import yaml
 # The scene (config/scene.yaml) the node is started with.
 SCENE = yaml.safe_load((FsPath(__file__).parents[1] / 'config' / 'scene.yaml').read_text())
 SCENE = SCENE['/**']['ros__parameters']
+# The node's own settings (config/dmp_server.yaml), for the obstacle gains it plans with.
+SERVER = yaml.safe_load((FsPath(__file__).parents[1] / 'config' / 'dmp_server.yaml').read_text())
+SERVER = SERVER['dmp_server']['ros__parameters']
 PLANE = TaskPlane.create(SCENE['task_plane']['origin'], SCENE['task_plane']['x_axis'],
                          SCENE['task_plane']['y_axis'], 0.02)
 Q_INIT = np.array(SCENE['initial_joint_positions'])
@@ -269,7 +272,13 @@ def test_obstacles_published_on_the_topic_are_avoided(server, client):
     np.testing.assert_allclose(PLANE.distance(x), 0.0, atol=1e-9)
     assert np.linalg.norm(x[-1] - GOAL) < 1e-3
     assert t[-1] == pytest.approx(3.0)      # obstacle_margin 0.5: a detour takes 1.5 tau
-    np.testing.assert_allclose(x, core_plan('G', START, GOAL, on_path)[1], atol=1e-9)
+    # obstacle_k is in 1/m (0: k_relative / |start - goal|); the core works in demo units.
+    gains = ObstacleGains(gamma=SERVER['obstacle_gamma'], beta=SERVER['obstacle_beta'],
+                          gamma2=SERVER['obstacle_gamma2'],
+                          k=SERVER['obstacle_k'] * PLANE.scale or None,
+                          k_relative=SERVER['obstacle_k_relative'])
+    np.testing.assert_allclose(x, core_plan('G', START, GOAL, on_path, gains=gains)[1],
+                               atol=1e-9)
     # The empty PoseArray cleared them: back to the obstacle-free plan.
     np.testing.assert_allclose(client.call(START, GOAL)[1], free, atol=1e-12)
 

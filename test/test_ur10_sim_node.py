@@ -11,7 +11,8 @@ import threading
 import time
 
 from conftest import NodeProcess
-from etdmp_ros.robot import CameraIntrinsics, JOINT_NAMES, UR10Model
+from etdmp_ros._paths import config_path
+from etdmp_ros.robot import CameraIntrinsics, JOINT_NAMES, read_parameter_file, UR10Model
 from etdmp_ros.ros_conversions import (image_from_msg, intrinsics_from_camera_info,
                                        stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray
@@ -166,7 +167,9 @@ def test_publishes_joint_states_camera_and_ground_truth(launch):
     p = np.array([tip.point.x, tip.point.y, tip.point.z])
     assert np.linalg.norm(p - model.tool_position(by_stamp[stamp_to_ns(tip.header.stamp)])) < 1e-6
     goal = client.received('/ur10_sim/ground_truth/goal')[-1].point
-    assert np.allclose([goal.x, goal.y, goal.z], [0.68, 0.28, 0.002])
+    # The default of config/scene.yaml.
+    assert np.allclose([goal.x, goal.y, goal.z],
+                       read_parameter_file(config_path('scene.yaml'))['goal_position'])
     obstacles = client.received('/ur10_sim/ground_truth/obstacles')[-1]
     assert len(obstacles.poses) == 2 and obstacles.header.frame_id == 'base_link'
     # Camera: 30 Hz of simulated time, images and camera_info that agree.

@@ -6,8 +6,9 @@ bringup: ur10_sim, perception, dmp_server and controller in ONE process (no ros2
 node's config/<node>.yaml (every file is keyed by node name, so all of them can be given to the
 one process), then the arguments given here (e.g. ``--ros-args --params-file my.yaml``). The
 nodes other than the simulation run on simulated time (``use_sim_time``), as the launch file
-sets it. A MultiThreadedExecutor spins them; on Ctrl-C the controller sends zero velocity
-before anything shuts down.
+sets it. One SingleThreadedExecutor spins them (the simulation steps in its own thread; rclpy's
+MultiThreadedExecutor keeps a core busy with 125 Hz topics); on Ctrl-C the controller sends zero
+velocity before anything shuts down.
 """
 
 import signal
@@ -16,15 +17,13 @@ import tempfile
 
 from etdmp_ros._paths import config_path
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 import yaml
 
 NODES = ('ur10_sim', 'perception', 'dmp_server', 'controller')
 #: Nodes that follow the simulation's /clock.
 SIM_TIME_NODES = ('perception', 'dmp_server', 'controller')
-#: The dmp_server's reentrant service needs a few threads; the others one each.
-EXECUTOR_THREADS = 6
 
 
 def parameter_files():
@@ -80,7 +79,7 @@ def main(args=None):
             nodes.append(sim)
             sim.start()
             nodes += [PerceptionNode(), DmpServer(), ControllerNode()]
-            executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+            executor = SingleThreadedExecutor()
             for node in nodes:
                 executor.add_node(node)
             executor.spin()

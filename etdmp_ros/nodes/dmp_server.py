@@ -12,8 +12,12 @@ Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward 
 serves ``/generalize`` (nav_msgs/srv/GetPlan); publishes ``/etdmp/path`` (transient local) and
 ``/etdmp/markers``.
 
-Threads: a MultiThreadedExecutor; the service runs in a reentrant callback group, so calls are
-served concurrently. ``_state_lock`` guards the latest inputs and the Pinocchio model,
+Threads: a SingleThreadedExecutor serves calls one at a time (each takes about a millisecond of
+this node's own work; the round trip is dominated by rclpy and DDS). rclpy's
+MultiThreadedExecutor was tried and dropped: with the simulation's 125 Hz topics it kept a core
+busy while idle (rclpy issues #1223, #1452). The service sits in a reentrant callback group and
+the state is locked, so a multi-threaded executor (e.g. in a user's own process) is safe:
+``_state_lock`` guards the latest inputs and the Pinocchio model,
 ``_core_lock`` the skills' rollouts (their caches are not thread-safe; a rollout takes well under
 a millisecond), and the skill library has its own lock. Settings are an immutable snapshot,
 replaced whole when parameters change.
@@ -46,7 +50,7 @@ import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
@@ -55,8 +59,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 NODE_NAME = 'dmp_server'
 TOOL_SOURCES = ('joint_states', 'tool_pose')
-#: Executor threads: the service is reentrant; the GIL limits gains beyond a few.
-EXECUTOR_THREADS = 4
 _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _THROTTLE = 5.0   # s between repeated warnings about the same bad input
@@ -604,7 +606,7 @@ def main(args=None):
     node = None
     try:
         node = DmpServer()
-        executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+        executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

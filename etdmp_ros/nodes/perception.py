@@ -25,6 +25,7 @@ thresholds and rates from config/perception.yaml (changeable at runtime, validat
 """
 
 from dataclasses import dataclass
+import signal
 import time
 
 from etdmp_ros._paths import config_path
@@ -39,6 +40,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import CameraInfo, Image
 
 NODE_NAME = 'perception'
@@ -357,9 +359,17 @@ class PerceptionNode(Node):
                                           color_msg.header.frame_id))
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main(args=None):
-    """Run the perception node until Ctrl-C."""
-    rclpy.init(args=args)
+    """Run the perception node until Ctrl-C (or SIGTERM)."""
+    # Our own signal handling: rclpy's shuts the context down at once, and a frame being
+    # processed at that moment would then fail to publish (a traceback on Ctrl-C).
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
     node = None
     try:
         node = PerceptionNode()
@@ -370,6 +380,8 @@ def main(args=None):
         rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
         return 1
     finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
