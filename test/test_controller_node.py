@@ -34,6 +34,8 @@ from std_srvs.srv import SetBool
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STARTUP = 60.0
+#: Reader history of the recorded topics (a few seconds at 500 Hz).
+DEPTH = 5000
 #: Zero commands the controller sends on exit (etdmp_ros.nodes.controller.EXIT_ZEROS).
 EXIT_ZEROS = 3
 
@@ -53,10 +55,13 @@ class Client:
         n = self.node
         self.path_pub = n.create_publisher(Path, '/etdmp/path', LATCHED)
         self.joint_pub = n.create_publisher(JointState, '/joint_states', 10)
-        n.create_subscription(JointState, '/joint_states', self._on_joints, 100)
-        n.create_subscription(PoseStamped, '/etdmp/controller/reference', self._on_reference, 100)
+        # Deep reader queues: at 500 Hz this Python client may fall behind for a while, and the
+        # acceleration check needs every command (consecutive ones are one period apart).
+        n.create_subscription(JointState, '/joint_states', self._on_joints, DEPTH)
+        n.create_subscription(PoseStamped, '/etdmp/controller/reference', self._on_reference,
+                              DEPTH)
         n.create_subscription(Float64MultiArray, '/forward_velocity_controller/commands',
-                              self._on_command, 100)
+                              self._on_command, DEPTH)
         n.create_subscription(String, '/etdmp/controller/status', self._on_status, LATCHED)
         self.pause = n.create_client(SetBool, '/controller/pause')
         self.parameters = n.create_client(SetParameters, '/controller/set_parameters')

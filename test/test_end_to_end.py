@@ -84,8 +84,11 @@ def test_commands_move_the_arm_within_its_limits(run):
     assert 0.05 < m['max_joint_velocity_ratio'] <= 1.0 + 1e-9
     assert m['max_joint_acceleration_ratio'] <= 1.0 + 1e-9
     assert m['controller_failure'] is None
-    assert m['controller_status'][:3] in (['approaching', 'tracking', 'holding'],
-                                          ['tracking', 'holding', 'idle'])
+    # Tracked the plan, then held its end (an 'idle' may come first: the recording can start
+    # before the path arrives).
+    status = m['controller_status']
+    assert 'tracking' in status and 'holding' in status, status
+    assert status.index('tracking') < status.index('holding'), status
 
 
 def test_trace_reaches_the_goal_clears_obstacles_and_keeps_the_shape(run):
@@ -117,10 +120,9 @@ def test_outputs_and_clean_shutdown(run):
                 'tracking_rms_mm', 'tracking_max_mm', 'min_clearance_mm', 'goal_error_mm',
                 'duration_s'):
         assert saved[key] == m[key]
-    # SIGINT stops the nodes cleanly. (perception is left out: on Ctrl-C during a frame it can
-    # still publish on a shut-down context, a traceback and exit code 1 - reported.)
+    # SIGINT stops every node cleanly.
     codes = m['node_exit_codes']
-    assert [codes[n] for n in ('ur10_sim', 'dmp_server', 'controller')] == [0, 0, 0]
+    assert [codes[n] for n in ('ur10_sim', 'perception', 'dmp_server', 'controller')] == [0] * 4
 
 
 # -- the demo's measuring functions, without ROS --------------------------------------------------

@@ -26,12 +26,12 @@ never stalls the control loop (see :mod:`etdmp_ros.ros_conversions._path_cdr`).
 """
 
 from dataclasses import fields, replace
-import signal
 import sys
 import threading
 import time
 
 from etdmp_ros._paths import config_path
+from etdmp_ros.nodes._spin import run
 from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, read_parameter_file,
                              trajectory_from_path, TrajectoryController, TrajectoryError,
                              UR10Model)
@@ -44,11 +44,8 @@ from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParam
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool
@@ -412,39 +409,11 @@ def _pose_msg(position, rotation, stamp):
     return pose
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def main(args=None):
     """Run the controller until Ctrl-C (or SIGTERM); send zero velocity before exiting."""
-    # Our own signal handling: rclpy's would shut the context down before the zeros are sent.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    # Installed explicitly: a shell starts background jobs with SIGINT ignored.
-    signal.signal(signal.SIGINT, _interrupt)
-    signal.signal(signal.SIGTERM, _interrupt)
     # Let the control steps preempt a path check (worker thread) within 1 ms instead of 5 ms.
     sys.setswitchinterval(0.001)
-    node = None
-    try:
-        node = ControllerNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:   # bad parameter: say which, no traceback
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
-        return 1
-    finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)    # a second Ctrl-C must not skip the zeros
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        if node is not None:
-            try:
-                node.send_zeros()
-            except Exception as exc:   # noqa: B902 - context already gone: nothing to send on
-                rclpy.logging.get_logger(NODE_NAME).warning(f'could not send zeros: {exc}')
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run(lambda nodes: nodes.append(ControllerNode()), NODE_NAME, args)
 
 
 if __name__ == '__main__':

@@ -31,6 +31,7 @@ import time
 
 from etdmp_ros._paths import config_path
 from etdmp_ros.dmp import builtin_demo, builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
+from etdmp_ros.nodes._spin import run
 from etdmp_ros.planning import place_demo, plan_path, PlanSettings, TOOL_DOWN, Workspace
 from etdmp_ros.robot import read_parameter_file, UR10Model
 from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_numpy, path_to_numpy,
@@ -46,14 +47,12 @@ from nav_msgs.srv import GetPlan
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
-import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -601,23 +600,9 @@ def _marker(header, ns, kind, points, rgba, size):
 
 
 def main(args=None):
-    """Run the dmp_server node until Ctrl-C."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = DmpServer()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except InvalidConfiguration:
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the dmp_server node until Ctrl-C (or SIGTERM)."""
+    return run(lambda nodes: nodes.append(DmpServer()), NODE_NAME, args,
+               startup_errors=(InvalidConfiguration,))
 
 
 if __name__ == '__main__':

@@ -25,22 +25,18 @@ thresholds and rates from config/perception.yaml (changeable at runtime, validat
 """
 
 from dataclasses import dataclass
-import signal
 import time
 
 from etdmp_ros._paths import config_path
+from etdmp_ros.nodes._spin import run
 from etdmp_ros.robot import (detector_from_parameters, FrameSynchronizer, read_parameter_file)
 from etdmp_ros.ros_conversions import (image_from_msg, image_msg, intrinsics_from_camera_info,
                                        pose_array_from_numpy, stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import CameraInfo, Image
 
 NODE_NAME = 'perception'
@@ -359,33 +355,9 @@ class PerceptionNode(Node):
                                           color_msg.header.frame_id))
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def main(args=None):
     """Run the perception node until Ctrl-C (or SIGTERM)."""
-    # Our own signal handling: rclpy's shuts the context down at once, and a frame being
-    # processed at that moment would then fail to publish (a traceback on Ctrl-C).
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, _interrupt)
-    signal.signal(signal.SIGTERM, _interrupt)
-    node = None
-    try:
-        node = PerceptionNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:   # bad parameter: say which, no traceback
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
-        return 1
-    finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run(lambda nodes: nodes.append(PerceptionNode()), NODE_NAME, args)
 
 
 if __name__ == '__main__':

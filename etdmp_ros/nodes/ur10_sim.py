@@ -21,6 +21,7 @@ import threading
 import time
 
 from etdmp_ros._paths import config_path
+from etdmp_ros.nodes._spin import run
 from etdmp_ros.robot import (MAX_OBSTACLES, parse_goal_position, parse_obstacle_positions,
                              read_parameter_file, SCENE_PARAMETERS, SceneConfig, UR10Sim)
 from etdmp_ros.ros_conversions import (camera_info_msg, image_msg, joint_state_msg,
@@ -30,9 +31,6 @@ from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
@@ -361,24 +359,11 @@ def _point_stamped(position, stamp):
 
 
 def main(args=None):
-    """Run the ur10_sim node until Ctrl-C."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = UR10SimNode()
-        node.start()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, ParameterException) as exc:   # bad parameter: say which, no traceback
-        rclpy.logging.get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
-        return 1
-    finally:
-        if node is not None:
-            node.stop()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 1 if node is not None and node.failed else 0
+    """Run the ur10_sim node until Ctrl-C (or SIGTERM)."""
+    def make(nodes):
+        nodes.append(UR10SimNode())
+        nodes[-1].start()
+    return run(make, NODE_NAME, args)
 
 
 if __name__ == '__main__':
