@@ -70,25 +70,22 @@ import time
 
 from etdmp_ros._paths import share_dir
 from etdmp_ros.dmp import builtin_demo, learn, nrmse
+from etdmp_ros.nodes._spin import BackgroundNode
 from etdmp_ros.planning import place_demo
 from etdmp_ros.plotting import DEMO_STYLE, METHOD_STYLE
 from etdmp_ros.robot import (CameraIntrinsics, CameraPose, quaternion_to_matrix,
                              read_parameter_file, UR10Model)
-from etdmp_ros.ros_conversions import (image_from_msg, intrinsics_from_camera_info,
-                                       path_to_numpy, point_to_numpy, pose_array_to_numpy,
-                                       stamp_to_ns)
+from etdmp_ros.ros_conversions import (image_from_msg, intrinsics_from_camera_info, path_to_numpy,
+                                       point_to_numpy, pose_array_to_numpy, stamp_to_ns)
 from etdmp_ros.task_plane import TaskPlane
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.srv import GetPlan
 import numpy as np
 import pinocchio as pin
 from rcl_interfaces.srv import SetParameters
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Float64, Float64MultiArray, String
 import yaml
@@ -365,7 +362,7 @@ def _stamp_of_raw_image(raw):
     return sec * 1_000_000_000 + nanosec
 
 
-class Recorder:
+class Recorder(BackgroundNode):
     """
     rclpy in this process (own context, spinning in a thread): records what the demo measures.
 
@@ -375,10 +372,7 @@ class Recorder:
 
     def __init__(self, domain_id, animation=True):
         """Create the node, subscriptions and clients; start spinning."""
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=int(domain_id),
-                   signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node('etdmp_demo', context=self.context)
+        super().__init__('etdmp_demo', domain_id)
         self.lock = threading.Lock()
         self.animation = animation
         self.sim_ns = 0
@@ -423,23 +417,7 @@ class Recorder:
                               self._on_depth, IMAGES, raw=True)
         self.generalize = n.create_client(GetPlan, '/generalize')
         self.server_parameters = n.create_client(SetParameters, '/dmp_server/set_parameters')
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(n)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self):
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception:   # noqa: B902 - the context was shut down while waiting
-                break
-
-    def close(self):
-        """Stop spinning and shut the context down."""
-        rclpy.shutdown(context=self.context)
-        self._thread.join(timeout=5)
-        self.node.destroy_node()
+        self.start()
 
     # -- callbacks
     def _on_tip(self, msg):

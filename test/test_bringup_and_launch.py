@@ -13,29 +13,25 @@ from pathlib import Path
 import signal
 import subprocess
 import sys
-import threading
 import time
 import types
 
 from conftest import REPO, sourced
+from etdmp_ros.nodes._spin import BackgroundNode
 from geometry_msgs.msg import PointStamped
 from nav_msgs.srv import GetPlan
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import Float64MultiArray, String
 
 NODES = ('ur10_sim', 'perception', 'dmp_server', 'controller')
 
 
-class Listener:
+class Listener(BackgroundNode):
     """rclpy client in this process (own context, spinning in a thread)."""
 
     def __init__(self):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('bringup_test', context=self.context)
+        super().__init__('bringup_test')
         self.goals, self.commands, self.statuses = [], [], []
         self.node.create_subscription(PointStamped, '/etdmp/goal', self.goals.append, 10)
         self.node.create_subscription(Float64MultiArray, '/forward_velocity_controller/commands',
@@ -43,17 +39,7 @@ class Listener:
         self.node.create_subscription(String, '/etdmp/controller/status',
                                       lambda m: self.statuses.append(m.data), 10)
         self.generalize = self.node.create_client(GetPlan, '/generalize')
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self):
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception:   # noqa: B902 - context shut down while waiting
-                break
+        self.start()
 
     def wait(self, predicate, timeout, what, process):
         deadline = time.monotonic() + timeout
@@ -63,10 +49,6 @@ class Listener:
             assert process.poll() is None, f'bringup exited while waiting for {what}'
             time.sleep(0.05)
         pytest.fail(f'timed out after {timeout} s waiting for {what}')
-
-    def close(self):
-        rclpy.shutdown(context=self.context)
-        self.thread.join(timeout=5)
 
 
 def test_bringup_runs_the_system_in_one_process(colcon_install, ros_env, tmp_path):

@@ -15,17 +15,16 @@ import time
 
 from conftest import isolate_dds, NodeProcess
 from controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
+from etdmp_ros.nodes._spin import BackgroundNode
 from etdmp_ros.robot import matrix_to_quaternion, PoseTrajectory, UR10Model
-from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, path_from_cdr,
-                                       serialize_path, stamp_to_ns)
+from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, path_from_cdr, serialize_path,
+                                       stamp_to_ns)
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
@@ -40,13 +39,11 @@ DEPTH = 5000
 EXIT_ZEROS = 3
 
 
-class Client:
+class Client(BackgroundNode):
     """rclpy in this process (own context, spinning in a thread): records what it hears."""
 
     def __init__(self, domain):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node('controller_test_client', context=self.context)
+        super().__init__('controller_test_client', domain)
         self.lock = threading.Lock()
         self.joints = {}            # stamp (ns) -> (q, receipt)
         self.references = {}        # stamp (ns) -> position
@@ -65,17 +62,7 @@ class Client:
         n.create_subscription(String, '/etdmp/controller/status', self._on_status, LATCHED)
         self.pause = n.create_client(SetBool, '/controller/pause')
         self.parameters = n.create_client(SetParameters, '/controller/set_parameters')
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(n)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self):
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception:   # noqa: B902 - context shut down while waiting
-                break
+        self.start()
 
     def _on_joints(self, msg):
         now = time.monotonic()
@@ -95,12 +82,6 @@ class Client:
     def _on_status(self, msg):
         with self.lock:
             self.status.append((time.monotonic(), msg.data))
-
-    def close(self):
-        """Stop spinning and shut the context down."""
-        rclpy.shutdown(context=self.context)
-        self._thread.join(timeout=5)
-        self.node.destroy_node()
 
     def state(self):
         """Return the latest status word (before any ': reason')."""

@@ -12,16 +12,14 @@ import time
 
 from conftest import NodeProcess
 from etdmp_ros._paths import config_path
+from etdmp_ros.nodes._spin import BackgroundNode
 from etdmp_ros.robot import CameraIntrinsics, JOINT_NAMES, read_parameter_file, UR10Model
-from etdmp_ros.ros_conversions import (image_from_msg, intrinsics_from_camera_info,
-                                       stamp_to_ns)
+from etdmp_ros.ros_conversions import image_from_msg, intrinsics_from_camera_info, stamp_to_ns
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -37,13 +35,11 @@ TOPICS = {
 }
 
 
-class Client:
+class Client(BackgroundNode):
     """rclpy in this process (own context, spinning in a thread), recording every topic."""
 
     def __init__(self):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('ur10_sim_test_client', context=self.context)
+        super().__init__('ur10_sim_test_client')
         self.lock = threading.Lock()
         self.messages = {topic: [] for topic in TOPICS}
         for topic, msg_type in TOPICS.items():
@@ -51,29 +47,13 @@ class Client:
         self.command_pub = self.node.create_publisher(
             Float64MultiArray, '/forward_velocity_controller/commands', 10)
         self.parameters = self.node.create_client(SetParameters, '/ur10_sim/set_parameters')
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
+        self.start()
 
     def _recorder(self, topic):
         def record(msg):
             with self.lock:
                 self.messages[topic].append((time.monotonic(), msg))
         return record
-
-    def _spin(self):
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception:   # noqa: B902 - context shut down while waiting
-                break
-
-    def close(self):
-        """Stop spinning and shut the context down."""
-        rclpy.shutdown(context=self.context)
-        self._thread.join(timeout=5)
-        self.node.destroy_node()
 
     def received(self, topic, since=0.0):
         """Return the messages of ``topic`` received after ``since`` (monotonic)."""
