@@ -69,6 +69,7 @@ import threading
 import time
 
 from etdmp_ros._paths import share_dir
+from etdmp_ros._reproduce import quadrant
 from etdmp_ros.dmp import builtin_demo, learn, nrmse
 from etdmp_ros.nodes._spin import BackgroundNode
 from etdmp_ros.planning import place_demo
@@ -173,12 +174,6 @@ def module_command(node, param_files):
     """Return the argv starting ``node`` with this Python (what ``ros2 run`` runs)."""
     return [sys.executable, '-m', f'etdmp_ros.nodes.{node}', '--ros-args',
             *[a for f in param_files for a in ('--params-file', str(f))]]
-
-
-def quadrant(vector):
-    """Return in which quadrant a 2D vector points: I is +x +y, II is -x +y, and so on."""
-    angle = math.atan2(vector[1], vector[0]) % (2.0 * math.pi)
-    return ('I', 'II', 'III', 'IV')[min(int(angle // (0.5 * math.pi)), 3)]
 
 
 @dataclass

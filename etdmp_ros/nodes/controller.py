@@ -30,13 +30,12 @@ import sys
 import threading
 import time
 
-from etdmp_ros._paths import config_path
 from etdmp_ros.nodes._spin import run
-from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, read_parameter_file,
+from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, node_defaults,
                              trajectory_from_path, TrajectoryController, TrajectoryError,
                              UR10Model)
-from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr,
-                                       stamp_to_ns, velocity_command_msg)
+from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr, stamp_to_ns,
+                                       velocity_command_msg)
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
@@ -178,8 +177,7 @@ class ControllerNode(Node):
 
     # ---------------------------------------------------------------------------- parameters
     def _declare_parameters(self):
-        defaults = read_parameter_file(config_path('scene.yaml'), NODE_NAME)
-        defaults.update(read_parameter_file(config_path('controller.yaml'), NODE_NAME))
+        defaults = node_defaults(NODE_NAME)
         for name, description in SCENE_PARAMETERS.items():
             self.declare_parameter(name, _float_list(defaults[name]),
                                    ParameterDescriptor(name=name, description=description,

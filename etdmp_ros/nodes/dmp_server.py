@@ -29,11 +29,10 @@ import pathlib
 import threading
 import time
 
-from etdmp_ros._paths import config_path
 from etdmp_ros.dmp import builtin_demo, builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.nodes._spin import run
 from etdmp_ros.planning import place_demo, plan_path, PlanSettings, TOOL_DOWN, Workspace
-from etdmp_ros.robot import read_parameter_file, UR10Model
+from etdmp_ros.robot import node_defaults, UR10Model
 from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_numpy, path_to_numpy,
                                        point_to_numpy, points_from_numpy, pose_array_to_numpy,
                                        serialize_path)
@@ -161,8 +160,7 @@ def _file_defaults():
     """
     defaults = dict(_DEFAULTS)
     try:
-        found = read_parameter_file(config_path('scene.yaml'), NODE_NAME)
-        found.update(read_parameter_file(config_path('dmp_server.yaml'), NODE_NAME))
+        found = node_defaults(NODE_NAME)
     except (OSError, ValueError):   # no share folder (e.g. a bare copy of the module): built-ins
         return defaults
     for name, value in found.items():

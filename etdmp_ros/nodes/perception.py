@@ -27,9 +27,8 @@ thresholds and rates from config/perception.yaml (changeable at runtime, validat
 from dataclasses import dataclass
 import time
 
-from etdmp_ros._paths import config_path
 from etdmp_ros.nodes._spin import run
-from etdmp_ros.robot import (detector_from_parameters, FrameSynchronizer, read_parameter_file)
+from etdmp_ros.robot import detector_from_parameters, FrameSynchronizer, node_defaults
 from etdmp_ros.ros_conversions import (image_from_msg, image_msg, intrinsics_from_camera_info,
                                        pose_array_from_numpy, stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray
@@ -177,8 +176,7 @@ class PerceptionNode(Node):
 
     # --------------------------------------------------------------------------- parameters
     def _declare_parameters(self):
-        defaults = read_parameter_file(config_path('scene.yaml'), NODE_NAME)
-        defaults.update(read_parameter_file(config_path('perception.yaml'), NODE_NAME))
+        defaults = node_defaults(NODE_NAME)
         for name, description in SCENE.items():
             value = defaults.get(name)
             if isinstance(value, list):

@@ -20,13 +20,11 @@ validates them and hands them over. Parameters: config/scene.yaml and config/ur1
 import threading
 import time
 
-from etdmp_ros._paths import config_path
 from etdmp_ros.nodes._spin import run
-from etdmp_ros.robot import (MAX_OBSTACLES, parse_goal_position, parse_obstacle_positions,
-                             read_parameter_file, SCENE_PARAMETERS, SceneConfig, UR10Sim)
-from etdmp_ros.ros_conversions import (camera_info_msg, image_msg, joint_state_msg,
-                                       ns_to_stamp, pose_array_from_numpy,
-                                       velocity_command_array)
+from etdmp_ros.robot import (MAX_OBSTACLES, node_defaults, parse_goal_position,
+                             parse_obstacle_positions, SCENE_PARAMETERS, SceneConfig, UR10Sim)
+from etdmp_ros.ros_conversions import (camera_info_msg, image_msg, joint_state_msg, ns_to_stamp,
+                                       pose_array_from_numpy, velocity_command_array)
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -167,8 +165,7 @@ class UR10SimNode(Node):
 
     # --------------------------------------------------------------------------- parameters
     def _declare_parameters(self):
-        defaults = read_parameter_file(config_path('scene.yaml'), NODE_NAME)
-        defaults.update(read_parameter_file(config_path('ur10_sim.yaml'), NODE_NAME))
+        defaults = node_defaults(NODE_NAME)
         self._declared = []
         for name in SCENE_PARAMETERS:
             dynamic = name in DYNAMIC

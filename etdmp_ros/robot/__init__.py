@@ -14,8 +14,9 @@ import sys
 from ._camera import CameraIntrinsics, CameraPose, matrix_to_quaternion, quaternion_to_matrix
 from ._controller import Command, ControllerConfig, DelayEstimator, STATUSES, TrajectoryController
 from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, IKResult
-from ._scene import (load_scene, parse_goal_position, parse_obstacle_positions,
-                     read_parameter_file, SCENE_PARAMETERS, SceneConfig)
+from ._scene import (load_scene, node_defaults, parse_goal_position,
+                     parse_obstacle_positions, read_parameter_file, SCENE_PARAMETERS,
+                     SceneConfig)
 from ._trajectory import (MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
                           trajectory_from_path, TrajectoryError)
 from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_urdf_path,
@@ -50,7 +51,7 @@ __all__ = [
     'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'IKResult', 'JOINT_NAMES',
     'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PoseTrajectory', 'SCENE_PARAMETERS',
     'STATUSES', 'SceneConfig', 'TrajectoryController', 'TrajectoryError', 'UR10Model',
-    'load_scene', 'matrix_to_quaternion', 'parse_goal_position', 'parse_obstacle_positions',
-    'quaternion_to_matrix', 'quaternions_to_rotations', 'read_parameter_file', 'robot_data_dir',
-    'trajectory_from_path', 'ur10_urdf_path', *_LAZY_NAMES,
+    'load_scene', 'matrix_to_quaternion', 'node_defaults', 'parse_goal_position',
+    'parse_obstacle_positions', 'quaternion_to_matrix', 'quaternions_to_rotations',
+    'read_parameter_file', 'robot_data_dir', 'trajectory_from_path', 'ur10_urdf_path', *_LAZY_NAMES,
 ]

@@ -59,6 +59,19 @@ def read_parameter_file(path, node_name=None):
     return flat
 
 
+def node_defaults(node_name):
+    """
+    Return a node's parameter values from the package's files: scene.yaml, then <node>.yaml.
+
+    The same files, in the same order, as the launch file passes; nodes declare their
+    parameters with these values, so a node started without parameter files still uses the one
+    description of the workcell.
+    """
+    values = read_parameter_file(config_path('scene.yaml'), node_name)
+    values.update(read_parameter_file(config_path(f'{node_name}.yaml'), node_name))
+    return values
+
+
 def _flatten(tree, prefix=''):
     flat = {}
     for key, value in tree.items():
