@@ -52,11 +52,12 @@ class Client(BackgroundNode):
         n = self.node
         self.path_pub = n.create_publisher(Path, '/etdmp/path', LATCHED)
         self.joint_pub = n.create_publisher(JointState, '/joint_states', 10)
-        # Deep reader queues: at 500 Hz this Python client may fall behind for a while, and the
-        # acceleration check needs every command (consecutive ones are one period apart).
-        n.create_subscription(JointState, '/joint_states', self._on_joints, DEPTH)
+        # Joint states and references: shallow queues keep this client current (a deep backlog
+        # would still hold the end of a path when its records are read). Commands: a deep queue,
+        # since the acceleration check needs every one (consecutive ones are a period apart).
+        n.create_subscription(JointState, '/joint_states', self._on_joints, 100)
         n.create_subscription(PoseStamped, '/etdmp/controller/reference', self._on_reference,
-                              DEPTH)
+                              100)
         n.create_subscription(Float64MultiArray, '/forward_velocity_controller/commands',
                               self._on_command, DEPTH)
         n.create_subscription(String, '/etdmp/controller/status', self._on_status, LATCHED)
@@ -166,6 +167,14 @@ class Rig:
         if sim:
             self.client.wait_for(lambda: self.client.state() == 'idle', STARTUP,
                                  'the controller to see joint states', self.processes)
+            # The latched status can arrive before the other topics are matched: wait for their
+            # publishers and let discovery settle, or the first path's references are missed.
+            node = self.client.node
+            self.client.wait_for(
+                lambda: all(node.count_publishers(t) > 0 for t in (
+                    '/etdmp/controller/reference', '/forward_velocity_controller/commands')),
+                STARTUP, 'the controller topics', self.processes)
+            time.sleep(1.0)
 
     def close(self):
         """Stop everything; return the controller's exit code."""
