@@ -53,5 +53,6 @@ __all__ = [
     'STATUSES', 'SceneConfig', 'TrajectoryController', 'TrajectoryError', 'UR10Model',
     'load_scene', 'matrix_to_quaternion', 'node_defaults', 'parse_goal_position',
     'parse_obstacle_positions', 'quaternion_to_matrix', 'quaternions_to_rotations',
-    'read_parameter_file', 'robot_data_dir', 'trajectory_from_path', 'ur10_urdf_path', *_LAZY_NAMES,
+    'read_parameter_file', 'robot_data_dir', 'trajectory_from_path', 'ur10_urdf_path',
+    *_LAZY_NAMES,
 ]
