@@ -61,8 +61,8 @@ import json
 import math
 import os
 from pathlib import Path
+import re
 import signal
-import struct
 import subprocess
 import sys
 import threading
@@ -70,13 +70,15 @@ import time
 
 from etdmp_ros._paths import share_dir
 from etdmp_ros._reproduce import quadrant
+from etdmp_ros.cpu_monitor import CpuMonitor
 from etdmp_ros.dmp import builtin_demo, learn, nrmse
 from etdmp_ros.nodes._spin import BackgroundNode
 from etdmp_ros.planning import place_demo
 from etdmp_ros.plotting import DEMO_STYLE, METHOD_STYLE
 from etdmp_ros.robot import (CameraIntrinsics, CameraPose, quaternion_to_matrix,
                              read_parameter_file, UR10Model)
-from etdmp_ros.ros_conversions import (image_from_msg, intrinsics_from_camera_info, path_to_numpy,
+from etdmp_ros.ros_conversions import (header_stamp_ns, image_from_msg,
+                                       intrinsics_from_camera_info, path_to_numpy,
                                        point_to_numpy, pose_array_to_numpy, stamp_to_ns)
 from etdmp_ros.task_plane import TaskPlane
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
@@ -183,6 +185,7 @@ class Scene:
     config_dir: Path
     skill: str
     layout: str = 'skill'
+    parameters: dict = field(default_factory=dict)
     scene: dict = field(init=False)
     server: dict = field(init=False)
     controller: dict = field(init=False)
@@ -218,6 +221,12 @@ class Scene:
                           'dmp_server': server}
         for node in SIM_TIME_NODES:
             self.overrides[node]['use_sim_time'] = True
+        for node, values in self.parameters.items():
+            if node not in self.overrides:
+                raise DemoError(f'no node {node!r} (nodes: {", ".join(NODES)})')
+            self.overrides[node].update(values)
+        if 'control_rate' in self.parameters.get('controller', {}):
+            self.controller['control_rate'] = self.parameters['controller']['control_rate']
 
     @property
     def planar(self):
@@ -350,19 +359,15 @@ class NodeProcesses:
 # ------------------------------------------------------------------------------- recording
 
 
-def _stamp_of_raw_image(raw):
-    """Return the header stamp (ns) of a CDR-serialized sensor_msgs/Image without parsing it."""
-    order = '<' if raw[1] == 1 else '>'     # encapsulation: CDR_LE (0, 1) or CDR_BE (0, 0)
-    sec, nanosec = struct.unpack_from(order + 'iI', raw, 4)
-    return sec * 1_000_000_000 + nanosec
-
-
 class Recorder(BackgroundNode):
     """
     rclpy in this process (own context, spinning in a thread): records what the demo measures.
 
     Times are simulated (ns), from message stamps; unstamped messages (commands, status,
-    tracking error) get the stamp of the latest pen-tip sample received before them.
+    tracking error) get the stamp of the latest pen-tip sample received before them. The
+    streams at the control rate (pen tip, commands, reference, tracking error) are kept as the
+    serialized bytes their raw subscriptions hand over and decoded in :meth:`arrays`, after
+    the run: deserializing each on arrival cost this process a tenth of a core.
     """
 
     def __init__(self, domain_id, animation=True):
@@ -371,11 +376,11 @@ class Recorder(BackgroundNode):
         self.lock = threading.Lock()
         self.animation = animation
         self.sim_ns = 0
-        self.tip = []                 # (stamp ns, x, y, z)
-        self.reference = []           # (stamp ns, x, y, z)
-        self.commands = []            # (sim ns at receipt, qd (6,))
+        self.tip = []                 # (stamp ns, serialized PointStamped)
+        self.reference = []           # serialized PoseStamped
+        self.commands = []            # (sim ns at receipt, monotonic s, serialized command)
         self.status = []              # (sim ns at receipt, text)
-        self.errors = []              # (sim ns at receipt, metres)
+        self.errors = []              # (sim ns at receipt, serialized Float64)
         self.goal_truth = self.obstacles_truth = None
         self.goal_seen = self.obstacles_seen = None
         self.goal_seen_stamp = 0
@@ -390,7 +395,7 @@ class Recorder(BackgroundNode):
         self.keep_frames_after = None
         n = self.node
         n.create_subscription(PointStamped, '/ur10_sim/ground_truth/tool_tip', self._on_tip,
-                              STREAM)
+                              STREAM, raw=True)
         n.create_subscription(PointStamped, '/ur10_sim/ground_truth/goal', self._on_goal_truth,
                               10)
         n.create_subscription(PoseArray, '/ur10_sim/ground_truth/obstacles',
@@ -398,12 +403,12 @@ class Recorder(BackgroundNode):
         n.create_subscription(PointStamped, '/etdmp/goal', self._on_goal_seen, 10)
         n.create_subscription(PoseArray, '/etdmp/obstacles', self._on_obstacles_seen, 10)
         n.create_subscription(Float64MultiArray, '/forward_velocity_controller/commands',
-                              self._on_command, STREAM)
+                              self._on_command, STREAM, raw=True)
         n.create_subscription(String, '/etdmp/controller/status', self._on_status, LATCHED)
         n.create_subscription(Float64, '/etdmp/controller/tracking_error', self._on_error,
-                              STREAM)
+                              STREAM, raw=True)
         n.create_subscription(PoseStamped, '/etdmp/controller/reference', self._on_reference,
-                              STREAM)
+                              STREAM, raw=True)
         n.create_subscription(CameraInfo, '/camera/camera/color/camera_info',
                               self._on_camera_info, 10)
         n.create_subscription(Image, '/camera/camera/color/image_raw', self._on_color, IMAGES,
@@ -415,11 +420,11 @@ class Recorder(BackgroundNode):
         self.start()
 
     # -- callbacks
-    def _on_tip(self, msg):
-        stamp = stamp_to_ns(msg.header.stamp)
+    def _on_tip(self, raw):
+        stamp = header_stamp_ns(raw)
         with self.lock:
             self.sim_ns = max(self.sim_ns, stamp)
-            self.tip.append((stamp, msg.point.x, msg.point.y, msg.point.z))
+            self.tip.append((stamp, raw))
 
     def _on_goal_truth(self, msg):
         self.goal_truth = point_to_numpy(msg.point)
@@ -434,22 +439,21 @@ class Recorder(BackgroundNode):
     def _on_obstacles_seen(self, msg):
         self.obstacles_seen = pose_array_to_numpy(msg)
 
-    def _on_command(self, msg):
+    def _on_command(self, raw):
         with self.lock:
-            self.commands.append((self.sim_ns, np.array(msg.data, dtype=float)))
+            self.commands.append((self.sim_ns, time.monotonic(), raw))
 
     def _on_status(self, msg):
         with self.lock:
             self.status.append((self.sim_ns, msg.data))
 
-    def _on_error(self, msg):
+    def _on_error(self, raw):
         with self.lock:
-            self.errors.append((self.sim_ns, msg.data))
+            self.errors.append((self.sim_ns, raw))
 
-    def _on_reference(self, msg):
-        p = msg.pose.position
+    def _on_reference(self, raw):
         with self.lock:
-            self.reference.append((stamp_to_ns(msg.header.stamp), p.x, p.y, p.z))
+            self.reference.append(raw)
 
     def _on_camera_info(self, msg):
         if self.camera_info is None:
@@ -458,7 +462,7 @@ class Recorder(BackgroundNode):
     def _on_color(self, raw):
         # Deserializing a 0.9 MB image costs time: only the frames kept are parsed. The depth
         # image of the same stamp (published after the colour one) is kept with it.
-        stamp = _stamp_of_raw_image(raw)
+        stamp = header_stamp_ns(raw)
         self._frame_count += 1
         with self.lock:
             wanted = [name for name, t in self._requests.items() if stamp >= t]
@@ -484,7 +488,7 @@ class Recorder(BackgroundNode):
             self._fill_depth(targets, depth)
 
     def _on_depth(self, raw):
-        stamp = _stamp_of_raw_image(raw)
+        stamp = header_stamp_ns(raw)
         with self.lock:
             targets = self._depth_wanted.pop(stamp, None)
             if targets is None:     # the colour image may still come: keep a few (references)
@@ -554,17 +558,39 @@ class Recorder(BackgroundNode):
         t, positions, quaternions = path_to_numpy(response.plan)
         return stamp_to_ns(response.plan.header.stamp), t, positions, quaternions
 
-    def arrays(self):
-        """Return a consistent copy of the recorded streams as numpy arrays."""
+    def latest_tip(self):
+        """Return the latest pen-tip position received (3,)."""
         with self.lock:
-            tip = np.array(self.tip, dtype=float).reshape(-1, 4)
-            ref = np.array(self.reference, dtype=float).reshape(-1, 4)
-            commands = (np.array([c[0] for c in self.commands], dtype=float),
-                        np.array([c[1] for c in self.commands], dtype=float).reshape(-1, 6))
-            errors = np.array(self.errors, dtype=float).reshape(-1, 2)
-        order = np.argsort(tip[:, 0], kind='stable')
-        return {'tip': tip[order], 'reference': ref[np.argsort(ref[:, 0], kind='stable')],
-                'command_time': commands[0], 'commands': commands[1], 'errors': errors}
+            raw = self.tip[-1][1]
+        return point_to_numpy(deserialize_message(raw, PointStamped).point)
+
+    def arrays(self):
+        """Return the recorded streams as numpy arrays, decoding the serialized ones."""
+        with self.lock:
+            tip, reference = list(self.tip), list(self.reference)
+            commands, errors = list(self.commands), list(self.errors)
+
+        tip = _points([raw for _, raw in tip], PointStamped)
+        reference = _points(reference, PoseStamped)
+        qd = np.array([deserialize_message(raw, Float64MultiArray).data for _, _, raw in commands],
+                      dtype=float).reshape(-1, 6)
+        errors = np.array([(ns, deserialize_message(raw, Float64).data) for ns, raw in errors],
+                          dtype=float).reshape(-1, 2)
+        return {'tip': tip[np.argsort(tip[:, 0], kind='stable')],
+                'reference': reference[np.argsort(reference[:, 0], kind='stable')],
+                'command_time': np.array([c[0] for c in commands], dtype=float),
+                'command_wall_time': np.array([c[1] for c in commands], dtype=float),
+                'commands': qd, 'errors': errors}
+
+
+def _points(messages, msg_type):
+    """Return (n, 4) stamps (ns) and positions of serialized PointStamped or PoseStamped."""
+    out = np.empty((len(messages), 4))
+    for i, raw in enumerate(messages):
+        msg = deserialize_message(raw, msg_type)
+        p = msg.point if msg_type is PointStamped else msg.pose.position
+        out[i] = stamp_to_ns(msg.header.stamp), p.x, p.y, p.z
+    return out
 
 
 # ---------------------------------------------------------------------------------- metrics
@@ -981,6 +1007,60 @@ def write_pictures(out, run, rec, snapshots, frames, intrinsics, animation=True)
     return written
 
 
+# ---------------------------------------------------------------------------- system budget
+
+
+#: The controller's log line at the end of a tracked path (etdmp_ros.nodes.controller).
+_TRACKED = re.compile(r'path tracked: error RMS ([\d.]+) mm, max ([\d.]+) mm; (\d+) control '
+                      r'steps in (\d+) periods \((\d+) joint states received, largest gap '
+                      r'([\d.]+) ms\)')
+#: ur10_sim's log line when it stops.
+_SIM_STOPPED = re.compile(r'largest wall-clock gap between two ([\d.]+) ms; camera frames '
+                          r'published (\d+), dropped (\d+)')
+
+
+def system_figures(monitor, rec, call_ns, end_ns, nodes):
+    """
+    Return what the closed loop cost and how well it kept time from the call to the end.
+
+    CPU per process (CPU-s per simulated s, from /proc), the real-time factor, the moving
+    commands per simulated second and the wall-clock period between commands as this process
+    received them, and what the controller and the simulation logged about their loops.
+    """
+    figures = {}
+    window = monitor.window(call_ns * 1e-9, end_ns * 1e-9) if end_ns else None
+    if window is not None:
+        figures['cpu_cores'] = window['cpu']
+        figures['cpu_cores_total'] = window['total']
+        figures['cpu_cores_nodes_but_sim'] = sum(v for k, v in window['cpu'].items()
+                                                 if k != 'ur10_sim')
+        figures['real_time_factor'] = window['real_time_factor']
+        figures['min_real_time_factor_1s'] = window['min_real_time_factor_1s']
+    t = rec['command_time']
+    inside = (t >= call_ns) & (t <= (end_ns or 0))
+    moving = inside & np.any(rec['commands'] != 0.0, axis=1) if len(t) else inside
+    if end_ns and end_ns > call_ns:
+        figures['moving_commands_per_s'] = float(moving.sum() / ((end_ns - call_ns) * 1e-9))
+    periods = np.diff(rec['command_wall_time'][inside]) * 1e3
+    if len(periods):
+        figures['command_period_ms'] = {'p50': float(np.median(periods)),
+                                        'p99': float(np.percentile(periods, 99)),
+                                        'max': float(periods.max())}
+    found = _TRACKED.findall(nodes.log('controller'))
+    if found:
+        rms, peak, steps, periods_, received, gap = found[-1]
+        figures['controller'] = {'tracking_rms_mm': float(rms), 'tracking_max_mm': float(peak),
+                                 'steps': int(steps), 'periods': int(periods_),
+                                 'joint_states_received': int(received),
+                                 'largest_joint_state_gap_ms': float(gap)}
+    found = _SIM_STOPPED.findall(nodes.log('ur10_sim'))
+    if found:
+        gap, frames, dropped = found[-1]
+        figures['simulation'] = {'largest_tick_gap_ms': float(gap), 'frames': int(frames),
+                                 'frames_dropped': int(dropped)}
+    return figures
+
+
 # ------------------------------------------------------------------------------------- run
 
 
@@ -997,6 +1077,8 @@ class Options:
     config_dir: Path = None
     command: object = module_command
     quiet: bool = False
+    #: Extra node parameters, {node: {name: value}}, after the scene's (e.g. control_rate).
+    parameters: dict = field(default_factory=dict)
 
 
 class _Progress:
@@ -1049,12 +1131,15 @@ def run_demo(options, env):
     out = Path(options.out)
     out.mkdir(parents=True, exist_ok=True)
     config_dir = Path(options.config_dir or share_dir() / 'config')
-    scene = Scene(config_dir, options.skill, options.layout)
+    scene = Scene(config_dir, options.skill, options.layout, options.parameters)
     other = 'dmp' if options.method == 'etdmp' else 'etdmp'
     progress(f'starting ur10_sim, perception, dmp_server and controller (ROS_DOMAIN_ID '
              f'{env["ROS_DOMAIN_ID"]}, localhost only; logs in {out / "logs"})')
     recorder = Recorder(env['ROS_DOMAIN_ID'], animation=options.animation)
     nodes = NodeProcesses(scene, out / 'logs', env, options.command)
+    monitor = CpuMonitor({**{n: p.pid for n, p in nodes.processes.items()},
+                          'demo': os.getpid()},
+                         lambda: recorder.sim_ns * 1e-9 if recorder.sim_ns else None).start()
     n_status = 0
     try:
         expected = len(np.asarray(scene.overrides['ur10_sim'].get(
@@ -1089,7 +1174,7 @@ def run_demo(options, env):
             other_plan = (other, None, reason)
         recorder.set_server_parameters(method=options.method, execute=True)
         n_status = len(recorder.state())
-        start = recorder.tip[-1][1:]
+        start = recorder.latest_tip()
         call_ns = recorder.sim_ns
         recorder.request_snapshot('start', call_ns)
         stamp, p_t, p_x, p_q, reason = _generalize(recorder, nodes, scene.explicit_goal)
@@ -1128,6 +1213,7 @@ def run_demo(options, env):
         if recorder.snapshot('end') is None:
             raise DemoError('no camera frame arrived after the end of the motion')
     finally:
+        monitor.stop()
         codes = nodes.stop(interrupted=sys.exc_info()[0] is KeyboardInterrupt)
         rec = recorder.arrays()
         status = recorder.state(n_status)
@@ -1140,6 +1226,7 @@ def run_demo(options, env):
     metrics['node_exit_codes'] = codes
     metrics['perceived_goal_stamp_age_s'] = goal_stamp_lag
     metrics['controller_failure'] = failure
+    metrics['system'] = system_figures(monitor, rec, call_ns, end_ns, nodes)
     intrinsics = recorder.camera_info or CameraIntrinsics.from_fovy(640, 480, 42.5)
     written = [out / 'plot.png']
     plot_run(written[0], run, metrics, extra)
@@ -1181,8 +1268,14 @@ def summary(metrics, written):
         f'{100 * m["max_joint_acceleration_ratio"]:.0f} % of the acceleration limits',
         f'  motion {m["duration_s"]:.2f} s simulated (approach {m["approach_duration_s"]:.2f} s,'
         f' plan {m["plan_duration_s"]:.2f} s); demo took {m["wall_time_s"]:.0f} s',
-        'files: ' + ', '.join(str(p) for p in written),
     ]
+    system = m.get('system', {})
+    if 'cpu_cores' in system and 'moving_commands_per_s' in system:
+        cpu = ', '.join(f'{name} {value:.2f}' for name, value in system['cpu_cores'].items())
+        lines.append(f'  while moving: {system["moving_commands_per_s"]:.0f} commands/s, '
+                     f'real-time factor {system["real_time_factor"]:.3f}, CPU '
+                     f'{system["cpu_cores_total"]:.2f} cores ({cpu})')
+    lines.append('files: ' + ', '.join(str(p) for p in written))
     return '\n'.join(lines)
 
 

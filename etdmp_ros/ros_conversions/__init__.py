@@ -4,6 +4,7 @@ numpy <-> ROS message helpers, written once for every node (no cv_bridge or tf2 
 Importing this package imports rclpy message modules; the ROS-free core never does.
 """
 
+from ._cdr import header_stamp_ns  # noqa: F401
 from ._geometry import (FAST_BUILD, ns_to_stamp, path_from_numpy, path_to_numpy,  # noqa: F401
                         point_to_numpy, points_from_numpy, pose_array_from_numpy,
                         pose_array_to_numpy, stamp_to_ns)

@@ -1,0 +1,223 @@
+"""
+System benchmark: the closed loop exactly as ``make demo`` runs it, idle and next to a busy core.
+
+A script, not a pytest test. Run from the repository root (``make bench-system``)::
+
+    MUJOCO_GL=egl .venv/bin/python test/benchmarks/bench_system.py [--runs 3]
+        [--skills G stir] [--load idle busy] [--rates 125 500] [--json out/bench_system.json]
+
+Each run is one ``make demo`` (``etdmp_ros.demo.run_demo``: the four nodes as separate
+processes, the 30 Hz colour + depth camera, perception, the demo's recorder in this process),
+for every skill, load and control rate asked for (``--rates 500`` runs G at 500 Hz, the
+e-series, idle only). ``busy`` adds one process busy-looping on a core for the whole run
+(another user on the machine). The figures come from the demo's ``metrics.json``
+(``system``), over the motion: from the ``/generalize`` call to the controller's idle.
+
+- CPU-s per simulated s of each process (``/proc``), their sum and the sum without ur10_sim;
+- control steps per control period while tracking (the controller's own count: its steps
+  against the periods that its joint states' stamps spanned), joint states received, and the
+  largest wall-clock gap between two joint states at the controller;
+- moving commands per simulated second and the wall-clock period between commands as the
+  recorder received them, p50 / p99;
+- the real-time factor over the motion and its lowest over any 1 s;
+- tracking RMS / max (true pen tip vs the controller's reference) and stale-input halts.
+
+It prints one table per skill and rate with the median of the runs per load, the targets and
+whether each is met. ``--runs 10 --load busy --skills G`` is the stress check of "no stale
+input halt in 10 loaded runs". Timing depends on the machine and on what else runs on it.
+"""
+
+import argparse
+import contextlib
+import json
+import os
+from pathlib import Path
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+os.environ.setdefault('MUJOCO_GL', 'egl')
+
+from etdmp_ros import demo  # noqa: E402
+
+#: (key, label, target text, check) of the table's rows; check(value, rate) -> bool. The CPU
+#: targets are the default configuration's (125 Hz); at 500 Hz only the step share has one.
+ROWS = (
+    ('steps_share', 'control steps / control periods while tracking', '>= 99 % (500 Hz: 97 %)',
+     lambda v, rate: v >= (0.99 if rate <= 125 else 0.97)),
+    ('joint_states_received', 'joint states received while tracking', '', None),
+    ('largest_joint_state_gap_ms', 'largest gap between joint states at the controller (ms)',
+     '<= 4 periods', lambda v, rate: None if rate > 125 else v <= 4000.0 / rate),
+    ('moving_commands_per_s', 'moving commands per simulated s', '>= 0.95 x rate',
+     lambda v, rate: None if rate > 125 else v >= 0.95 * rate),
+    ('command_period_p50_ms', 'command period p50, wall clock (ms)', '', None),
+    ('command_period_p99_ms', 'command period p99, wall clock (ms)', '', None),
+    ('real_time_factor', 'real-time factor over the motion', '1.0',
+     lambda v, rate: abs(v - 1.0) <= 0.01),
+    ('min_real_time_factor_1s', 'lowest real-time factor over 1 s', '1.0',
+     lambda v, rate: v >= 0.97),
+    ('cpu_ur10_sim', 'CPU ur10_sim (cores)', '', None),
+    ('cpu_perception', 'CPU perception (cores)', '', None),
+    ('cpu_dmp_server', 'CPU dmp_server (cores)', '', None),
+    ('cpu_controller', 'CPU controller (cores)', '', None),
+    ('cpu_demo', 'CPU demo recorder (cores)', '', None),
+    ('cpu_total', 'CPU whole closed loop (cores)', '<= 1.0',
+     lambda v, rate: None if rate > 125 else v <= 1.0),
+    ('cpu_nodes_but_sim', 'CPU all but ur10_sim (cores)', '<= 0.7',
+     lambda v, rate: None if rate > 125 else v <= 0.7),
+    ('tracking_rms_mm', 'tracking RMS (mm)', '<= 0.1',
+     lambda v, rate: None if rate > 125 else v <= 0.1),
+    ('tracking_max_mm', 'tracking max (mm)', '<= 0.5',
+     lambda v, rate: None if rate > 125 else v <= 0.5),
+    ('frames_dropped', 'camera frames dropped', '', None),
+    ('stale_halts', 'stale-input halts', '0', lambda v, rate: v == 0),
+)
+
+
+@contextlib.contextmanager
+def busy_core(active=True):
+    """Run one process that busy-loops on a core (another program on the machine) meanwhile."""
+    if not active:
+        yield None
+        return
+    process = subprocess.Popen([sys.executable, '-c', 'while True:\n    pass'])
+    try:
+        yield process
+    finally:
+        process.kill()
+        process.wait()
+
+
+def figures(metrics):
+    """Return the flat figures of one run from its metrics."""
+    system = metrics.get('system', {})
+    controller = system.get('controller', {})
+    out = {
+        'moving_commands_per_s': system.get('moving_commands_per_s'),
+        'command_period_p50_ms': system.get('command_period_ms', {}).get('p50'),
+        'command_period_p99_ms': system.get('command_period_ms', {}).get('p99'),
+        'real_time_factor': system.get('real_time_factor'),
+        'min_real_time_factor_1s': system.get('min_real_time_factor_1s'),
+        'cpu_total': system.get('cpu_cores_total'),
+        'cpu_nodes_but_sim': system.get('cpu_cores_nodes_but_sim'),
+        'tracking_rms_mm': metrics.get('tracking_rms_mm'),
+        'tracking_max_mm': metrics.get('tracking_max_mm'),
+        'frames_dropped': system.get('simulation', {}).get('frames_dropped'),
+        'stale_halts': int(str(metrics.get('controller_failure') or '').startswith('stale')),
+        'joint_states_received': controller.get('joint_states_received'),
+        'largest_joint_state_gap_ms': controller.get('largest_joint_state_gap_ms'),
+        'steps_share': (controller['steps'] / controller['periods']
+                        if controller.get('periods') else None),
+    }
+    for name, value in system.get('cpu_cores', {}).items():
+        out[f'cpu_{name}'] = value
+    return out
+
+
+def run_once(skill, load, rate, out):
+    """Run the demo once; return its figures (a failed run counts as a stale halt if so)."""
+    parameters = {}
+    if rate != 125:
+        parameters = {'ur10_sim': {'control_rate': float(rate)},
+                      'controller': {'control_rate': float(rate)}}
+    options = demo.Options(skill=skill, out=out, animation=False, quiet=True,
+                           parameters=parameters)
+    env = demo.isolated_environment()
+    os.environ.update(env)
+    with busy_core(load == 'busy'):
+        try:
+            metrics, _ = demo.run_demo(options, env)
+        except demo.DemoError as err:
+            saved = Path(out) / 'metrics.json'
+            if not saved.exists():
+                raise
+            metrics = json.loads(saved.read_text())
+            print(f'    run failed: {err}'.splitlines()[0], flush=True)
+    return figures(metrics)
+
+
+def median(values):
+    """Return the median of the values that are not None (None if there are none)."""
+    values = [v for v in values if v is not None]
+    return statistics.median(values) if values else None
+
+
+def table(skill, rate, results):
+    """Return the markdown table of one skill and rate: median per load, target, met."""
+    loads = list(results)
+    columns = ' | '.join(f'{load} (median of {len(results[load])})' for load in loads)
+    head = f'| {skill} at {rate:g} Hz | {columns} | target | met |'
+    lines = [head, '|' + '---|' * (len(loads) + 3)]
+    for key, label, target, check in ROWS:
+        values = [median([r.get(key) for r in results[load]]) for load in loads]
+        if all(v is None for v in values):
+            continue
+        cells = []
+        for v in values:
+            if v is None:
+                cells.append('-')
+            elif key in ('steps_share',):
+                cells.append(f'{100 * v:.1f} %')
+            elif isinstance(v, float):
+                cells.append(f'{v:.3f}' if abs(v) < 10 else f'{v:.1f}')
+            else:
+                cells.append(str(v))
+        met = ''
+        if check is not None:
+            # Worst over every run (not the median): a target is met when every run meets it.
+            runs = [r.get(key) for load in loads for r in results[load]]
+            verdicts = [None if v is None else check(v, rate) for v in runs]
+            if any(v is not None for v in verdicts):
+                met = 'yes' if all(verdicts) else 'NO'
+        lines.append(f'| {label} | ' + ' | '.join(cells) + f' | {target if met else ""} | {met} |')
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    """Run the benchmark; print the tables; return 0."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--runs', type=int, default=3, help='demo runs per case (default 3)')
+    parser.add_argument('--skills', nargs='+', default=['G', 'stir'], choices=demo.SKILLS)
+    parser.add_argument('--load', nargs='+', default=['idle', 'busy'],
+                        choices=('idle', 'busy'))
+    parser.add_argument('--rates', nargs='+', type=float, default=[125.0, 500.0],
+                        help='control rates (Hz); rates other than 125 run G, idle only')
+    parser.add_argument('--json', type=Path, help="also write every run's figures here")
+    args = parser.parse_args(argv)
+    cases = []
+    for rate in args.rates:
+        if rate == 125.0:
+            cases += [(skill, rate, args.load) for skill in args.skills]
+        elif 'G' in args.skills and 'idle' in args.load:
+            cases.append(('G', rate, ['idle']))
+    print(f'bench_system: {os.cpu_count()} cores, load average before '
+          f'{os.getloadavg()[0]:.2f}, {args.runs} runs per case', flush=True)
+    everything = {}
+    with tempfile.TemporaryDirectory(prefix='bench_system_') as tmp:
+        for skill, rate, loads in cases:
+            results = {load: [] for load in loads}
+            for run in range(args.runs):
+                for load in loads:     # interleaved: drifting machine load hits all alike
+                    started = time.monotonic()
+                    out = Path(tmp) / f'{skill}_{rate:g}_{load}_{run}'
+                    result = run_once(skill, load, rate, out)
+                    results[load].append(result)
+                    print(f'  {skill} {rate:g} Hz {load} run {run + 1}: '
+                          f'{result["moving_commands_per_s"] or 0:.0f} commands/s, CPU '
+                          f'{result["cpu_total"] or 0:.2f} cores, tracking max '
+                          f'{result["tracking_max_mm"] or 0:.3f} mm '
+                          f'({time.monotonic() - started:.0f} s)', flush=True)
+            everything[f'{skill}@{rate:g}'] = results
+            print()
+            print(table(skill, rate, results))
+            print(flush=True)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(everything, indent=1) + '\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
