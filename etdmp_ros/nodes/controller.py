@@ -26,6 +26,7 @@ never stalls the control loop (see :mod:`etdmp_ros.ros_conversions._path_cdr`).
 """
 
 from dataclasses import fields, replace
+import math
 import sys
 import threading
 import time
@@ -128,6 +129,52 @@ def _float_list(value):
     return [float(v) for v in value] if isinstance(value, (list, tuple)) else value
 
 
+class TrackingSummary:
+    """
+    What the log line at the end of a tracked path reports (and the benchmarks read).
+
+    The tracking error (metres, the controller's own: reference minus forward kinematics), the
+    control steps against the control periods the path spanned (from the joint states' stamps),
+    the joint states received and the largest wall-clock gap between two of them.
+    """
+
+    def __init__(self, period):
+        """Start empty; ``period`` is the control period (s)."""
+        self.period = period
+        self.steps = 0
+        self.received = 0
+        self.max_gap = 0.0
+        self._sum_sq = 0.0
+        self._max_error = 0.0
+        self._first = self._last = None
+
+    def joint_state(self, gap):
+        """Count a joint state received while tracking, ``gap`` s after the previous one."""
+        self.received += 1
+        self.max_gap = max(self.max_gap, gap)
+
+    def step(self, t, error):
+        """Count a control step at stamp ``t`` (s) with tracking error ``error`` (m)."""
+        self.steps += 1
+        self._sum_sq += error * error
+        self._max_error = max(self._max_error, error)
+        self._first = t if self._first is None else self._first
+        self._last = t
+
+    @property
+    def periods(self):
+        """Control periods from the first to the last step, both included."""
+        return 0 if self._first is None else round((self._last - self._first) / self.period) + 1
+
+    def summary(self):
+        """Return the figures as one line of text."""
+        rms = math.sqrt(self._sum_sq / max(self.steps, 1))
+        return (f'error RMS {rms * 1e3:.3f} mm, max {self._max_error * 1e3:.3f} mm; '
+                f'{self.steps} control steps in {self.periods} periods '
+                f'({self.received} joint states received, largest gap '
+                f'{self.max_gap * 1e3:.1f} ms)')
+
+
 class ControllerNode(Node):
     """The controller node: joint states and paths in, joint velocity commands out."""
 
@@ -151,7 +198,7 @@ class ControllerNode(Node):
         self._stale = False
         self._status = None
         self._path_generation = 0
-        self._tracked = [0, 0.0, 0.0]           # steps, sum of squared errors, max error
+        self._tracked = TrackingSummary(self.period)
         self._check_lock = threading.Lock()
 
         self._command_pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, 10)
@@ -245,6 +292,8 @@ class ControllerNode(Node):
             stamp = self.get_clock().now().nanoseconds
         t = stamp * 1e-9
         with self._lock:
+            if self.controller.status == 'tracking' and self._last_receipt is not None:
+                self._tracked.joint_state(receipt - self._last_receipt)
             self._last_receipt = receipt
             self._q = q
             if self._last_step is not None and self._last_step - 1e-9 <= t \
@@ -255,25 +304,20 @@ class ControllerNode(Node):
                 self.get_logger().info('joint states are back')
             self._last_step = t
             command = self.controller.step(q, t)
-            self._summarize(command)
+            self._summarize(command, t)
             self._rotation = command.tool_rotation
             self._publish_command(command.qd)
             self._publish_feedback(command, ns_to_stamp(stamp))
             self._publish_status()
 
-    def _summarize(self, command):
-        """Accumulate the tracking error of a path; log a summary when its tracking ends."""
-        tracked = self._tracked
+    def _summarize(self, command, t):
+        """Accumulate a path's tracking figures; log them when its tracking ends."""
         if command.status == 'tracking':
-            tracked[0] += 1
-            tracked[1] += command.tracking_error ** 2
-            tracked[2] = max(tracked[2], command.tracking_error)
-        elif tracked[0]:
-            self.get_logger().info(
-                f'path tracked: error RMS {np.sqrt(tracked[1] / tracked[0]) * 1e3:.3f} mm, max '
-                f'{tracked[2] * 1e3:.3f} mm over {tracked[0]} steps; actuation delay estimate '
-                f'{self.controller.delay * 1e3:.1f} ms')
-            self._tracked = [0, 0.0, 0.0]
+            self._tracked.step(t, command.tracking_error)
+        elif self._tracked.steps:
+            self.get_logger().info(f'path tracked: {self._tracked.summary()}; actuation delay '
+                                   f'estimate {self.controller.delay * 1e3:.1f} ms')
+            self._tracked = TrackingSummary(self.period)
 
     def _watchdog(self):
         with self._lock:
@@ -294,11 +338,17 @@ class ControllerNode(Node):
         self._command_pub.publish(velocity_command_msg(qd))
 
     def _publish_feedback(self, command, stamp):
-        self._pose_pub.publish(_pose_msg(command.tool_position, command.tool_rotation, stamp))
+        # Built and sent only while someone listens: each publication costs this 125 Hz loop
+        # tens of microseconds of CPU, and each delivery as much in the receiving process.
+        if self._pose_pub.get_subscription_count():
+            self._pose_pub.publish(_pose_msg(command.tool_position, command.tool_rotation,
+                                             stamp))
         if command.reference_position is not None:
-            self._reference_pub.publish(_pose_msg(command.reference_position,
-                                                  command.reference_rotation, stamp))
-            self._error_pub.publish(Float64(data=float(command.tracking_error)))
+            if self._reference_pub.get_subscription_count():
+                self._reference_pub.publish(_pose_msg(command.reference_position,
+                                                      command.reference_rotation, stamp))
+            if self._error_pub.get_subscription_count():
+                self._error_pub.publish(Float64(data=float(command.tracking_error)))
 
     def _publish_status(self):
         status = self.controller.status
