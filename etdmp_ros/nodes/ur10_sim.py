@@ -4,16 +4,22 @@ ur10_sim: the MuJoCo UR10 workcell (:class:`etdmp_ros.robot.UR10Sim`) as a ROS 2
 Subscribes ``/forward_velocity_controller/commands`` (std_msgs/Float64MultiArray, 6 joint
 velocities in rad/s, UR order). Publishes, stamped with the simulated time:
 
-- ``/joint_states``, ``/clock`` and the ground truth (``/ur10_sim/ground_truth/goal``,
-  ``.../obstacles``, ``.../tool_tip``, in base_link) at ``control_rate``;
+- ``/joint_states``, ``/clock`` and ``/ur10_sim/ground_truth/tool_tip`` (base_link) at
+  ``control_rate``;
 - ``/camera/camera/color/image_raw`` (rgb8), ``/camera/camera/aligned_depth_to_color/image_raw``
-  (16UC1, mm) and their ``camera_info`` at ``camera_rate``, frame ``camera_color_optical_frame``.
+  (16UC1, mm) and their ``camera_info`` at ``camera_rate``, frame ``camera_color_optical_frame``;
+- ``/ur10_sim/ground_truth/goal`` and ``.../obstacles`` (base_link) with each camera frame,
+  stamped like it (what the camera saw), or at 10 Hz when the camera is off.
 
-The simulation runs in its own thread, one control period per tick: apply the latest command
-(and scene changes), step the physics, publish, render when a camera frame is due, then sleep
-to keep ``real_time_factor``. The executor thread only receives commands and parameter changes,
-validates them and hands them over. Parameters: config/scene.yaml and config/ur10_sim.yaml
-(both read from the package's share folder as defaults); ``goal_position``,
+Threads. The simulation thread runs one control period per tick: apply the latest command (and
+scene changes), step the physics, publish the state, then sleep to keep ``real_time_factor``.
+When a camera frame is due it only takes a snapshot of the scene (microseconds) and hands it to
+the camera thread, which renders it (milliseconds), converts and publishes the images: the
+physics and the joint states never wait for rendering or image transport. If the camera thread
+is still busy with the previous frame, the new one is dropped (counted), never queued. Images
+are rendered only while someone subscribes to them. The executor thread only receives commands
+and parameter changes, validates them and hands them over. Parameters: config/scene.yaml and
+config/ur10_sim.yaml (both read from the package's share folder as defaults); ``goal_position``,
 ``obstacle_positions``, ``real_time_factor`` and ``watchdog_timeout`` can be changed at runtime.
 """
 
@@ -51,6 +57,8 @@ TOOL_TIP_TOPIC = '/ur10_sim/ground_truth/tool_tip'
 DYNAMIC = ('goal_position', 'obstacle_positions', 'real_time_factor', 'watchdog_timeout')
 # Fell this far behind real time (overload, debugger): restart pacing instead of bursting.
 MAX_LAG = 0.25
+#: Hz of the goal and obstacle ground truth when the camera is off.
+GROUND_TRUTH_RATE = 10.0
 
 SCENE_DESCRIPTIONS = {
     'goal_position': '[x, y, z] m in base_link: centre of the top face of the goal marker; '
@@ -138,8 +146,11 @@ class UR10SimNode(Node):
         self._commands_seen = False
         self._watchdog_was_active = self.sim.watchdog_active
         self._next_camera_time = 0.0
+        self._next_truth_time = 0.0
+        self._camera = None   # the camera thread, once started
         self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
-                      'publish_state': 0.0, 'ticks': 0, 'frames': 0}
+                      'publish_state': 0.0, 'ticks': 0, 'frames': 0, 'frames_dropped': 0,
+                      'max_tick_gap': 0.0}
 
         reliable = QoSProfile(depth=10)
         images = QoSProfile(depth=2)   # frames are big: never queue more than one behind
@@ -228,27 +239,42 @@ class UR10SimNode(Node):
 
     # ---------------------------------------------------------------------------- simulation
     def start(self):
-        """Start the simulation thread."""
+        """Start the simulation thread (and the camera thread when the camera is on)."""
+        if self.camera_period:
+            self._camera = _CameraThread(self)
         self._thread = threading.Thread(target=self._run, name='ur10_sim', daemon=True)
         self._thread.start()
 
     def stop(self):
-        """Stop the simulation thread (waits for the current tick) and free the camera."""
+        """Stop the simulation and camera threads (waits for the current tick and frame)."""
         self._stop.set()
         if self._thread is None:
             self.sim.close()   # run_for() rendered in this thread
-        else:
-            self._thread.join(timeout=5.0)
+            return
+        self._thread.join(timeout=5.0)
+        if self._camera is not None:
+            self._camera.stop()
+        stats = self.stats
+        if stats['ticks']:
+            self.get_logger().info(
+                f'stopped at {self.sim.time:.2f} s simulated; {stats["ticks"]} ticks, largest '
+                f'wall-clock gap between two {stats["max_tick_gap"] * 1e3:.1f} ms; camera '
+                f'frames published {stats["frames"]}, dropped {stats["frames_dropped"]}')
 
     def _run(self):
         try:
             wall_start, sim_start = time.monotonic(), self.sim.time
+            last_tick = None
             while not self._stop.is_set():
                 self.tick()
+                now = time.monotonic()
+                if last_tick is not None:
+                    self.stats['max_tick_gap'] = max(self.stats['max_tick_gap'], now - last_tick)
+                last_tick = now
                 rtf = self.real_time_factor
                 if rtf <= 0:
                     continue
-                delay = wall_start + (self.sim.time - sim_start) / rtf - time.monotonic()
+                delay = wall_start + (self.sim.time - sim_start) / rtf - now
                 if delay > 0:
                     self._stop.wait(delay)
                 elif delay < -MAX_LAG:
@@ -260,7 +286,8 @@ class UR10SimNode(Node):
             self.get_logger().fatal(f'simulation stopped: {type(exc).__name__}: {exc}')
             self.context.try_shutdown()
         finally:
-            self.sim.close()   # the OpenGL context is current in this thread only
+            if self._camera is None:
+                self.sim.close()   # rendered in this thread (the camera thread closes its own)
 
     def run_for(self, duration):
         """Run ``duration`` s of simulated time in the calling thread, unpaced (benchmarks)."""
@@ -303,29 +330,100 @@ class UR10SimNode(Node):
             self._next_camera_time += self.camera_period
             if self._next_camera_time < sim.time:   # fell behind: skip, never burst
                 self._next_camera_time = sim.time + self.camera_period
-            rgb, depth = sim.render_rgb_depth()
-            c3 = time.process_time()
-            self._publish_images(stamp, rgb, depth)
-            stats['render'] += c3 - c2
-            stats['publish_images'] += time.process_time() - c3
-            stats['frames'] += 1
+            self._publish_ground_truth(stamp)
+            if self._camera is not None:
+                self._camera.offer(sim.camera_state(), stamp)
+            else:   # run_for(): render here
+                self.frame(sim.camera_state(), stamp)
+        elif not self.camera_period and sim.time >= self._next_truth_time - 1e-9:
+            self._next_truth_time = sim.time + 1.0 / GROUND_TRUTH_RATE
+            self._publish_ground_truth(stamp)
+
+    def frame(self, state, stamp):
+        """Render a camera state and publish it (images only while someone subscribes)."""
+        stats = self.stats
+        if self._color_pub.get_subscription_count() or self._depth_pub.get_subscription_count():
+            c0 = time.process_time()
+            rgb, depth = self.sim.render_rgb_depth(state)
+            c1 = time.process_time()
+            self._color_pub.publish(image_msg(rgb, 'rgb8', stamp, OPTICAL_FRAME))
+            self._depth_pub.publish(image_msg(depth, '16UC1', stamp, OPTICAL_FRAME))
+            stats['render'] += c1 - c0
+            stats['publish_images'] += time.process_time() - c1
+        self._camera_info.header.stamp = stamp
+        self._color_info_pub.publish(self._camera_info)
+        self._depth_info_pub.publish(self._camera_info)
+        stats['frames'] += 1
 
     def _publish_state(self, stamp):
         sim = self.sim
         self._joint_pub.publish(joint_state_msg(sim.q, sim.qd, stamp=stamp))
         self._clock_pub.publish(Clock(clock=stamp))
-        self._goal_pub.publish(_point_stamped(sim.goal_position, stamp))
         self._tool_pub.publish(_point_stamped(sim.tool_tip_position, stamp))
+
+    def _publish_ground_truth(self, stamp):
+        sim = self.sim
+        self._goal_pub.publish(_point_stamped(sim.goal_position, stamp))
         obstacles = pose_array_from_numpy(sim.obstacle_positions, frame_id='base_link')
         obstacles.header.stamp = stamp
         self._obstacles_pub.publish(obstacles)
 
-    def _publish_images(self, stamp, rgb, depth):
-        self._color_pub.publish(image_msg(rgb, 'rgb8', stamp, OPTICAL_FRAME))
-        self._depth_pub.publish(image_msg(depth, '16UC1', stamp, OPTICAL_FRAME))
-        self._camera_info.header.stamp = stamp
-        self._color_info_pub.publish(self._camera_info)
-        self._depth_info_pub.publish(self._camera_info)
+
+class _CameraThread:
+    """
+    Renders and publishes the camera frames of :class:`UR10SimNode` in a thread of their own.
+
+    :meth:`offer` never blocks: a frame offered while the previous one is still being rendered
+    is dropped (``stats['frames_dropped']``). The OpenGL context lives in this thread.
+    """
+
+    def __init__(self, node):
+        """Start the thread."""
+        self._node = node
+        self._ready = threading.Condition()
+        self._pending = None
+        self._busy = False
+        self._stopping = False
+        self._thread = threading.Thread(target=self._run, name='ur10_sim_camera', daemon=True)
+        self._thread.start()
+
+    def offer(self, state, stamp):
+        """Hand a camera state over for rendering, or drop it if the last one is not done."""
+        with self._ready:
+            if self._busy or self._pending is not None:
+                self._node.stats['frames_dropped'] += 1
+                return
+            self._pending = (state, stamp)
+            self._ready.notify()
+
+    def stop(self):
+        """Finish the current frame, free the camera and end the thread."""
+        with self._ready:
+            self._stopping = True
+            self._ready.notify()
+        self._thread.join(timeout=5.0)
+
+    def _run(self):
+        node = self._node
+        try:
+            while True:
+                with self._ready:
+                    while self._pending is None and not self._stopping:
+                        self._ready.wait()
+                    if self._stopping:
+                        return
+                    (state, stamp), self._pending = self._pending, None
+                    self._busy = True
+                try:
+                    node.frame(state, stamp)
+                finally:
+                    with self._ready:
+                        self._busy = False
+        except Exception as exc:   # noqa: B902 - report why the camera stopped
+            if not self._stopping and node.context.ok():
+                node.get_logger().error(f'camera stopped: {type(exc).__name__}: {exc}')
+        finally:
+            node.sim.close()   # the OpenGL context is current in this thread only
 
 
 def _number_list(parameter):

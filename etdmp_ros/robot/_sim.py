@@ -41,6 +41,7 @@ Shadows and multisampling are off by default: on a software renderer (llvmpipe) 
 maps cost ~40 ms a frame instead of ~2 ms.
 """
 
+from dataclasses import dataclass
 import math
 import xml.etree.ElementTree as ElementTree
 
@@ -119,12 +120,24 @@ def _mujoco_camera_quat(pose):
     return quat
 
 
+@dataclass(frozen=True)
+class CameraState:
+    """What the camera sees at one instant: simulated time (s), joint and mocap positions."""
+
+    time: float
+    qpos: np.ndarray
+    mocap_pos: np.ndarray
+    mocap_quat: np.ndarray
+
+
 class UR10Sim:
     """
     MuJoCo UR10 workcell: velocity-commanded joints, movable goal and obstacles, a camera.
 
-    Not thread-safe: call from one thread at a time. The camera's OpenGL context is created on
-    the first :meth:`render_rgb_depth` call and is current in the thread that made that call.
+    Not thread-safe: call from one thread at a time, except that one other thread may render
+    :meth:`camera_state` snapshots (:meth:`render_rgb_depth` with a state, and :meth:`close`)
+    while the first steps. The camera's OpenGL context is created on the first
+    :meth:`render_rgb_depth` call and is current in the thread that made that call.
     """
 
     def __init__(self, scene=None, *, timestep=0.002, watchdog_timeout=0.1,
@@ -161,6 +174,7 @@ class UR10Sim:
         self.data = mujoco.MjData(self.model)
         self._ids()
         self._camera = None
+        self._render_data = None
         self._command = np.zeros(6)
         self._command_time = -math.inf
         self.watchdog_active = self.watchdog_timeout > 0
@@ -418,17 +432,41 @@ class UR10Sim:
         mujoco.mj_kinematics(self.model, self.data)
 
     # -------------------------------------------------------------------------------- camera
-    def render_rgb_depth(self):
+    def camera_state(self):
+        """
+        Return a copy of what the camera would see now, to render later (another thread).
+
+        A :class:`CameraState`: the simulated time, joint and mocap (goal, obstacles) positions.
+        Taking it costs microseconds; :meth:`render_rgb_depth` of it costs milliseconds.
+        """
+        d = self.data
+        return CameraState(float(d.time), d.qpos.copy(), d.mocap_pos.copy(),
+                           d.mocap_quat.copy())
+
+    def render_rgb_depth(self, state=None):
         """
         Render the camera: return ``(rgb, depth_mm)``.
 
+        ``state``: a :meth:`camera_state` taken earlier (rendered from a private copy of the
+        simulation data, so the physics may go on stepping meanwhile), or None for now.
         ``rgb``: uint8 (H, W, 3); ``depth_mm``: uint16 (H, W), z in the optical frame in
         millimetres, aligned with ``rgb``, 0 where out of :attr:`depth_range`. Both are new
         arrays (safe to keep). Row 0 is the top of the image.
         """
         if self._camera is None:
             self._camera = _OffscreenCamera(self.model, self.camera_id, self.intrinsics)
-        rgb, depth = self._camera.render(self.data)
+        data = self.data
+        if state is not None:
+            if self._render_data is None:
+                self._render_data = mujoco.MjData(self.model)
+            data = self._render_data
+            data.time = state.time
+            data.qpos[:] = state.qpos
+            data.mocap_pos[:] = state.mocap_pos
+            data.mocap_quat[:] = state.mocap_quat
+            mujoco.mj_kinematics(self.model, data)
+            mujoco.mj_camlight(self.model, data)
+        rgb, depth = self._camera.render(data)
         if self.depth_noise > 0:
             depth = depth + self._rng.standard_normal(depth.shape, dtype=np.float32) * \
                 np.float32(self.depth_noise) * depth * depth
