@@ -12,12 +12,11 @@ Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward 
 serves ``/generalize`` (nav_msgs/srv/GetPlan); publishes ``/etdmp/path`` (transient local) and
 ``/etdmp/markers``.
 
-Threads: a SingleThreadedExecutor serves calls one at a time (each takes about a millisecond of
-this node's own work; the round trip is dominated by rclpy and DDS). rclpy's
-MultiThreadedExecutor was tried and dropped: with the simulation's 125 Hz topics it kept a core
-busy while idle (rclpy issues #1223, #1452). The service sits in a reentrant callback group and
-the state is locked, so a multi-threaded executor (e.g. in a user's own process) is safe:
-``_state_lock`` guards the latest inputs and the Pinocchio model,
+Threads: one executor (``_spin.make_executor``) serves calls one at a time (each takes about a
+millisecond of this node's own work; the round trip is dominated by rclpy and DDS); markers
+are built and published by a worker thread after the response. The service sits in a reentrant
+callback group and the state is locked, so a multi-threaded executor (e.g. in a user's own
+process) is safe: ``_state_lock`` guards the latest inputs and the Pinocchio model,
 ``_core_lock`` the skills' rollouts (their caches are not thread-safe; a rollout takes well under
 a millisecond), and the skill library has its own lock. Settings are an immutable snapshot,
 replaced whole when parameters change.
@@ -305,10 +304,9 @@ class DmpServer(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
 
         inputs = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(JointState, '/joint_states', self._on_joint_state,
-                                 qos_profile_sensor_data, callback_group=inputs)
-        self.create_subscription(PoseStamped, '/etdmp/tool_pose', self._on_tool_pose,
-                                 qos_profile_sensor_data, callback_group=inputs)
+        self._inputs = inputs
+        self._tool_subscriptions = {}  # tool_position_source -> subscription (made on first use)
+        self._subscribe_tool_source(settings.tool_position_source)
         self.create_subscription(PointStamped, '/etdmp/goal', self._on_goal, 10,
                                  callback_group=inputs)
         self.create_subscription(PoseArray, '/etdmp/obstacles', self._on_obstacles, 10,
@@ -318,8 +316,7 @@ class DmpServer(Node):
         self._path_pub = self.create_publisher(Path, '/etdmp/path', _LATCHED)
         self._marker_pub = self.create_publisher(MarkerArray, '/etdmp/markers', _LATCHED)
         self._pending_markers = None
-        self._marker_trigger = self.create_guard_condition(
-            self._publish_markers, callback_group=MutuallyExclusiveCallbackGroup())
+        self._marker_thread = None   # builds markers after a call, off the service's path
         self.create_service(GetPlan, '/generalize', self._on_generalize,
                             callback_group=ReentrantCallbackGroup())
         log.info(f'serving /generalize with skill {settings.skill!r} '
@@ -354,6 +351,25 @@ class DmpServer(Node):
         settings = Settings.from_values(self._values())
         self._library.formulation, self._library.n_basis = settings.formulation, settings.n_basis
         self._settings = settings
+        self._subscribe_tool_source(settings.tool_position_source)
+
+    def _subscribe_tool_source(self, source):
+        """
+        Subscribe the topic of the tool position source, if not done yet.
+
+        Only the source in use is subscribed at first: the other one would be delivered at the
+        control rate for nothing. A subscription once made stays (destroying one while the
+        executor runs is avoided); the callbacks keep both latest values.
+        """
+        if source in self._tool_subscriptions:
+            return
+        if source == 'joint_states':
+            sub = self.create_subscription(JointState, '/joint_states', self._on_joint_state,
+                                           qos_profile_sensor_data, callback_group=self._inputs)
+        else:
+            sub = self.create_subscription(PoseStamped, '/etdmp/tool_pose', self._on_tool_pose,
+                                           qos_profile_sensor_data, callback_group=self._inputs)
+        self._tool_subscriptions[source] = sub
 
     # -- skills -------------------------------------------------------------------------------
 
@@ -542,19 +558,36 @@ class DmpServer(Node):
             self._path_pub.publish(serialize_path(plan.positions, plan.t, stamp, 'base_link',
                                                   plan.orientation))
             if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
-                self._pending_markers = (settings, skill, plan, response.plan.header)
-                self._marker_trigger.trigger()
+                self._request_markers((settings, skill, plan, response.plan.header))
         self.get_logger().debug(f'/generalize: {settings.skill} ({plan.method}), '
                                 f'{len(plan.t)} poses over {plan.t[-1]:.2f} s')
         return response
 
     # -- markers --------------------------------------------------------------------------------
 
-    def _publish_markers(self):
-        pending, self._pending_markers = self._pending_markers, None
-        if pending is None:
-            return
-        settings, skill, plan, header = pending
+    def _request_markers(self, pending):
+        """Have the markers of a plan published by a worker thread (the newest plan wins)."""
+        with self._state_lock:
+            self._pending_markers = pending
+            if self._marker_thread is not None:
+                return   # it takes the newest pending plan when it is done with this one
+            self._marker_thread = threading.Thread(target=self._marker_worker, daemon=True,
+                                                   name='markers')
+            self._marker_thread.start()
+
+    def _marker_worker(self):
+        while True:
+            with self._state_lock:
+                pending, self._pending_markers = self._pending_markers, None
+                if pending is None:
+                    self._marker_thread = None
+                    return
+            try:
+                self._publish_markers(*pending)
+            except Exception as err:   # noqa: B902 - markers are a view: never take the node down
+                self.get_logger().error(f'/etdmp/markers not published: {err}')
+
+    def _publish_markers(self, settings, skill, plan, header):
         other = 'dmp' if plan.method == 'etdmp' else 'etdmp'
         plane = settings.plane if skill.dim == 2 else None
         with self._core_lock:
