@@ -18,7 +18,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (os.path.join('share', package_name), ['package.xml']),
-        (os.path.join('share', package_name, 'config'), sorted(glob('config/*.yaml'))),
+        (os.path.join('share', package_name, 'config'),
+         sorted(glob('config/*.yaml') + glob('config/*.xml'))),
         (os.path.join('share', package_name, 'launch'), sorted(glob('launch/*.py'))),
     ],
     install_requires=['setuptools'],

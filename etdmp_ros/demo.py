@@ -5,7 +5,8 @@ The closed-loop demo (``make demo``): see, plan, write, measure.
 starts the four nodes as separate processes, exactly as ``ros2 run`` starts them (``ur10_sim``,
 ``perception``, ``dmp_server``, ``controller``; parameters: config/scene.yaml, then the node's
 own file, then a small overrides file), on a DDS domain of its own with localhost-only
-discovery, the non-simulation nodes on simulated time (``use_sim_time``). Then it
+discovery, dmp_server on simulated time (``use_sim_time``: it stamps plans with the ROS clock;
+the others stamp with their inputs' stamps). Then it
 
 1. waits until the camera has shown the goal marker and the obstacles to ``perception``;
 2. asks ``/generalize`` for the plain-DMP baseline without executing it (``dmp_server``
@@ -13,8 +14,9 @@ discovery, the non-simulation nodes on simulated time (``use_sim_time``). Then i
    for the real plan (``method: etdmp``, ``execute: true``), both with empty frame ids: from the
    tool's current position to the perceived goal (stir: to an explicit goal in the bottle);
 3. records the true pen tip (``/ur10_sim/ground_truth/tool_tip``), the joint-velocity commands
-   (``/forward_velocity_controller/commands``), the controller's status, reference and tracking
-   error and the camera images until the controller is idle again;
+   (``/forward_velocity_controller/commands``), the controller's status and reference, and the
+   camera images until the controller is idle again (the controller's own tracking error comes
+   from the summary it logs);
 4. stops the nodes with SIGINT (Ctrl-C) and writes ``plot.png``, ``camera_start.png``,
    ``camera_middle.png``, ``camera_end.png``, ``animation.gif``, ``metrics.json`` and
    ``recording.npz`` to the output folder, node logs to ``<out>/logs/``.
@@ -90,12 +92,13 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Float64, Float64MultiArray, String
+from std_msgs.msg import Float64MultiArray, String
 import yaml
 
 NODES = ('ur10_sim', 'perception', 'dmp_server', 'controller')
-#: Nodes that follow the simulation's /clock.
-SIM_TIME_NODES = ('perception', 'dmp_server', 'controller')
+#: Nodes that follow the simulation's /clock: those that stamp with the ROS clock (plans).
+#: perception and the controller stamp with their inputs' stamps (images, joint states).
+SIM_TIME_NODES = ('dmp_server',)
 SKILLS = ('G', 'P', 'R', 'W', 'wipe', 'stir')
 METHODS = ('etdmp', 'dmp')
 METHOD_NAMES = {'etdmp': 'ET-DMP', 'dmp': 'DMP'}
@@ -363,10 +366,10 @@ class Recorder(BackgroundNode):
     """
     rclpy in this process (own context, spinning in a thread): records what the demo measures.
 
-    Times are simulated (ns), from message stamps; unstamped messages (commands, status,
-    tracking error) get the stamp of the latest pen-tip sample received before them. The
-    streams at the control rate (pen tip, commands, reference, tracking error) are kept as the
-    serialized bytes their raw subscriptions hand over and decoded in :meth:`arrays`, after
+    Times are simulated (ns), from message stamps; unstamped messages (commands, status) get
+    the stamp of the latest pen-tip sample received before them. The streams at the control
+    rate (pen tip, commands, reference) are kept as the serialized bytes their raw
+    subscriptions hand over and decoded in :meth:`arrays`, after
     the run: deserializing each on arrival cost this process a tenth of a core.
     """
 
@@ -380,7 +383,6 @@ class Recorder(BackgroundNode):
         self.reference = []           # serialized PoseStamped
         self.commands = []            # (sim ns at receipt, monotonic s, serialized command)
         self.status = []              # (sim ns at receipt, text)
-        self.errors = []              # (sim ns at receipt, serialized Float64)
         self.goal_truth = self.obstacles_truth = None
         self.goal_seen = self.obstacles_seen = None
         self.goal_seen_stamp = 0
@@ -405,8 +407,6 @@ class Recorder(BackgroundNode):
         n.create_subscription(Float64MultiArray, '/forward_velocity_controller/commands',
                               self._on_command, STREAM, raw=True)
         n.create_subscription(String, '/etdmp/controller/status', self._on_status, LATCHED)
-        n.create_subscription(Float64, '/etdmp/controller/tracking_error', self._on_error,
-                              STREAM, raw=True)
         n.create_subscription(PoseStamped, '/etdmp/controller/reference', self._on_reference,
                               STREAM, raw=True)
         n.create_subscription(CameraInfo, '/camera/camera/color/camera_info',
@@ -446,10 +446,6 @@ class Recorder(BackgroundNode):
     def _on_status(self, msg):
         with self.lock:
             self.status.append((self.sim_ns, msg.data))
-
-    def _on_error(self, raw):
-        with self.lock:
-            self.errors.append((self.sim_ns, raw))
 
     def _on_reference(self, raw):
         with self.lock:
@@ -568,19 +564,17 @@ class Recorder(BackgroundNode):
         """Return the recorded streams as numpy arrays, decoding the serialized ones."""
         with self.lock:
             tip, reference = list(self.tip), list(self.reference)
-            commands, errors = list(self.commands), list(self.errors)
+            commands = list(self.commands)
 
         tip = _points([raw for _, raw in tip], PointStamped)
         reference = _points(reference, PoseStamped)
         qd = np.array([deserialize_message(raw, Float64MultiArray).data for _, _, raw in commands],
                       dtype=float).reshape(-1, 6)
-        errors = np.array([(ns, deserialize_message(raw, Float64).data) for ns, raw in errors],
-                          dtype=float).reshape(-1, 2)
         return {'tip': tip[np.argsort(tip[:, 0], kind='stable')],
                 'reference': reference[np.argsort(reference[:, 0], kind='stable')],
                 'command_time': np.array([c[0] for c in commands], dtype=float),
                 'command_wall_time': np.array([c[1] for c in commands], dtype=float),
-                'commands': qd, 'errors': errors}
+                'commands': qd}
 
 
 def _points(messages, msg_type):
@@ -761,7 +755,6 @@ def compute_metrics(run):
         'max_joint_velocity_rad_s': np.max(np.abs(qd), axis=0).tolist() if len(qd) else [],
         'joint_velocity_limits_rad_s': v_lim.tolist(),
         'joint_acceleration_limits_rad_s2': a_lim.tolist(),
-        'controller_reported_tracking_max_mm': _reported_max(rec['errors'], run.status),
         'plan_stamp_minus_sim_time_s': float((run.plan_stamp_ns - run.call_ns) * 1e-9),
         'controller_status': [text for _, text in run.status],
         'wall_time_s': float(run.wall_time),
@@ -790,19 +783,6 @@ def _matched_errors(seen, truth):
     if not len(seen):
         return [None] * len(truth)
     return [float(np.min(np.linalg.norm(seen - p, axis=1)) * 1e3) for p in truth]
-
-
-def _reported_max(errors, status):
-    """Max of the controller's own tracking error between its 'tracking' and next status."""
-    changes = [ns for ns, _ in status]
-    tracking = [ns for ns, text in status if text.split(':')[0] == 'tracking']
-    if not tracking or not len(errors):
-        return None
-    start = tracking[0]
-    later = [ns for ns in changes if ns > start]
-    end = later[0] if later else math.inf
-    inside = errors[(errors[:, 0] > start) & (errors[:, 0] < end), 1]
-    return float(inside.max() * 1e3) if len(inside) else None
 
 
 # --------------------------------------------------------------------------------- pictures
@@ -1013,10 +993,13 @@ def write_pictures(out, run, rec, snapshots, frames, intrinsics, animation=True)
 #: The controller's log line at the end of a tracked path (etdmp_ros.nodes.controller).
 _TRACKED = re.compile(r'path tracked: error RMS ([\d.]+) mm, max ([\d.]+) mm; (\d+) control '
                       r'steps in (\d+) periods \((\d+) joint states received, largest gap '
-                      r'([\d.]+) ms\)')
+                      r'([\d.]+) ms(?: at t = ([\d.]+) s)?\)')
+#: ur10_sim's warning about a stalled simulation loop.
+_STALL = re.compile(r'simulation loop stalled: (\d+) ms between two ticks at t = ([\d.]+) s')
 #: ur10_sim's log line when it stops.
-_SIM_STOPPED = re.compile(r'largest wall-clock gap between two ([\d.]+) ms; camera frames '
-                          r'published (\d+), dropped (\d+)')
+_SIM_STOPPED = re.compile(r'(\d+) more than \d+ periods after the previous one, largest '
+                          r'wall-clock gap between two ([\d.]+) ms; camera frames published '
+                          r'(\d+), dropped (\d+)')
 
 
 def system_figures(monitor, rec, call_ns, end_ns, nodes):
@@ -1048,16 +1031,20 @@ def system_figures(monitor, rec, call_ns, end_ns, nodes):
                                         'max': float(periods.max())}
     found = _TRACKED.findall(nodes.log('controller'))
     if found:
-        rms, peak, steps, periods_, received, gap = found[-1]
+        rms, peak, steps, periods_, received, gap, gap_at = found[-1]
         figures['controller'] = {'tracking_rms_mm': float(rms), 'tracking_max_mm': float(peak),
                                  'steps': int(steps), 'periods': int(periods_),
                                  'joint_states_received': int(received),
-                                 'largest_joint_state_gap_ms': float(gap)}
+                                 'largest_joint_state_gap_ms': float(gap),
+                                 'largest_joint_state_gap_at_s': float(gap_at or 'nan')}
+    stalls = _STALL.findall(nodes.log('ur10_sim'))
+    figures['simulation_stalls'] = [(float(t), float(ms)) for ms, t in stalls
+                                    if call_ns * 1e-9 <= float(t) <= (end_ns or 0) * 1e-9]
     found = _SIM_STOPPED.findall(nodes.log('ur10_sim'))
     if found:
-        gap, frames, dropped = found[-1]
-        figures['simulation'] = {'largest_tick_gap_ms': float(gap), 'frames': int(frames),
-                                 'frames_dropped': int(dropped)}
+        late, gap, frames, dropped = found[-1]
+        figures['simulation'] = {'late_ticks': int(late), 'largest_tick_gap_ms': float(gap),
+                                 'frames': int(frames), 'frames_dropped': int(dropped)}
     return figures
 
 
@@ -1144,8 +1131,9 @@ def run_demo(options, env):
     try:
         expected = len(np.asarray(scene.overrides['ur10_sim'].get(
             'obstacle_positions', scene.scene['obstacle_positions'])).reshape(-1, 3))
-        _wait_until(lambda: len(recorder.tip) > 0, STARTUP_TIMEOUT,
-                    'the simulation (/ur10_sim/ground_truth/tool_tip)', nodes)
+        _wait_until(lambda: len(recorder.tip) > 0 and recorder.goal_truth is not None
+                    and recorder.obstacles_truth is not None, STARTUP_TIMEOUT,
+                    'the simulation (/ur10_sim/ground_truth/*)', nodes)
         progress('simulation running; waiting for the camera to show the goal and obstacles')
         _wait_until(lambda: recorder.goal_seen is not None
                     and recorder.obstacles_seen is not None
@@ -1222,11 +1210,21 @@ def run_demo(options, env):
     run = Run(scene, options.method, np.asarray(start), np.asarray(goal), (p_t, p_x, p_q),
               other_plan, rec, status, call_ns, stamp, end_ns, goal_truth, goal_seen,
               obstacles_truth, obstacles_seen)
-    metrics, extra = compute_metrics(run)
+    try:
+        metrics, extra = compute_metrics(run)
+    except DemoError as err:
+        if failure:   # stopped before it tracked anything worth measuring: say why
+            raise DemoError(f'the controller stopped: {failure} (nothing measured: {err}; '
+                            f'logs in {out / "logs"})') from None
+        raise
     metrics['node_exit_codes'] = codes
     metrics['perceived_goal_stamp_age_s'] = goal_stamp_lag
     metrics['controller_failure'] = failure
     metrics['system'] = system_figures(monitor, rec, call_ns, end_ns, nodes)
+    # The controller's own tracking error (reference minus its forward kinematics), from the
+    # summary it logs at the end of the path.
+    metrics['controller_reported_tracking_max_mm'] = (
+        metrics['system'].get('controller', {}).get('tracking_max_mm'))
     intrinsics = recorder.camera_info or CameraIntrinsics.from_fovy(640, 480, 42.5)
     written = [out / 'plot.png']
     plot_run(written[0], run, metrics, extra)

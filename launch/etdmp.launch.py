@@ -17,6 +17,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 NODES = ('ur10_sim', 'perception', 'dmp_server', 'controller')
+SIM_TIME_NODES = ('dmp_server',)
 
 
 def generate_launch_description():
@@ -31,8 +32,9 @@ def generate_launch_description():
     nodes = []
     for name in NODES:
         parameters = [scene, os.path.join(config, f'{name}.yaml')]
-        if name != 'ur10_sim':
-            # The simulation stamps everything with its /clock; the others follow it.
+        if name in SIM_TIME_NODES:
+            # dmp_server stamps plans with the ROS clock: the simulation's /clock. The others
+            # stamp with their inputs' stamps (images, joint states) and need no clock.
             parameters.append({'use_sim_time': True})
         if name == 'dmp_server':
             parameters.append({'skill': LaunchConfiguration('skill'),

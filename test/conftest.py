@@ -6,6 +6,7 @@ each test gets its own ``ROS_DOMAIN_ID`` and localhost-only discovery, so parall
 machine cannot hear each other.
 """
 
+import contextlib
 import itertools
 import os
 from pathlib import Path
@@ -123,3 +124,28 @@ class NodeProcess:
                 self.process.wait()
         self._log.close()
         return self.process.returncode
+
+
+#: The busy loop of :func:`busy_core`: spins until killed or until its time is up.
+_BUSY_LOOP = ('import sys, time\n'
+              'end = time.monotonic() + float(sys.argv[1])\n'
+              'while time.monotonic() < end:\n'
+              '    pass\n')
+
+
+@contextlib.contextmanager
+def busy_core(active=True, limit=600.0):
+    """
+    Keep one core busy meanwhile (another program on the machine): one busy-looping process.
+
+    Bounded: the process ends by itself after ``limit`` seconds even if this one dies first.
+    """
+    if not active:
+        yield None
+        return
+    process = subprocess.Popen([sys.executable, '-c', _BUSY_LOOP, str(limit)])
+    try:
+        yield process
+    finally:
+        process.kill()
+        process.wait()

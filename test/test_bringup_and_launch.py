@@ -135,5 +135,5 @@ def test_launch_file_starts_every_node_with_its_parameter_files(monkeypatch):
         assert all(Path(f).is_file() for f in files)
         overrides = {k: v for p in node.kwargs['parameters'] if isinstance(p, dict)
                      for k, v in p.items()}
-        assert overrides.get('use_sim_time', False) == (node.kwargs['executable'] != 'ur10_sim')
+        assert overrides.get('use_sim_time', False) == (node.kwargs['executable'] == 'dmp_server')
     assert len(entities) == len(recorded)

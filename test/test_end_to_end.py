@@ -7,21 +7,28 @@ on an isolated DDS domain, driven by the demo's code (:func:`etdmp_ros.demo.run_
 ``make demo`` runs): goal and obstacles perceived from the camera images, ``/generalize`` called
 with empty frame ids (the DMP baseline without execution first), the controller executing the
 ET-DMP plan. Checked against the simulation's ground truth, for the letter G and for stirring
-in 3D: commands within the UR10's velocity and the controller's acceleration limits while the
-arm moves; the true pen trace reaches the goal within 5 mm, clears every obstacle and keeps the
-demonstration's shape (nRMSE at most twice the plan's), and the DMP baseline from the same start
-is clearly worse. One run per skill (~15 s each) serves all the checks.
+in 3D, each on an idle machine and next to a process busy-looping on one core: while the arm
+moves, commands at 0.95 of the control rate or more per simulated second, within the UR10's
+velocity and the controller's acceleration limits; the true pen trace reaches the goal within
+5 mm, clears every obstacle and keeps the demonstration's shape (nRMSE at most twice the
+plan's), and the DMP baseline from the same start is clearly worse. One run per skill and load
+(~15 s each) serves all the checks.
 """
 
 import json
 import math
 
-from conftest import sourced
+from conftest import busy_core, sourced
 from etdmp_ros import demo
+from etdmp_ros._paths import config_path
+from etdmp_ros.robot import read_parameter_file
 import numpy as np
 import pytest
 
 SKILLS = ('G', 'stir')
+#: Each skill idle, and next to a process busy-looping on one of the two cores (another user
+#: on the machine): the closed loop must keep its rate either way.
+CASES = [(skill, load) for load in ('idle', 'busy') for skill in SKILLS]
 #: nRMSE below which a ratio means nothing: the DMP's own fit of the demonstration and a
 #: tracking error of ~0.1 mm on a 0.2 m movement are of this order. ET-DMP's stirring plan
 #: (no obstacle near it) is an exact copy of the demonstration: nRMSE 1.5e-4.
@@ -36,15 +43,17 @@ def installed_command(install):
     return command
 
 
-@pytest.fixture(scope='module', params=SKILLS)
+@pytest.fixture(scope='module', params=CASES, ids=[f'{s}-{load}' for s, load in CASES])
 def run(request, colcon_install, module_ros_env, tmp_path_factory):
-    """Run the closed-loop demo once for a skill; return (metrics, output folder)."""
-    out = tmp_path_factory.mktemp(f'demo_{request.param}')
+    """Run the closed-loop demo once for a skill and load; return (metrics, output folder)."""
+    skill, load = request.param
+    out = tmp_path_factory.mktemp(f'demo_{skill}_{load}')
     env = dict(module_ros_env, ROS_HOME=str(out / 'ros_home'))
-    options = demo.Options(skill=request.param, out=out, animation=False, quiet=True,
+    options = demo.Options(skill=skill, out=out, animation=False, quiet=True,
                            config_dir=colcon_install / 'share' / 'etdmp_ros' / 'config',
                            command=installed_command(colcon_install))
-    metrics, _ = demo.run_demo(options, env)
+    with busy_core(load == 'busy'):
+        metrics, _ = demo.run_demo(options, env)
     return metrics, out
 
 
@@ -79,8 +88,10 @@ def test_generalize_with_empty_frame_ids_plans_from_the_tool(run):
 
 def test_commands_move_the_arm_within_its_limits(run):
     m, _ = run
-    # Commands at the controller's 125 Hz while the arm moves (approach + plan + hold).
-    assert m['commands_nonzero'] > 100 * m['duration_s'] * 0.8
+    # Commands at the controller's 125 Hz while the arm moves (approach + plan + hold), per
+    # simulated second, idle or next to a busy core.
+    rate = float(read_parameter_file(config_path('controller.yaml'), 'controller')['control_rate'])
+    assert m['system']['moving_commands_per_s'] >= 0.95 * rate
     assert 0.05 < m['max_joint_velocity_ratio'] <= 1.0 + 1e-9
     assert m['max_joint_acceleration_ratio'] <= 1.0 + 1e-9
     assert m['controller_failure'] is None

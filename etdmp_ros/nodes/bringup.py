@@ -4,10 +4,11 @@ bringup: ur10_sim, perception, dmp_server and controller in ONE process (no ros2
 ``ros2 run etdmp_ros bringup`` runs the same node classes with the same parameter files as
 ``ros2 launch etdmp_ros etdmp.launch.py`` runs in four processes: config/scene.yaml, then each
 node's config/<node>.yaml (every file is keyed by node name, so all of them can be given to the
-one process), then the arguments given here (e.g. ``--ros-args --params-file my.yaml``). The
-nodes other than the simulation run on simulated time (``use_sim_time``), as the launch file
-sets it. One SingleThreadedExecutor spins them (the simulation steps in its own thread); on
-Ctrl-C the controller sends zero velocity before anything shuts down (``_spin.run``).
+one process), then the arguments given here (e.g. ``--ros-args --params-file my.yaml``).
+dmp_server runs on simulated time (``use_sim_time``: it stamps plans with the ROS clock), as the
+launch file sets it; the other nodes stamp with their inputs' stamps. One executor spins them
+(the simulation steps in its own threads); on Ctrl-C the controller sends zero velocity before
+anything shuts down (``_spin.run``).
 """
 
 import sys
@@ -18,8 +19,8 @@ from etdmp_ros.nodes._spin import run
 import yaml
 
 NODES = ('ur10_sim', 'perception', 'dmp_server', 'controller')
-#: Nodes that follow the simulation's /clock.
-SIM_TIME_NODES = ('perception', 'dmp_server', 'controller')
+#: Nodes that follow the simulation's /clock: those that stamp with the ROS clock (plans).
+SIM_TIME_NODES = ('dmp_server',)
 
 
 def parameter_files():

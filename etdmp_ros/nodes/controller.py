@@ -147,11 +147,13 @@ class TrackingSummary:
         self._sum_sq = 0.0
         self._max_error = 0.0
         self._first = self._last = None
+        self._max_gap_at = None
 
-    def joint_state(self, gap):
-        """Count a joint state received while tracking, ``gap`` s after the previous one."""
+    def joint_state(self, gap, t):
+        """Count a joint state received while tracking (stamp ``t``), ``gap`` s after the last."""
         self.received += 1
-        self.max_gap = max(self.max_gap, gap)
+        if gap > self.max_gap:
+            self.max_gap, self._max_gap_at = gap, t
 
     def step(self, t, error):
         """Count a control step at stamp ``t`` (s) with tracking error ``error`` (m)."""
@@ -172,7 +174,8 @@ class TrackingSummary:
         return (f'error RMS {rms * 1e3:.3f} mm, max {self._max_error * 1e3:.3f} mm; '
                 f'{self.steps} control steps in {self.periods} periods '
                 f'({self.received} joint states received, largest gap '
-                f'{self.max_gap * 1e3:.1f} ms)')
+                f'{self.max_gap * 1e3:.1f} ms'
+                + (f' at t = {self._max_gap_at:.3f} s)' if self._max_gap_at is not None else ')'))
 
 
 class ControllerNode(Node):
@@ -293,7 +296,7 @@ class ControllerNode(Node):
         t = stamp * 1e-9
         with self._lock:
             if self.controller.status == 'tracking' and self._last_receipt is not None:
-                self._tracked.joint_state(receipt - self._last_receipt)
+                self._tracked.joint_state(receipt - self._last_receipt, t)
             self._last_receipt = receipt
             self._q = q
             if self._last_step is not None and self._last_step - 1e-9 <= t \

@@ -57,6 +57,8 @@ TOOL_TIP_TOPIC = '/ur10_sim/ground_truth/tool_tip'
 DYNAMIC = ('goal_position', 'obstacle_positions', 'real_time_factor', 'watchdog_timeout')
 # Fell this far behind real time (overload, debugger): restart pacing instead of bursting.
 MAX_LAG = 0.25
+#: A wall-clock gap between two ticks longer than this many periods is a stall (warned).
+LATE_TICKS = 3
 #: Hz of the goal and obstacle ground truth when the camera is off.
 GROUND_TRUTH_RATE = 10.0
 
@@ -150,7 +152,7 @@ class UR10SimNode(Node):
         self._camera = None   # the camera thread, once started
         self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
                       'publish_state': 0.0, 'ticks': 0, 'frames': 0, 'frames_dropped': 0,
-                      'max_tick_gap': 0.0}
+                      'max_tick_gap': 0.0, 'late_ticks': 0}
 
         reliable = QoSProfile(depth=10)
         images = QoSProfile(depth=2)   # frames are big: never queue more than one behind
@@ -257,8 +259,9 @@ class UR10SimNode(Node):
         stats = self.stats
         if stats['ticks']:
             self.get_logger().info(
-                f'stopped at {self.sim.time:.2f} s simulated; {stats["ticks"]} ticks, largest '
-                f'wall-clock gap between two {stats["max_tick_gap"] * 1e3:.1f} ms; camera '
+                f'stopped at {self.sim.time:.2f} s simulated; {stats["ticks"]} ticks, '
+                f'{stats["late_ticks"]} more than {LATE_TICKS} periods after the previous one, '
+                f'largest wall-clock gap between two {stats["max_tick_gap"] * 1e3:.1f} ms; camera '
                 f'frames published {stats["frames"]}, dropped {stats["frames_dropped"]}')
 
     def _run(self):
@@ -269,7 +272,7 @@ class UR10SimNode(Node):
                 self.tick()
                 now = time.monotonic()
                 if last_tick is not None:
-                    self.stats['max_tick_gap'] = max(self.stats['max_tick_gap'], now - last_tick)
+                    self._note_gap(now - last_tick)
                 last_tick = now
                 rtf = self.real_time_factor
                 if rtf <= 0:
@@ -288,6 +291,18 @@ class UR10SimNode(Node):
         finally:
             if self._camera is None:
                 self.sim.close()   # rendered in this thread (the camera thread closes its own)
+
+    def _note_gap(self, gap):
+        """Keep the largest wall-clock gap between ticks; warn about one over LATE_TICKS."""
+        stats = self.stats
+        stats['max_tick_gap'] = max(stats['max_tick_gap'], gap)
+        rtf = self.real_time_factor
+        if rtf > 0 and gap > LATE_TICKS * self.tick_period / rtf:
+            stats['late_ticks'] += 1
+            self.get_logger().warning(
+                f'simulation loop stalled: {gap * 1e3:.0f} ms between two ticks at t = '
+                f'{self.sim.time:.3f} s (the machine is overloaded?)',
+                throttle_duration_sec=1.0)
 
     def run_for(self, duration):
         """Run ``duration`` s of simulated time in the calling thread, unpaced (benchmarks)."""

@@ -28,18 +28,19 @@ input halt in 10 loaded runs". Timing depends on the machine and on what else ru
 """
 
 import argparse
-import contextlib
 import json
 import os
 from pathlib import Path
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / 'test'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
+from conftest import busy_core  # noqa: E402
 from etdmp_ros import demo  # noqa: E402
 
 #: (key, label, target text, check) of the table's rows; check(value, rate) -> bool. The CPU
@@ -72,22 +73,9 @@ ROWS = (
     ('tracking_max_mm', 'tracking max (mm)', '<= 0.5',
      lambda v, rate: None if rate > 125 else v <= 0.5),
     ('frames_dropped', 'camera frames dropped', '', None),
+    ('late_ticks', 'simulation ticks > 3 periods late (whole run)', '', None),
     ('stale_halts', 'stale-input halts', '0', lambda v, rate: v == 0),
 )
-
-
-@contextlib.contextmanager
-def busy_core(active=True):
-    """Run one process that busy-loops on a core (another program on the machine) meanwhile."""
-    if not active:
-        yield None
-        return
-    process = subprocess.Popen([sys.executable, '-c', 'while True:\n    pass'])
-    try:
-        yield process
-    finally:
-        process.kill()
-        process.wait()
 
 
 def figures(metrics):
@@ -105,6 +93,7 @@ def figures(metrics):
         'tracking_rms_mm': metrics.get('tracking_rms_mm'),
         'tracking_max_mm': metrics.get('tracking_max_mm'),
         'frames_dropped': system.get('simulation', {}).get('frames_dropped'),
+        'late_ticks': system.get('simulation', {}).get('late_ticks'),
         'stale_halts': int(str(metrics.get('controller_failure') or '').startswith('stale')),
         'joint_states_received': controller.get('joint_states_received'),
         'largest_joint_state_gap_ms': controller.get('largest_joint_state_gap_ms'),
@@ -130,11 +119,11 @@ def run_once(skill, load, rate, out):
         try:
             metrics, _ = demo.run_demo(options, env)
         except demo.DemoError as err:
-            saved = Path(out) / 'metrics.json'
-            if not saved.exists():
-                raise
-            metrics = json.loads(saved.read_text())
             print(f'    run failed: {err}'.splitlines()[0], flush=True)
+            saved = Path(out) / 'metrics.json'
+            if not saved.exists():   # failed before anything could be measured
+                return {'stale_halts': int('stale-input' in str(err)), 'failed': str(err)}
+            metrics = json.loads(saved.read_text())
     return figures(metrics)
 
 
