@@ -19,7 +19,7 @@ help:
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
 	@echo "make docs       regenerate the README pictures in docs/img/"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception"
+	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make clean      remove build outputs and caches; make distclean also removes .venv*/"
 
@@ -80,9 +80,13 @@ $(BENCH_STAMP): requirements.txt $(BENCH_REQ) setup.py setup.cfg
 	  --no-deps --no-build-isolation -e .
 	@touch $@
 
-BENCHMARKS := core sim dmp_server controller perception
+BENCHMARKS := core sim dmp_server controller perception system
 
 bench: $(addprefix bench-,$(BENCHMARKS))
+
+# The closed loop as `make demo` runs it, idle and next to a busy core (needs no peer library).
+bench-system: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_system.py $(BENCH_ARGS)
 
 # make bench-core, bench-sim, bench-dmp_server, bench-controller, bench-perception
 bench-%: $(BENCH_STAMP)

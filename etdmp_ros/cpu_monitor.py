@@ -2,8 +2,10 @@
 CPU per process against simulated time: what the closed loop costs the machine (Linux /proc).
 
 :class:`CpuMonitor` samples, a few times a second, the CPU time (user + system, all threads) of
-a set of processes from ``/proc/<pid>/stat`` together with the wall clock and the simulated
-time, so that a window of simulated time (say, while the arm moves) can be turned into
+a set of processes and their descendants (ur10_sim's camera process counts as ur10_sim; a
+named process counts only as itself, not as its parent's, and the monitoring process alone)
+from ``/proc/<pid>/stat``, together with the wall clock and the simulated time, so that a
+window of simulated time (say, while the arm moves) can be turned into
 
 - CPU-seconds per simulated second of each process (1.0 = one core busy at real time), and
 - the real-time factor (simulated seconds per wall second) over that window, and its lowest
@@ -18,6 +20,18 @@ import threading
 import time
 
 _TICKS = os.sysconf('SC_CLK_TCK') if hasattr(os, 'sysconf') else 100
+
+
+def child_pids(pid):
+    """Return the pids of the children of process ``pid`` (all its threads'; [] if gone)."""
+    children = []
+    try:
+        for task in os.listdir(f'/proc/{pid}/task'):
+            with open(f'/proc/{pid}/task/{task}/children') as f:
+                children += [int(c) for c in f.read().split()]
+    except OSError:
+        pass
+    return children
 
 
 def process_cpu_seconds(pid):
@@ -47,6 +61,9 @@ class CpuMonitor:
         self.sim_time = sim_time
         self.period = period
         self.samples = []    # (wall s, sim s, {name: cpu s})
+        self._trees = {name: {pid} for name, pid in self.pids.items()}
+        self._last = {}      # pid -> its latest CPU s (kept when it exits)
+        self._refreshed = -1.0
         self.available = os.path.exists(f'/proc/{os.getpid()}/stat')
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True, name='cpu_monitor')
@@ -71,13 +88,32 @@ class CpuMonitor:
                 return
 
     def sample(self):
-        """Take one sample now (processes that have exited are left out of it)."""
+        """Take one sample now: each name's CPU, its descendants included (exited ones too)."""
         sim = self.sim_time()
         if sim is None:
             return
-        cpu = {name: process_cpu_seconds(pid) for name, pid in self.pids.items()}
-        self.samples.append((time.monotonic(), float(sim),
-                             {name: c for name, c in cpu.items() if c is not None}))
+        now = time.monotonic()
+        if now - self._refreshed > 1.0:     # new children appear at start-up only: look rarely
+            self._refreshed = now
+            roots = set(self.pids.values())   # a named process is never another's child
+            for name, tree in self._trees.items():
+                if self.pids[name] == os.getpid():
+                    continue    # this process counts alone: what it starts beside is not its work
+                todo = list(tree)
+                while todo:
+                    for child in child_pids(todo.pop()):
+                        if child not in tree and child not in roots:
+                            tree.add(child)
+                            todo.append(child)
+        cpu = {}
+        for name, tree in self._trees.items():
+            for pid in tree:
+                value = process_cpu_seconds(pid)
+                if value is not None:
+                    self._last[pid] = value
+            if self.pids[name] in self._last:
+                cpu[name] = sum(self._last.get(pid, 0.0) for pid in tree)
+        self.samples.append((now, float(sim), cpu))
 
     def window(self, start, end):
         """

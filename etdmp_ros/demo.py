@@ -994,6 +994,8 @@ def write_pictures(out, run, rec, snapshots, frames, intrinsics, animation=True)
 _TRACKED = re.compile(r'path tracked: error RMS ([\d.]+) mm, max ([\d.]+) mm; (\d+) control '
                       r'steps in (\d+) periods \((\d+) joint states received, largest gap '
                       r'([\d.]+) ms(?: at t = ([\d.]+) s)?\)')
+#: The camera process's log line when it stops (etdmp_ros.nodes._sim_camera).
+_CAMERA_STOPPED = re.compile(r'camera stopped: (\d+) frames published, (\d+) skipped')
 #: ur10_sim's warning about a stalled simulation loop.
 _STALL = re.compile(r'simulation loop stalled: (\d+) ms between two ticks at t = ([\d.]+) s')
 #: ur10_sim's log line when it stops.
@@ -1045,6 +1047,10 @@ def system_figures(monitor, rec, call_ns, end_ns, nodes):
         late, gap, frames, dropped = found[-1]
         figures['simulation'] = {'late_ticks': int(late), 'largest_tick_gap_ms': float(gap),
                                  'frames': int(frames), 'frames_dropped': int(dropped)}
+        camera = _CAMERA_STOPPED.findall(nodes.log('ur10_sim'))
+        if camera:   # snapshots the camera process skipped because it was still rendering
+            figures['simulation']['frames_rendered'] = int(camera[-1][0])
+            figures['simulation']['frames_dropped'] += int(camera[-1][1])
     return figures
 
 

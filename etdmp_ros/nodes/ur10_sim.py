@@ -11,21 +11,24 @@ velocities in rad/s, UR order). Publishes, stamped with the simulated time:
 - ``/ur10_sim/ground_truth/goal`` and ``.../obstacles`` (base_link) with each camera frame,
   stamped like it (what the camera saw), or at 10 Hz when the camera is off.
 
-Threads. The simulation thread runs one control period per tick: apply the latest command (and
-scene changes), step the physics, publish the state, then sleep to keep ``real_time_factor``.
-When a camera frame is due it only takes a snapshot of the scene (microseconds) and hands it to
-the camera thread, which renders it (milliseconds), converts and publishes the images: the
-physics and the joint states never wait for rendering or image transport. If the camera thread
-is still busy with the previous frame, the new one is dropped (counted), never queued. Images
-are rendered only while someone subscribes to them. The executor thread only receives commands
+Threads and processes. The simulation thread runs one control period per tick: apply the
+latest command (and scene changes), step the physics, publish the state, then sleep to keep
+``real_time_factor``. When a camera frame is due it only takes a snapshot of the scene
+(microseconds) and sends it, without waiting, to the camera process
+(:mod:`etdmp_ros.nodes._sim_camera`, node ``ur10_sim_camera``), which renders it (milliseconds)
+and publishes the images: the physics and the joint states never wait for rendering or image
+transport, nor share an interpreter lock with them. The executor thread only receives commands
 and parameter changes, validates them and hands them over. Parameters: config/scene.yaml and
 config/ur10_sim.yaml (both read from the package's share folder as defaults); ``goal_position``,
 ``obstacle_positions``, ``real_time_factor`` and ``watchdog_timeout`` can be changed at runtime.
 """
 
+import socket
+import subprocess
 import threading
 import time
 
+from etdmp_ros.nodes._sim_camera import command as camera_command, encode as camera_snapshot
 from etdmp_ros.nodes._spin import run
 from etdmp_ros.robot import (MAX_OBSTACLES, node_defaults, parse_goal_position,
                              parse_obstacle_positions, SCENE_PARAMETERS, SceneConfig, UR10Sim)
@@ -87,6 +90,8 @@ NODE_PARAMETERS = {
     'depth_noise': ('m, standard deviation of the depth noise at 1 m (grows with z^2)',
                     (0.0, 1.0)),
     'multisamples': ('MSAA samples of the colour image (0 = fastest)', (0, 16)),
+    'camera_niceness': ('CPU niceness of the camera process (0..19): on a busy machine the '
+                        'physics and the control path go first, frames are skipped', (0, 19)),
 }
 
 
@@ -110,6 +115,18 @@ def _typed(value):
     return value
 
 
+def build_sim(p):
+    """Return the :class:`UR10Sim` of ur10_sim's parameter values ``p`` (name -> value)."""
+    if p['depth_min'] >= p['depth_max']:
+        raise ValueError(f'depth_min ({p["depth_min"]}) must be below depth_max '
+                         f'({p["depth_max"]})')
+    return UR10Sim(SceneConfig.from_parameters(p), timestep=p['physics_timestep'],
+                   watchdog_timeout=p['watchdog_timeout'],
+                   image_size=(p['image_width'], p['image_height']),
+                   fovy_deg=p['fovy_deg'], depth_range=(p['depth_min'], p['depth_max']),
+                   depth_noise=p['depth_noise'], multisamples=p['multisamples'])
+
+
 class UR10SimNode(Node):
     """The simulation node: a thin shell translating topics and parameters to :class:`UR10Sim`."""
 
@@ -120,15 +137,8 @@ class UR10SimNode(Node):
         p = {name: self.get_parameter(name).value for name in self._declared}
         if p['obstacle_positions'] is None:   # `obstacle_positions: []` in YAML: rcl leaves it
             p['obstacle_positions'] = []      # untyped (NOT_SET); the user meant no obstacles
-        scene = SceneConfig.from_parameters(p)
-        if p['depth_min'] >= p['depth_max']:
-            raise ValueError(f'depth_min ({p["depth_min"]}) must be below depth_max '
-                             f'({p["depth_max"]})')
-        self.sim = UR10Sim(scene, timestep=p['physics_timestep'],
-                           watchdog_timeout=p['watchdog_timeout'],
-                           image_size=(p['image_width'], p['image_height']),
-                           fovy_deg=p['fovy_deg'], depth_range=(p['depth_min'], p['depth_max']),
-                           depth_noise=p['depth_noise'], multisamples=p['multisamples'])
+        self._parameter_values = p   # (not _parameters: rclpy Node uses that name)
+        self.sim = build_sim(p)
         self.steps_per_tick = max(1, round(1.0 / (p['control_rate'] * self.sim.timestep)))
         self.tick_period = self.steps_per_tick * self.sim.timestep
         if abs(self.tick_period * p['control_rate'] - 1.0) > 1e-6:
@@ -149,24 +159,18 @@ class UR10SimNode(Node):
         self._watchdog_was_active = self.sim.watchdog_active
         self._next_camera_time = 0.0
         self._next_truth_time = 0.0
-        self._camera = None   # the camera thread, once started
+        self._camera = None   # the camera process, once started
         self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
                       'publish_state': 0.0, 'ticks': 0, 'frames': 0, 'frames_dropped': 0,
                       'max_tick_gap': 0.0, 'late_ticks': 0}
 
         reliable = QoSProfile(depth=10)
-        images = QoSProfile(depth=2)   # frames are big: never queue more than one behind
         self._joint_pub = self.create_publisher(JointState, '/joint_states', reliable)
         self._clock_pub = self.create_publisher(Clock, '/clock', reliable)
         self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, reliable)
         self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, reliable)
         self._tool_pub = self.create_publisher(PointStamped, TOOL_TIP_TOPIC, reliable)
-        if self.camera_period:
-            self._color_pub = self.create_publisher(Image, COLOR_TOPIC, images)
-            self._depth_pub = self.create_publisher(Image, DEPTH_TOPIC, images)
-            self._color_info_pub = self.create_publisher(CameraInfo, COLOR_INFO_TOPIC, reliable)
-            self._depth_info_pub = self.create_publisher(CameraInfo, DEPTH_INFO_TOPIC, reliable)
-            self._camera_info = camera_info_msg(self.sim.intrinsics, frame_id=OPTICAL_FRAME)
+        self._camera_publishers = None   # made by frame(), for run_for(): images in-process
         self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, reliable)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -241,14 +245,14 @@ class UR10SimNode(Node):
 
     # ---------------------------------------------------------------------------- simulation
     def start(self):
-        """Start the simulation thread (and the camera thread when the camera is on)."""
+        """Start the simulation thread (and the camera process when the camera is on)."""
         if self.camera_period:
-            self._camera = _CameraThread(self)
+            self._camera = _CameraProcess(self)
         self._thread = threading.Thread(target=self._run, name='ur10_sim', daemon=True)
         self._thread.start()
 
     def stop(self):
-        """Stop the simulation and camera threads (waits for the current tick and frame)."""
+        """Stop the simulation thread and the camera process (waits for tick and frame)."""
         self._stop.set()
         if self._thread is None:
             self.sim.close()   # run_for() rendered in this thread
@@ -256,6 +260,7 @@ class UR10SimNode(Node):
         self._thread.join(timeout=5.0)
         if self._camera is not None:
             self._camera.stop()
+        self.sim.close()
         stats = self.stats
         if stats['ticks']:
             self.get_logger().info(
@@ -290,7 +295,7 @@ class UR10SimNode(Node):
             self.context.try_shutdown()
         finally:
             if self._camera is None:
-                self.sim.close()   # rendered in this thread (the camera thread closes its own)
+                self.sim.close()   # rendered in this thread (the camera process has its own)
 
     def _note_gap(self, gap):
         """Keep the largest wall-clock gap between ticks; warn about one over LATE_TICKS."""
@@ -347,7 +352,7 @@ class UR10SimNode(Node):
                 self._next_camera_time = sim.time + self.camera_period
             self._publish_ground_truth(stamp)
             if self._camera is not None:
-                self._camera.offer(sim.camera_state(), stamp)
+                self._camera.offer(sim.camera_state(), round(sim.time * 1e9))
             else:   # run_for(): render here
                 self.frame(sim.camera_state(), stamp)
         elif not self.camera_period and sim.time >= self._next_truth_time - 1e-9:
@@ -355,19 +360,33 @@ class UR10SimNode(Node):
             self._publish_ground_truth(stamp)
 
     def frame(self, state, stamp):
-        """Render a camera state and publish it (images only while someone subscribes)."""
+        """
+        Render a camera state here and publish it (images only while someone subscribes).
+
+        What :meth:`run_for` does (benchmarks, in-process tests); the running node renders in
+        its camera process instead, which publishes the same topics.
+        """
         stats = self.stats
-        if self._color_pub.get_subscription_count() or self._depth_pub.get_subscription_count():
+        if self._camera_publishers is None:
+            images, infos = QoSProfile(depth=2), QoSProfile(depth=10)
+            self._camera_publishers = (
+                self.create_publisher(Image, COLOR_TOPIC, images),
+                self.create_publisher(Image, DEPTH_TOPIC, images),
+                self.create_publisher(CameraInfo, COLOR_INFO_TOPIC, infos),
+                self.create_publisher(CameraInfo, DEPTH_INFO_TOPIC, infos),
+                camera_info_msg(self.sim.intrinsics, frame_id=OPTICAL_FRAME))
+        color, depth_pub, color_info, depth_info, info = self._camera_publishers
+        if color.get_subscription_count() or depth_pub.get_subscription_count():
             c0 = time.process_time()
             rgb, depth = self.sim.render_rgb_depth(state)
             c1 = time.process_time()
-            self._color_pub.publish(image_msg(rgb, 'rgb8', stamp, OPTICAL_FRAME))
-            self._depth_pub.publish(image_msg(depth, '16UC1', stamp, OPTICAL_FRAME))
+            color.publish(image_msg(rgb, 'rgb8', stamp, OPTICAL_FRAME))
+            depth_pub.publish(image_msg(depth, '16UC1', stamp, OPTICAL_FRAME))
             stats['render'] += c1 - c0
             stats['publish_images'] += time.process_time() - c1
-        self._camera_info.header.stamp = stamp
-        self._color_info_pub.publish(self._camera_info)
-        self._depth_info_pub.publish(self._camera_info)
+        info.header.stamp = stamp
+        color_info.publish(info)
+        depth_info.publish(info)
         stats['frames'] += 1
 
     def _publish_state(self, stamp):
@@ -384,61 +403,54 @@ class UR10SimNode(Node):
         self._obstacles_pub.publish(obstacles)
 
 
-class _CameraThread:
+class _CameraProcess:
     """
-    Renders and publishes the camera frames of :class:`UR10SimNode` in a thread of their own.
+    The camera of :class:`UR10SimNode` in a process of its own (:mod:`._sim_camera`).
 
-    :meth:`offer` never blocks: a frame offered while the previous one is still being rendered
-    is dropped (``stats['frames_dropped']``). The OpenGL context lives in this thread.
+    :meth:`offer` never blocks: a snapshot that does not fit the socket's buffer (the camera
+    process is stuck) is dropped (``stats['frames_dropped']``); one that the process is too
+    slow to render is skipped there (it logs how many when it stops).
     """
 
     def __init__(self, node):
-        """Start the thread."""
+        """Start the camera process with the node's parameters and topic names."""
         self._node = node
-        self._ready = threading.Condition()
-        self._pending = None
-        self._busy = False
-        self._stopping = False
-        self._thread = threading.Thread(target=self._run, name='ur10_sim_camera', daemon=True)
-        self._thread.start()
+        self._link, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self._link.setblocking(False)
+        topics = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR_INFO_TOPIC,
+                  'depth_info': DEPTH_INFO_TOPIC}
+        parameters = {k: (list(v) if isinstance(v, tuple) else v)
+                      for k, v in node._parameter_values.items()}
+        argv = camera_command(theirs.fileno(), parameters, topics, f'{node.get_name()}_camera',
+                              node.get_namespace())
+        self.process = subprocess.Popen(argv, pass_fds=(theirs.fileno(),))
+        theirs.close()
+        self._lost = False
 
-    def offer(self, state, stamp):
-        """Hand a camera state over for rendering, or drop it if the last one is not done."""
-        with self._ready:
-            if self._busy or self._pending is not None:
-                self._node.stats['frames_dropped'] += 1
-                return
-            self._pending = (state, stamp)
-            self._ready.notify()
+    def offer(self, state, stamp_ns):
+        """Send a camera state to be rendered (dropped if the process cannot take it now)."""
+        if self._lost:
+            return
+        try:
+            self._link.send(camera_snapshot(state, stamp_ns))
+        except BlockingIOError:
+            self._node.stats['frames_dropped'] += 1
+        except OSError as exc:   # the camera process has gone
+            self._lost = True
+            self._node.get_logger().error(
+                f'camera process exited (code {self.process.poll()}): {exc}; no more camera '
+                'frames')
+        else:
+            self._node.stats['frames'] += 1
 
     def stop(self):
-        """Finish the current frame, free the camera and end the thread."""
-        with self._ready:
-            self._stopping = True
-            self._ready.notify()
-        self._thread.join(timeout=5.0)
-
-    def _run(self):
-        node = self._node
+        """Close the socket (the process finishes its frame and exits); kill it if it hangs."""
+        self._link.close()
         try:
-            while True:
-                with self._ready:
-                    while self._pending is None and not self._stopping:
-                        self._ready.wait()
-                    if self._stopping:
-                        return
-                    (state, stamp), self._pending = self._pending, None
-                    self._busy = True
-                try:
-                    node.frame(state, stamp)
-                finally:
-                    with self._ready:
-                        self._busy = False
-        except Exception as exc:   # noqa: B902 - report why the camera stopped
-            if not self._stopping and node.context.ok():
-                node.get_logger().error(f'camera stopped: {type(exc).__name__}: {exc}')
-        finally:
-            node.sim.close()   # the OpenGL context is current in this thread only
+            self.process.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
 
 
 def _number_list(parameter):

@@ -28,7 +28,7 @@ if sys.platform.startswith('linux') and not os.environ.get('DISPLAY'):
     os.environ.setdefault('MUJOCO_GL', 'egl')
 
 _LAZY = {
-    '_sim': ('MAX_OBSTACLES', 'UR10Sim'),
+    '_sim': ('CameraState', 'MAX_OBSTACLES', 'UR10Sim'),
     '_vision': ('check_frame', 'Detection', 'Detections', 'Detector', 'detector_from_parameters',
                 'DETECTOR_PARAMETERS', 'DetectorSettings', 'FrameSynchronizer', 'HsvRange',
                 'ObjectModel', 'Rejection'),

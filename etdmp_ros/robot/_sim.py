@@ -122,21 +122,27 @@ def _mujoco_camera_quat(pose):
 
 @dataclass(frozen=True)
 class CameraState:
-    """What the camera sees at one instant: simulated time (s), joint and mocap positions."""
+    """
+    What the camera sees at one instant: simulated time (s), joint and mocap positions.
+
+    ``obstacles``: how many obstacles are in use (the others are hidden). Everything a render
+    needs besides the model, so a copy of the model (another process) can render it too.
+    """
 
     time: float
     qpos: np.ndarray
     mocap_pos: np.ndarray
     mocap_quat: np.ndarray
+    obstacles: int
 
 
 class UR10Sim:
     """
     MuJoCo UR10 workcell: velocity-commanded joints, movable goal and obstacles, a camera.
 
-    Not thread-safe: call from one thread at a time, except that one other thread may render
-    :meth:`camera_state` snapshots (:meth:`render_rgb_depth` with a state, and :meth:`close`)
-    while the first steps. The camera's OpenGL context is created on the first
+    Not thread-safe: call from one thread at a time. :meth:`camera_state` snapshots can be
+    rendered later, also by another UR10Sim built from the same scene (the ``ur10_sim`` node
+    renders in a process of its own). The camera's OpenGL context is created on the first
     :meth:`render_rgb_depth` call and is current in the thread that made that call.
     """
 
@@ -434,14 +440,15 @@ class UR10Sim:
     # -------------------------------------------------------------------------------- camera
     def camera_state(self):
         """
-        Return a copy of what the camera would see now, to render later (another thread).
+        Return a copy of what the camera would see now, to render later (elsewhere).
 
         A :class:`CameraState`: the simulated time, joint and mocap (goal, obstacles) positions.
-        Taking it costs microseconds; :meth:`render_rgb_depth` of it costs milliseconds.
+        Taking it costs microseconds; :meth:`render_rgb_depth` of it costs milliseconds, in
+        this object or in another one built with the same scene (another process).
         """
         d = self.data
         return CameraState(float(d.time), d.qpos.copy(), d.mocap_pos.copy(),
-                           d.mocap_quat.copy())
+                           d.mocap_quat.copy(), len(self._obstacles))
 
     def render_rgb_depth(self, state=None):
         """
@@ -464,6 +471,9 @@ class UR10Sim:
             data.qpos[:] = state.qpos
             data.mocap_pos[:] = state.mocap_pos
             data.mocap_quat[:] = state.mocap_quat
+            for i, geom in enumerate(self._obstacle_geoms):
+                self.model.geom_group[geom] = VISIBLE_GROUP if i < state.obstacles \
+                    else HIDDEN_GROUP
             mujoco.mj_kinematics(self.model, data)
             mujoco.mj_camlight(self.model, data)
         rgb, depth = self._camera.render(data)

@@ -194,9 +194,12 @@ def main(argv=None):
                     result = run_once(skill, load, rate, out)
                     results[load].append(result)
                     print(f'  {skill} {rate:g} Hz {load} run {run + 1}: '
-                          f'{result["moving_commands_per_s"] or 0:.0f} commands/s, CPU '
-                          f'{result["cpu_total"] or 0:.2f} cores, tracking max '
-                          f'{result["tracking_max_mm"] or 0:.3f} mm '
+                          f'{100 * (result.get("steps_share") or 0):.1f} % steps, largest gap '
+                          f'{result.get("largest_joint_state_gap_ms") or 0:.1f} ms, '
+                          f'{result.get("moving_commands_per_s") or 0:.0f} commands/s, RTF '
+                          f'{result.get("real_time_factor") or 0:.3f}, CPU '
+                          f'{result.get("cpu_total") or 0:.2f} cores, tracking max '
+                          f'{result.get("tracking_max_mm") or 0:.3f} mm '
                           f'({time.monotonic() - started:.0f} s)', flush=True)
             everything[f'{skill}@{rate:g}'] = results
             print()

@@ -1,0 +1,133 @@
+"""
+The simulated camera of ur10_sim, in a process of its own (``ur10_sim`` starts and stops it).
+
+Rendering a 640x480 colour + depth frame costs ~7 ms of CPU and publishing it holds Python's
+interpreter lock for a millisecond or more (rclpy converts and sends the 1.5 MB while holding
+it). In the simulation's process that made its loop late: at 500 Hz, 13 ticks in 11 s came
+more than 3 periods late with the camera rendering there, none without it (ur10_sim alone,
+its own count). So the simulation only takes a snapshot of the scene when a frame is due
+(:meth:`UR10Sim.camera_state`, microseconds) and sends it here over a local socket, without
+ever waiting: if this process is behind, it renders the newest snapshot and skips the others.
+
+This process builds the same workcell from the same parameters (``ur10_sim``'s, passed as
+JSON), renders each snapshot, and publishes the colour and depth images and their
+camera_info under ur10_sim's topic names, stamped with the snapshot's simulated time; images
+are rendered only while someone subscribes to them. Its node is named ``<ur10_sim>_camera``,
+in ur10_sim's namespace, without parameter services (its parameters are ur10_sim's), at the
+CPU niceness ``camera_niceness``: on a busy machine the physics and the control path go first
+and frames are skipped. It ends when ur10_sim closes the socket (or dies); Ctrl-C is left to
+ur10_sim, which stops it.
+"""
+
+import argparse
+import json
+import signal
+import socket
+import struct
+import sys
+
+import numpy as np
+
+#: Snapshot header: stamp (ns, int64), simulated time (s, float64), obstacles in use (int32).
+_HEADER = struct.Struct('<qdi')
+
+
+def encode(state, stamp_ns):
+    """Return the bytes of a :class:`CameraState` and its stamp (what ur10_sim sends)."""
+    return (_HEADER.pack(int(stamp_ns), state.time, state.obstacles)
+            + np.concatenate([state.qpos, state.mocap_pos.ravel(),
+                              state.mocap_quat.ravel()]).astype('<f8').tobytes())
+
+
+def decode(data, nq, nmocap):
+    """Return ``(CameraState, stamp ns)`` from :func:`encode`'s bytes; ValueError if malformed."""
+    from etdmp_ros.robot import CameraState
+    values = np.frombuffer(data, dtype='<f8', offset=_HEADER.size)
+    if len(data) < _HEADER.size or values.size != nq + 7 * nmocap:
+        raise ValueError(f'camera snapshot of {len(data)} bytes does not fit the model')
+    stamp_ns, time, obstacles = _HEADER.unpack_from(data)
+    mocap = values[nq:]
+    return (CameraState(time, values[:nq].copy(), mocap[:3 * nmocap].reshape(nmocap, 3),
+                        mocap[3 * nmocap:].reshape(nmocap, 4), obstacles), stamp_ns)
+
+
+def command(fd, parameters, topics, node_name, namespace):
+    """Return the argv of the camera process (``fd``: its end of the socket)."""
+    return [sys.executable, '-m', 'etdmp_ros.nodes._sim_camera', '--fd', str(fd),
+            '--parameters', json.dumps(parameters), '--topics', json.dumps(topics),
+            '--ros-args', '-r', f'__node:={node_name}', '-r', f'__ns:={namespace}']
+
+
+def main(argv=None):
+    """Render and publish the snapshots that arrive on the socket until it closes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # ur10_sim stops this process
+    parser = argparse.ArgumentParser()
+    parser.add_argument('--fd', type=int, required=True)
+    parser.add_argument('--parameters', required=True)
+    parser.add_argument('--topics', required=True)
+    args, ros_args = parser.parse_known_args(argv)
+    link = socket.socket(fileno=args.fd)
+
+    from etdmp_ros.nodes._spin import init, lower_priority
+    from etdmp_ros.nodes.ur10_sim import build_sim, OPTICAL_FRAME
+    from etdmp_ros.ros_conversions import camera_info_msg, image_msg, ns_to_stamp
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import CameraInfo, Image
+
+    init(ros_args)
+    node = Node('camera', start_parameter_services=False)
+    log = node.get_logger()
+    topics = json.loads(args.topics)
+    images = QoSProfile(depth=2)   # frames are big: never queue more than one behind
+    color = node.create_publisher(Image, topics['color'], images)
+    depth = node.create_publisher(Image, topics['depth'], images)
+    infos = [node.create_publisher(CameraInfo, topics[name], QoSProfile(depth=10))
+             for name in ('color_info', 'depth_info')]
+    published = skipped = 0
+    try:
+        parameters = json.loads(args.parameters)
+        lower_priority(parameters['camera_niceness'])
+        sim = build_sim(parameters)
+        info = camera_info_msg(sim.intrinsics, frame_id=OPTICAL_FRAME)
+        nq, nmocap = sim.model.nq, sim.model.nmocap
+        while rclpy.ok():
+            data = link.recv(65536)
+            if not data:
+                break                        # ur10_sim closed its end: done
+            link.setblocking(False)          # take the newest snapshot waiting, skip the rest
+            try:
+                while True:
+                    newer = link.recv(65536)
+                    if not newer:
+                        break
+                    data, skipped = newer, skipped + 1
+            except BlockingIOError:
+                pass
+            link.setblocking(True)
+            state, stamp_ns = decode(data, nq, nmocap)
+            stamp = ns_to_stamp(stamp_ns)
+            if color.get_subscription_count() or depth.get_subscription_count():
+                rgb, depth_mm = sim.render_rgb_depth(state)
+                color.publish(image_msg(rgb, 'rgb8', stamp, OPTICAL_FRAME))
+                depth.publish(image_msg(depth_mm, '16UC1', stamp, OPTICAL_FRAME))
+            info.header.stamp = stamp
+            for publisher in infos:
+                publisher.publish(info)
+            published += 1
+    except Exception as exc:   # noqa: B902 - say why the camera stopped, then exit
+        log.error(f'camera stopped: {type(exc).__name__}: {exc}')
+        return 1
+    finally:
+        log.info(f'camera stopped: {published} frames published, {skipped} skipped (rendering '
+                 'slower than the camera rate)')
+        if 'sim' in locals():
+            sim.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
