@@ -42,6 +42,7 @@ os.environ.setdefault('MUJOCO_GL', 'egl')
 
 from conftest import busy_core  # noqa: E402
 from etdmp_ros import demo  # noqa: E402
+import yaml  # noqa: E402
 
 #: (key, label, target text, check) of the table's rows; check(value, rate) -> bool. The CPU
 #: targets are the default configuration's (125 Hz); at 500 Hz only the step share has one.
@@ -105,12 +106,14 @@ def figures(metrics):
     return out
 
 
-def run_once(skill, load, rate, out):
+def run_once(skill, load, rate, out, extra=()):
     """Run the demo once; return its figures (a failed run counts as a stale halt if so)."""
     parameters = {}
     if rate != 125:
         parameters = {'ur10_sim': {'control_rate': float(rate)},
                       'controller': {'control_rate': float(rate)}}
+    for node, name, value in extra:
+        parameters.setdefault(node, {})[name] = value
     options = demo.Options(skill=skill, out=out, animation=False, quiet=True,
                            parameters=parameters)
     env = demo.isolated_environment()
@@ -174,7 +177,14 @@ def main(argv=None):
     parser.add_argument('--rates', nargs='+', type=float, default=[125.0, 500.0],
                         help='control rates (Hz); rates other than 125 run G, idle only')
     parser.add_argument('--json', type=Path, help="also write every run's figures here")
+    parser.add_argument('--set', action='append', default=[], metavar='NODE.NAME=YAML',
+                        help='a node parameter for every run, e.g. controller.use_sim_time=true')
     args = parser.parse_args(argv)
+    extra = []
+    for item in args.set:
+        key, _, value = item.partition('=')
+        node, _, name = key.partition('.')
+        extra.append((node, name, yaml.safe_load(value)))
     cases = []
     for rate in args.rates:
         if rate == 125.0:
@@ -191,7 +201,7 @@ def main(argv=None):
                 for load in loads:     # interleaved: drifting machine load hits all alike
                     started = time.monotonic()
                     out = Path(tmp) / f'{skill}_{rate:g}_{load}_{run}'
-                    result = run_once(skill, load, rate, out)
+                    result = run_once(skill, load, rate, out, extra)
                     results[load].append(result)
                     print(f'  {skill} {rate:g} Hz {load} run {run + 1}: '
                           f'{100 * (result.get("steps_share") or 0):.1f} % steps, largest gap '
