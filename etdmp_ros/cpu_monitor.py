@@ -46,6 +46,21 @@ def process_cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / _TICKS   # utime, stime (fields 14, 15)
 
 
+def descendants(pid):
+    """Return the pids of every process below ``pid`` (children, their children, ...)."""
+    found, todo = [], [pid]
+    while todo:
+        for child in child_pids(todo.pop()):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def tree_cpu_seconds(pid):
+    """Return the CPU time (s) of process ``pid`` and of its living descendants."""
+    return sum(c for c in map(process_cpu_seconds, [pid, *descendants(pid)]) if c is not None)
+
+
 class CpuMonitor:
     """
     Samples the CPU time of named processes with the wall clock and the simulated time.

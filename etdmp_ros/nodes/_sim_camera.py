@@ -13,10 +13,14 @@ This process builds the same workcell from the same parameters (``ur10_sim``'s, 
 JSON), renders each snapshot, and publishes the colour and depth images and their
 camera_info under ur10_sim's topic names, stamped with the snapshot's simulated time; images
 are rendered only while someone subscribes to them. Its node is named ``<ur10_sim>_camera``,
-in ur10_sim's namespace, without parameter services (its parameters are ur10_sim's), at the
-CPU niceness ``camera_niceness``: on a busy machine the physics and the control path go first
-and frames are skipped. It ends when ur10_sim closes the socket (or dies); Ctrl-C is left to
-ur10_sim, which stops it.
+in ur10_sim's namespace, without parameter services (its parameters are ur10_sim's). It ends
+when ur10_sim closes the socket (or dies); Ctrl-C is left to ur10_sim, which stops it.
+
+It runs at the same CPU priority as the simulation, deliberately: a niced camera or perception
+process (tried: niceness 10 and 5) made the simulation's loop stall for 100-350 ms next to a busy
+core, one run in three. Fast DDS's shared-memory ports are guarded by mutexes shared between
+processes: a low-priority reader preempted while holding its port's mutex blocks every writer
+sending to it, the simulation's included (py-spy: its publish waiting in RTPSWriter::send_nts).
 """
 
 import argparse
@@ -68,7 +72,7 @@ def main(argv=None):
     args, ros_args = parser.parse_known_args(argv)
     link = socket.socket(fileno=args.fd)
 
-    from etdmp_ros.nodes._spin import init, lower_priority
+    from etdmp_ros.nodes._spin import init
     from etdmp_ros.nodes.ur10_sim import build_sim, OPTICAL_FRAME
     from etdmp_ros.ros_conversions import camera_info_msg, image_msg, ns_to_stamp
     import rclpy
@@ -87,9 +91,7 @@ def main(argv=None):
              for name in ('color_info', 'depth_info')]
     published = skipped = 0
     try:
-        parameters = json.loads(args.parameters)
-        lower_priority(parameters['camera_niceness'])
-        sim = build_sim(parameters)
+        sim = build_sim(json.loads(args.parameters))
         info = camera_info_msg(sim.intrinsics, frame_id=OPTICAL_FRAME)
         nq, nmocap = sim.model.nq, sim.model.nmocap
         while rclpy.ok():

@@ -71,23 +71,6 @@ def use_dds_profile():
         pass
 
 
-def lower_priority(niceness, logger=None):
-    """
-    Raise this process's CPU niceness to ``niceness`` (0..19) if it is lower; return it.
-
-    For work that may wait when the machine is busy (rendering, vision: they keep only the
-    newest frame), so that the control path (simulation, controller) gets the CPU first. Any
-    user may raise a niceness; lowering it again needs privileges, so this never lowers it.
-    """
-    current = os.nice(0)
-    if niceness > current:
-        current = os.nice(int(niceness) - current)
-        if logger is not None:
-            logger.info(f'CPU niceness {current}: the control path goes first when the '
-                        'machine is busy')
-    return current
-
-
 def init(args=None):
     """Initialise rclpy (with the package's DDS profile) without its signal handlers."""
     use_dds_profile()

@@ -29,7 +29,7 @@ import time
 
 import cv2
 
-from etdmp_ros.nodes._spin import lower_priority, run
+from etdmp_ros.nodes._spin import run
 from etdmp_ros.robot import detector_from_parameters, FrameSynchronizer, node_defaults
 from etdmp_ros.ros_conversions import (image_from_msg, image_msg, intrinsics_from_camera_info,
                                        pose_array_from_numpy, stamp_to_ns)
@@ -85,8 +85,6 @@ NODE_PARAMETERS = {
                          (0.0, 1000.0)),
     'warn_period': ('s; repeated warnings at most this often', (0.0, 3600.0)),
     'reliable_images': ('reliable image subscriptions (false: best effort)', None),
-    'niceness': ('CPU niceness the perception program gives itself at start (0..19; not in '
-                 'bringup): the control path goes first on a busy machine', (0, 19)),
 }
 ARRAYS = ('goal_hsv_low', 'goal_hsv_high', 'obstacle_hsv_low', 'obstacle_hsv_high')
 
@@ -201,8 +199,7 @@ class PerceptionNode(Node):
                 value = float(value)
             # HSV corners: integers, but `ros2 param set` users may type floats; validated below.
             self.declare_parameter(name, value, _descriptor(
-                description, value, value_range,
-                read_only=name in ('reliable_images', 'niceness'),
+                description, value, value_range, read_only=name == 'reliable_images',
                 dynamic=name in ARRAYS))
 
     def _values(self, updates=()):
@@ -363,11 +360,8 @@ class PerceptionNode(Node):
 
 
 def main(args=None):
-    """Run the perception node until Ctrl-C (or SIGTERM), at its ``niceness``."""
-    def make(nodes):
-        nodes.append(PerceptionNode())
-        lower_priority(nodes[-1].get_parameter('niceness').value, nodes[-1].get_logger())
-    return run(make, NODE_NAME, args)
+    """Run the perception node until Ctrl-C (or SIGTERM)."""
+    return run(lambda nodes: nodes.append(PerceptionNode()), NODE_NAME, args)
 
 
 if __name__ == '__main__':

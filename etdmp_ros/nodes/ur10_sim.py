@@ -90,8 +90,6 @@ NODE_PARAMETERS = {
     'depth_noise': ('m, standard deviation of the depth noise at 1 m (grows with z^2)',
                     (0.0, 1.0)),
     'multisamples': ('MSAA samples of the colour image (0 = fastest)', (0, 16)),
-    'camera_niceness': ('CPU niceness of the camera process (0..19): on a busy machine the '
-                        'physics and the control path go first, frames are skipped', (0, 19)),
 }
 
 

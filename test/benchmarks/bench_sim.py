@@ -14,7 +14,8 @@ this process and, for camera 15/30 Hz x control 125/500 Hz:
    images: Image + CameraInfo messages). CPU is process CPU (``time.process_time``), so
    llvmpipe's render threads and the DDS transport threads are counted;
 2. runs it PACED at real_time_factor 1 in its simulation thread, as ``ros2 run`` does: the
-   achieved real-time factor and the CPU share of the process (cores).
+   achieved real-time factor and the CPU share of the node (cores), its camera process (which
+   renders there) included.
 
 A subscriber process receives the camera and joint-state topics, like perception and the
 controller would (``--no-subscriber`` to leave it out); its delivered rates are printed. Target
@@ -37,6 +38,7 @@ os.environ.setdefault('MUJOCO_GL', 'egl')
 os.environ.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 50))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
+from etdmp_ros.cpu_monitor import process_cpu_seconds, tree_cpu_seconds  # noqa: E402
 from etdmp_ros.nodes.ur10_sim import COLOR_TOPIC, DEPTH_TOPIC, UR10SimNode  # noqa: E402
 from etdmp_ros.ros_conversions import image_msg  # noqa: E402
 import numpy as np  # noqa: E402
@@ -137,10 +139,16 @@ def paced(camera_rate, control_rate, seconds):
     """Run the node's own thread at real-time factor 1; return (achieved RTF, CPU cores)."""
     node = make_node(camera_rate, control_rate, 1.0)
     node.start()
-    time.sleep(0.5)
-    sim0, wall, cpu = node.sim.time, time.perf_counter(), time.process_time()
+    time.sleep(2.0)    # the camera process starts up
+
+    def cpu_now():     # this process and the node's camera process (not the subscriber's)
+        camera = node._camera.process.pid if node._camera is not None else None
+        return process_cpu_seconds(os.getpid()) + (tree_cpu_seconds(camera) if camera else 0.0)
+
+    sim0, wall, cpu = node.sim.time, time.perf_counter(), cpu_now()
     time.sleep(seconds)
-    sim1, wall, cpu = node.sim.time, time.perf_counter() - wall, time.process_time() - cpu
+    sim1, wall = node.sim.time, time.perf_counter() - wall
+    cpu = cpu_now() - cpu
     node.stop()
     node.destroy_node()
     return (sim1 - sim0) / wall, cpu / wall
