@@ -9,13 +9,14 @@ the controller's reference is checked to be the plan at its nominal speed, so a 
 reference cannot hide a lag. Timing thresholds leave room for a loaded 2-core machine.
 """
 
+import os
 import signal
 import threading
 import time
 
 from conftest import isolate_dds, NodeProcess
 from controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
-from etdmp_ros.nodes._spin import BackgroundNode
+from etdmp_ros.nodes._spin import BackgroundNode, normal_scheduling, set_realtime_priority
 from etdmp_ros.robot import matrix_to_quaternion, PoseTrajectory, UR10Model
 from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, path_from_cdr, serialize_path,
                                        stamp_to_ns)
@@ -437,6 +438,50 @@ def test_parameters_are_validated(rig):
     assert not c.set_parameter('approach_speed', -1.0).successful
     assert c.set_parameter('approach_speed', 0.3).successful
     assert c.set_parameter('approach_speed', 0.25).successful
+
+
+def test_control_steps_run_at_the_configured_priority(rig):
+    # The executor's thread (the process's main thread) at SCHED_FIFO 50, Fast DDS's threads
+    # (named dds.*) at normal priority; or, where that is not permitted, a warning.
+    pid = rig.controller.process.pid
+    policies = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        try:
+            with open(f'/proc/{pid}/task/{tid}/comm') as comm:
+                name = comm.read().strip()
+            policies[int(tid)] = (name, os.sched_getscheduler(int(tid)),
+                                  os.sched_getparam(int(tid)).sched_priority)
+        except (FileNotFoundError, ProcessLookupError):
+            pass
+    middleware = {p[1:] for p in policies.values() if p[0].startswith('dds.')}
+    assert middleware == {(os.SCHED_OTHER, 0)}, policies
+    log = rig.controller.log()
+    if 'SCHED_FIFO priority 50 refused' in log:     # no CAP_SYS_NICE / rtprio limit here
+        assert policies[pid][1:] == (os.SCHED_OTHER, 0), policies
+    else:
+        assert 'control steps at SCHED_FIFO priority 50' in log, log
+        assert policies[pid][1:] == (os.SCHED_FIFO, 50), policies
+
+
+def test_a_refused_priority_changes_nothing_and_a_worker_can_drop_one():
+    result = {}
+
+    def worker():
+        result['reason'] = set_realtime_priority(100)        # above SCHED_FIFO's 99
+        result['policy'] = os.sched_getscheduler(0)
+        result['unchanged'] = set_realtime_priority(0)
+        result['granted'] = set_realtime_priority(10) == ''  # where permitted
+        result['raised'] = os.sched_getscheduler(0)
+        normal_scheduling()
+        result['lowered'] = os.sched_getscheduler(0)
+
+    thread = threading.Thread(target=worker)
+    thread.start()
+    thread.join()
+    assert result['reason'].startswith('SCHED_FIFO priority 100 refused'), result
+    assert result['policy'] == os.SCHED_OTHER and result['unchanged'] == ''
+    assert result['raised'] == (os.SCHED_FIFO if result['granted'] else os.SCHED_OTHER)
+    assert result['lowered'] == os.SCHED_OTHER
 
 
 def test_singularity_halt_through_ros(rig):

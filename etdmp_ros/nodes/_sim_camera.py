@@ -3,9 +3,10 @@ The simulated camera of ur10_sim, in a process of its own (``ur10_sim`` starts a
 
 Rendering a 640x480 colour + depth frame costs ~7 ms of CPU and publishing it holds Python's
 interpreter lock for a millisecond or more (rclpy converts and sends the 1.5 MB while holding
-it). In the simulation's process that made its loop late: at 500 Hz, 13 ticks in 11 s came
-more than 3 periods late with the camera rendering there, none without it (ur10_sim alone,
-its own count). So the simulation only takes a snapshot of the scene when a frame is due
+it). In the simulation's process that made its loop late: at 500 Hz with an image subscriber,
+1 to 11 ticks in 11 s came more than 3 periods late with the camera rendering there, 1 to 3
+with it here, most of them in the first 0.1 s while this process starts (ur10_sim alone, its
+own count, 2 runs each). So the simulation only takes a snapshot of the scene when a frame is due
 (:meth:`UR10Sim.camera_state`, microseconds) and sends it here over a local socket, without
 ever waiting: if this process is behind, it renders the newest snapshot and skips the others.
 
@@ -89,7 +90,7 @@ def main(argv=None):
     depth = node.create_publisher(Image, topics['depth'], images)
     infos = [node.create_publisher(CameraInfo, topics[name], QoSProfile(depth=10))
              for name in ('color_info', 'depth_info')]
-    published = skipped = 0
+    published = skipped = early = 0       # early: snapshots sent while this process started
     try:
         sim = build_sim(json.loads(args.parameters))
         info = camera_info_msg(sim.intrinsics, frame_id=OPTICAL_FRAME)
@@ -104,7 +105,11 @@ def main(argv=None):
                     newer = link.recv(65536)
                     if not newer:
                         break
-                    data, skipped = newer, skipped + 1
+                    data = newer
+                    if published:
+                        skipped += 1
+                    else:
+                        early += 1
             except BlockingIOError:
                 pass
             link.setblocking(True)
@@ -123,7 +128,7 @@ def main(argv=None):
         return 1
     finally:
         log.info(f'camera stopped: {published} frames published, {skipped} skipped (rendering '
-                 'slower than the camera rate)')
+                 f'slower than the camera rate), {early} sent before the camera was ready')
         if 'sim' in locals():
             sim.close()
         node.destroy_node()

@@ -10,8 +10,9 @@ spins in short slices that check it; the caller then stops its nodes while the c
 Executor. rclpy's EventsExecutor (``rclpy.experimental``, in Jazzy since rclpy 7.1.4) when it is
 there: it dispatches each message from the middleware's event callbacks in C++, where the
 SingleThreadedExecutor rebuilds and scans a wait set in Python for every wake-up. Measured on
-this machine kind (test/benchmarks/bench_system.py, make demo G): the closed loop's CPU fell
-from about 1.5 to 1.05 cores, a 125 Hz JointState subscription from 0.07 to 0.02 cores. It does
+this machine kind (test/benchmarks/bench_system.py, letter G, medians of 3): with every other
+change of the budget in place, the closed loop takes 0.87 cores with it and 1.24 with the
+SingleThreadedExecutor; a 125 Hz JointState subscription alone 0.03 against 0.07 cores. It does
 not support guard conditions (no node here uses one). ``ETDMP_EXECUTOR=single`` selects the
 SingleThreadedExecutor (e.g. to rule the executor out when debugging). rclpy's
 MultiThreadedExecutor is never used: next to the simulation's 125 Hz topics it keeps a core busy
@@ -110,14 +111,45 @@ def freeze_heap():
     Collect garbage once, then exempt every object alive now from Python's cycle collector.
 
     A node's heap after start-up (rclpy, numpy, Pinocchio, numba, MuJoCo, OpenCV, the learned
-    skills) holds hundreds of thousands of objects that live as long as the process. Each full
-    collection traversed all of them: 30-150 ms pauses measured in every node (gc.callbacks)
-    on this machine kind, long enough to miss ten control periods or trip the 0.1 s joint-state
-    watchdog. Frozen (gc.freeze), they are never traversed again; objects made later are
-    collected as usual.
+    skills) holds 80 000-130 000 objects that live as long as the process, and each full
+    collection traversed all of them: 17 ms (perception) to 50 ms (dmp_server, controller) on
+    this machine kind, up to six control periods (``test/benchmarks/bench_system.py
+    --gc-pauses``). Frozen (gc.freeze), they are never traversed again (a full collection then
+    takes well under 0.1 ms); objects made later are collected as usual. A full collection runs
+    only when many objects have survived the younger generations, which is why the demo's
+    figures seldom show one.
     """
     gc.collect()
     gc.freeze()
+
+
+def set_realtime_priority(priority):
+    """
+    Put the calling thread under SCHED_FIFO at ``priority`` (1-99); 0 changes nothing.
+
+    Only this thread: the one that spins the executor, as ros2_control raises only its update
+    loop. The middleware's threads (Fast DDS receives in threads of its own) keep normal
+    scheduling; threads this one starts later inherit the policy (the EventsExecutor's timer
+    thread; :func:`normal_scheduling` lets a worker give it up). Needs CAP_SYS_NICE or an
+    rtprio limit (``ulimit -r``, /etc/security/limits.conf) of at least ``priority``. Returns
+    '' on success, else why not (and changes nothing). The kernel keeps 5 % of each second for
+    other tasks (``sched_rt_runtime_us``), so a runaway thread cannot lock the machine up.
+    """
+    if priority == 0:
+        return ''
+    if not hasattr(os, 'sched_setscheduler'):
+        return 'this platform has no SCHED_FIFO'
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        return f'SCHED_FIFO priority {priority} refused ({exc.strerror})'
+    return ''
+
+
+def normal_scheduling():
+    """Return the calling thread to normal scheduling (SCHED_OTHER), e.g. a worker thread."""
+    if hasattr(os, 'sched_getscheduler') and os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 def run(make_nodes, name, args=None, startup_errors=()):

@@ -31,7 +31,7 @@ import sys
 import threading
 import time
 
-from etdmp_ros.nodes._spin import run
+from etdmp_ros.nodes._spin import normal_scheduling, run, set_realtime_priority
 from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, node_defaults,
                              trajectory_from_path, TrajectoryController, TrajectoryError,
                              UR10Model)
@@ -40,7 +40,8 @@ from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_fro
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
@@ -107,6 +108,9 @@ PARAMETERS = {
     'untimed_path_angular_speed': ('rad/s, the same for rotations', (0.001, 3.0), True),
     'check_paths': ('check each path with position IK before moving (reach, joint limits, '
                     'singularities)', None, True),
+    'thread_priority': ('SCHED_FIFO priority (1-99) of the thread that runs the control steps; '
+                        '0 = normal scheduling. Needs CAP_SYS_NICE or an rtprio limit, else a '
+                        'warning and normal scheduling', (0, 99), False),
 }
 SCENE_PARAMETERS = {
     'tool_offset': 'm, tool tip in the flange frame tool0 (config/scene.yaml)',
@@ -119,7 +123,10 @@ CONFIG_NAMES = {'control_rate': 'rate', 'joint_acceleration_limits': 'accelerati
 def _descriptor(name, description, value_range, dynamic):
     descriptor = ParameterDescriptor(name=name, description=description,
                                      read_only=not dynamic)
-    if value_range is not None:
+    if value_range is not None and isinstance(value_range[0], int):
+        descriptor.integer_range = [IntegerRange(
+            from_value=value_range[0], to_value=value_range[1], step=1)]
+    elif value_range is not None:
         descriptor.floating_point_range = [FloatingPointRange(
             from_value=float(value_range[0]), to_value=float(value_range[1]), step=0.0)]
     return descriptor
@@ -225,6 +232,24 @@ class ControllerNode(Node):
             f'{np.round(self.model.tool_offset, 4).tolist()} m, actuation delay '
             f'{self.controller.delay * 1000:.1f} ms; pause: {self.get_name()}/pause')
 
+    def use_thread_priority(self):
+        """
+        Schedule the calling thread by the parameter thread_priority (the node program).
+
+        Call from the thread that will spin the executor (the control steps), once the node
+        exists. The program makes this change, not the node, so a test or a composed process
+        keeps its scheduling. The path checks run in threads of normal priority.
+        """
+        priority = self.get_parameter('thread_priority').value
+        reason = set_realtime_priority(priority)
+        if reason:
+            self.get_logger().warning(
+                f'{reason}: the control steps run under normal scheduling and may be late when '
+                'the machine is busy (grant CAP_SYS_NICE or an rtprio limit, or set '
+                'thread_priority 0)')
+        elif priority:
+            self.get_logger().info(f'control steps at SCHED_FIFO priority {priority}')
+
     # ---------------------------------------------------------------------------- parameters
     def _declare_parameters(self):
         defaults = node_defaults(NODE_NAME)
@@ -234,8 +259,9 @@ class ControllerNode(Node):
                                                        read_only=True))
         for name, (description, value_range, dynamic) in PARAMETERS.items():
             value = defaults[name]
-            if value_range is not None and isinstance(value, int):
-                value = float(value)
+            if value_range is not None and isinstance(value, int) \
+                    and not isinstance(value_range[0], int):
+                value = float(value)    # a float parameter written as 125 in YAML
             self.declare_parameter(name, _float_list(value),
                                    _descriptor(name, description, value_range, dynamic))
         names = list(SCENE_PARAMETERS) + list(PARAMETERS)
@@ -390,6 +416,7 @@ class ControllerNode(Node):
 
     def _accept_path(self, generation, stamps, positions, quaternions):
         """Time, check and hand over a received path (worker thread; the newest path wins)."""
+        normal_scheduling()         # not real-time work (the thread inherits the executor's)
         q, rotation = self._wait_for_robot()
         if q is None:
             self.get_logger().error(f'path ignored: no joint states for {WAIT_FOR_JOINT_STATES:g}'
@@ -464,7 +491,12 @@ def main(args=None):
     """Run the controller until Ctrl-C (or SIGTERM); send zero velocity before exiting."""
     # Let the control steps preempt a path check (worker thread) within 1 ms instead of 5 ms.
     sys.setswitchinterval(0.001)
-    return run(lambda nodes: nodes.append(ControllerNode()), NODE_NAME, args)
+
+    def make_nodes(nodes):
+        nodes.append(ControllerNode())
+        nodes[-1].use_thread_priority()
+
+    return run(make_nodes, NODE_NAME, args)
 
 
 if __name__ == '__main__':

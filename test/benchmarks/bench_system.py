@@ -23,7 +23,10 @@ e-series, idle only). ``busy`` adds one process busy-looping on a core for the w
 - tracking RMS / max (true pen tip vs the controller's reference) and stale-input halts.
 
 It prints one table per skill and rate with the median of the runs per load, the targets and
-whether each is met. ``--runs 10 --load busy --skills G`` is the stress check of "no stale
+whether each is met. ``--gc-pauses`` instead times, for each node as its program builds it, a
+full collection of Python's cycle collector before and after ``_spin.freeze_heap`` (what a
+node's 0.1 s watchdog and 8 ms period would see when one happens; they are rare, so the demo
+runs above seldom show one). ``--runs 10 --load busy --skills G`` is the stress check of "no stale
 input halt in 10 loaded runs". Timing depends on the machine and on what else runs on it.
 """
 
@@ -31,12 +34,15 @@ import argparse
 import json
 import os
 from pathlib import Path
+import shutil
 import statistics
 import sys
 import tempfile
 import time
 
 REPO = Path(__file__).resolve().parents[2]
+#: Where the files of a failed run are kept (the runs themselves write to a temporary folder).
+FAILED_RUNS = REPO / 'out' / 'bench_system_failed'
 sys.path.insert(0, str(REPO / 'test'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
@@ -122,7 +128,11 @@ def run_once(skill, load, rate, out, extra=()):
         try:
             metrics, _ = demo.run_demo(options, env)
         except demo.DemoError as err:
-            print(f'    run failed: {err}'.splitlines()[0], flush=True)
+            kept = FAILED_RUNS / Path(out).name
+            shutil.rmtree(kept, ignore_errors=True)
+            shutil.copytree(out, kept)        # the run's logs outlive the temporary directory
+            reason = str(err).splitlines()[0].split(' (files written')[0]
+            print(f'    run failed: {reason} (logs kept in {kept})', flush=True)
             saved = Path(out) / 'metrics.json'
             if not saved.exists():   # failed before anything could be measured
                 return {'stale_halts': int('stale-input' in str(err)), 'failed': str(err)}
@@ -167,6 +177,51 @@ def table(skill, rate, results):
     return '\n'.join(lines)
 
 
+#: Run in a fresh process per node: build it as its program does, time full collections.
+GC_PAUSE_PROGRAM = """
+import gc, importlib, statistics, sys, time
+from etdmp_ros.nodes import _spin
+module, cls = sys.argv[1].split(':')
+_spin.init()
+node = getattr(importlib.import_module(module), cls)()
+gc.collect()
+def pause():
+    times = []
+    for _ in range(5):
+        start = time.perf_counter()
+        gc.collect()
+        times.append(time.perf_counter() - start)
+    return 1e3 * statistics.median(times)
+objects = len(gc.get_objects())
+before = pause()
+_spin.freeze_heap()
+print(objects, before, pause())
+getattr(node, 'stop', lambda: None)()
+node.destroy_node()
+"""
+GC_NODES = (('controller', 'etdmp_ros.nodes.controller:ControllerNode'),
+            ('dmp_server', 'etdmp_ros.nodes.dmp_server:DmpServer'),
+            ('perception', 'etdmp_ros.nodes.perception:PerceptionNode'),
+            ('ur10_sim', 'etdmp_ros.nodes.ur10_sim:UR10SimNode'))
+
+
+def gc_pauses():
+    """Print the full-collection pause of each node before and after freezing its heap."""
+    import subprocess
+    env = dict(os.environ, **demo.isolated_environment())
+    print('| node | objects after start-up | full collection, before freeze (ms) | after (ms) |')
+    print('|---|---|---|---|')
+    for name, target in GC_NODES:
+        out = subprocess.run([sys.executable, '-c', GC_PAUSE_PROGRAM, target], env=env,
+                             capture_output=True, text=True, timeout=300)
+        if out.returncode:
+            print(f'| {name} | failed: {out.stderr.strip().splitlines()[-1:]} | | |')
+            continue
+        objects, before, after = out.stdout.split()[-3:]
+        print(f'| {name} | {int(objects)} | {float(before):.1f} | {float(after):.2f} |',
+              flush=True)
+
+
 def main(argv=None):
     """Run the benchmark; print the tables; return 0."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
@@ -179,7 +234,13 @@ def main(argv=None):
     parser.add_argument('--json', type=Path, help="also write every run's figures here")
     parser.add_argument('--set', action='append', default=[], metavar='NODE.NAME=YAML',
                         help='a node parameter for every run, e.g. controller.use_sim_time=true')
+    parser.add_argument('--gc-pauses', action='store_true',
+                        help="only time each node's full garbage collection before and after "
+                        'freezing its heap')
     args = parser.parse_args(argv)
+    if args.gc_pauses:
+        gc_pauses()
+        return 0
     extra = []
     for item in args.set:
         key, _, value = item.partition('=')
