@@ -123,6 +123,26 @@ def freeze_heap():
     gc.freeze()
 
 
+#: Seconds of messages a publisher at the control rate keeps for its reliable readers.
+HISTORY_SECONDS = 1.0
+
+
+def rate_qos(rate):
+    """
+    Return the QoS of a reliable publisher at ``rate`` Hz: a history of :data:`HISTORY_SECONDS`.
+
+    A reliable writer whose history is full of samples that some reader has not acknowledged
+    yet waits in ``publish()`` for that reader, up to the DDS default max_blocking_time of
+    0.1 s (Fast DDS, StatefulWriter::try_remove_change). With rclpy's usual depth of 10, one
+    reader starved of CPU for 80 ms at 125 Hz (the demo's recorder, dmp_server, next to busy
+    processes) blocked the simulation's /joint_states for 100 ms and tripped the controller's
+    0.1 s watchdog. A second of history leaves a slow reader that much time; the samples are
+    a few hundred bytes.
+    """
+    from rclpy.qos import QoSProfile
+    return QoSProfile(depth=max(10, int(round(rate * HISTORY_SECONDS))))
+
+
 def set_realtime_priority(priority):
     """
     Put the calling thread under SCHED_FIFO at ``priority`` (1-99); 0 changes nothing.

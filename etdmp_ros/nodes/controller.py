@@ -31,7 +31,7 @@ import sys
 import threading
 import time
 
-from etdmp_ros.nodes._spin import normal_scheduling, run, set_realtime_priority
+from etdmp_ros.nodes._spin import normal_scheduling, rate_qos, run, set_realtime_priority
 from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, node_defaults,
                              trajectory_from_path, TrajectoryController, TrajectoryError,
                              UR10Model)
@@ -211,10 +211,12 @@ class ControllerNode(Node):
         self._tracked = TrackingSummary(self.period)
         self._check_lock = threading.Lock()
 
-        self._command_pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, 10)
-        self._pose_pub = self.create_publisher(PoseStamped, TOOL_POSE_TOPIC, 10)
-        self._error_pub = self.create_publisher(Float64, ERROR_TOPIC, 10)
-        self._reference_pub = self.create_publisher(PoseStamped, REFERENCE_TOPIC, 10)
+        # A second of history: a slow reader must never block a control step's publish().
+        rate = rate_qos(self.config.rate)
+        self._command_pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, rate)
+        self._pose_pub = self.create_publisher(PoseStamped, TOOL_POSE_TOPIC, rate)
+        self._error_pub = self.create_publisher(Float64, ERROR_TOPIC, rate)
+        self._reference_pub = self.create_publisher(PoseStamped, REFERENCE_TOPIC, rate)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._status_pub = self.create_publisher(String, STATUS_TOPIC, latched)
         # Depth 1: after a stall only the newest joint state matters (no backlog of old ones).

@@ -29,7 +29,7 @@ import threading
 import time
 
 from etdmp_ros.nodes._sim_camera import command as camera_command, encode as camera_snapshot
-from etdmp_ros.nodes._spin import run
+from etdmp_ros.nodes._spin import rate_qos, run
 from etdmp_ros.robot import (MAX_OBSTACLES, node_defaults, parse_goal_position,
                              parse_obstacle_positions, SCENE_PARAMETERS, SceneConfig, UR10Sim)
 from etdmp_ros.ros_conversions import (camera_info_msg, image_msg, joint_state_msg, ns_to_stamp,
@@ -163,11 +163,13 @@ class UR10SimNode(Node):
                       'max_tick_gap': 0.0, 'late_ticks': 0}
 
         reliable = QoSProfile(depth=10)
-        self._joint_pub = self.create_publisher(JointState, '/joint_states', reliable)
-        self._clock_pub = self.create_publisher(Clock, '/clock', reliable)
+        # A second of history: a slow reader must never block the simulation's publish().
+        state = rate_qos(1.0 / self.tick_period)
+        self._joint_pub = self.create_publisher(JointState, '/joint_states', state)
+        self._clock_pub = self.create_publisher(Clock, '/clock', state)
         self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, reliable)
         self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, reliable)
-        self._tool_pub = self.create_publisher(PointStamped, TOOL_TIP_TOPIC, reliable)
+        self._tool_pub = self.create_publisher(PointStamped, TOOL_TIP_TOPIC, state)
         self._camera_publishers = None   # made by frame(), for run_for(): images in-process
         self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, reliable)
         self.add_on_set_parameters_callback(self._validate_parameters)
