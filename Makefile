@@ -10,13 +10,14 @@ STAMP       := $(VENV)/.installed
 PYTEST_ARGS ?= -q test
 LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 
-.PHONY: venv test demo reproduce docs bench clean distclean help
+.PHONY: venv test test-fast demo reproduce docs bench clean distclean help
 .DEFAULT_GOAL := help
 
 help:
 	@echo "make demo       headless closed-loop demo: the UR10 writes a G (SKILL=W|P|R|wipe|stir, METHOD=dmp)"
 	@echo "make reproduce  the paper's letter experiments, offline -> out/reproduce/"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
+	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
 	@echo "make docs       regenerate the README pictures in docs/img/"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
 	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system"
@@ -42,6 +43,10 @@ $(STAMP): requirements.txt setup.py setup.cfg | $(VENV_PY)
 
 test: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
+
+# The suites are markers (test/conftest.py SUITES): unit, nodes, system.
+test-fast: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -m unit test
 
 # The closed loop: camera -> perception -> /generalize -> controller -> MuJoCo UR10 (out/demo/).
 SKILL  ?= G

@@ -26,6 +26,45 @@ SOURCE_LITTER = ('build', 'install', 'log', '*.egg-info')
 _DOMAIN_IDS = itertools.count(1 + os.getpid() % 50)
 
 
+#: Every test module in one suite, marked so (``pytest -m unit``; ``make test-fast``):
+#: ``unit`` runs in this process without ROS processes (about 30 s in all, linters included),
+#: ``nodes`` starts installed executables, ``system`` runs the whole closed loop.
+SUITES = {
+    'unit': ('test_cli', 'test_controller_sim', 'test_demos', 'test_dmp_obstacles',
+             'test_dmp_similarity', 'test_dmp_skill', 'test_flake8', 'test_ik',
+             'test_paper_reproduction', 'test_pep257', 'test_planning', 'test_readme',
+             'test_robot_model', 'test_ros_conversions_geometry', 'test_ros_conversions_sim',
+             'test_sim', 'test_skill_library', 'test_vision'),
+    'nodes': ('test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
+              'test_install_layout', 'test_perception_node', 'test_ur10_sim_node'),
+    'system': ('test_end_to_end',),
+}
+_SUITE_OF = {module: suite for suite, modules in SUITES.items() for module in modules}
+
+
+def pytest_configure(config):
+    """Register the suite markers; every test module of this folder must be in exactly one."""
+    present = {path.stem for path in Path(__file__).parent.glob('test_*.py')}
+    listed = [module for modules in SUITES.values() for module in modules]
+    if sorted(listed) != sorted(present):
+        raise pytest.UsageError(
+            f'test/conftest.py SUITES disagrees with the test modules: unlisted '
+            f'{sorted(present - set(listed))}, missing {sorted(set(listed) - present)}, '
+            f'listed twice {sorted({m for m in listed if listed.count(m) > 1})}')
+    for suite in SUITES:
+        config.addinivalue_line('markers', f'{suite}: a test of the {suite} suite (conftest)')
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark every test with its module's suite; a module in no suite is an error."""
+    for item in items:
+        module = item.path.stem
+        if module not in _SUITE_OF:
+            raise pytest.UsageError(f'{module} is in no suite: add it to SUITES in '
+                                    'test/conftest.py')
+        item.add_marker(getattr(pytest.mark, _SUITE_OF[module]))
+
+
 def _litter():
     return {p.name for pattern in SOURCE_LITTER for p in REPO.glob(pattern)}
 
