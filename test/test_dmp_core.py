@@ -1,6 +1,8 @@
 """
-The three pieces under every skill, tested directly: the Euclidean transform, the forcing term
-and the numpy reference rollout (the oracle the numba rollout is checked against elsewhere).
+The three pieces under every skill, tested directly.
+
+The Euclidean transform, the forcing term and the numpy reference rollout (the oracle the numba
+rollout is checked against elsewhere).
 
 Each is compared with what it must be by construction: rotations that turn I_C onto I_D with the
 signed angle (the paper's Eq. 10 corrected), normalised kernels that vanish with the phase, and
