@@ -24,11 +24,9 @@ import math
 from pathlib import Path
 
 from etdmp_ros.dmp import (clearance, DemonstrationError, GeneralizationError, learn, load_demo,
-                           OBSTACLE_MARGIN, similarity)
+                           METHODS, OBSTACLE_MARGIN, similarity)
 import numpy as np
 
-METHODS = ('etdmp', 'dmp')
-METHOD_LABELS = {'etdmp': 'ET-DMP', 'dmp': 'DMP'}
 QUADRANTS = ('I', 'II', 'III', 'IV')
 
 # Where the obstacles of the Figs. 7-8 runs sit on the obstacle-free ET-DMP path, as fractions of

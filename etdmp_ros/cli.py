@@ -19,10 +19,11 @@ import math
 from pathlib import Path
 import sys
 
-from etdmp_ros._reproduce import (compare_methods, format_report, METHOD_LABELS, METHODS,
-                                  reproduce, ReproductionError, write_metrics)
+from etdmp_ros._reproduce import (compare_methods, format_report, reproduce, ReproductionError,
+                                  write_metrics)
 from etdmp_ros.dmp import (builtin_demo, builtin_demo_names, DemonstrationError,
-                           GeneralizationError, learn, load_demo, OBSTACLE_MARGIN)
+                           GeneralizationError, learn, load_demo, METHOD_LABELS, METHODS,
+                           OBSTACLE_MARGIN)
 import numpy as np
 
 PROG = 'etdmp'

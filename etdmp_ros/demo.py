@@ -73,7 +73,7 @@ import time
 from etdmp_ros._paths import share_dir
 from etdmp_ros._reproduce import quadrant
 from etdmp_ros.cpu_monitor import CpuMonitor
-from etdmp_ros.dmp import builtin_demo, learn, nrmse
+from etdmp_ros.dmp import builtin_demo, learn, METHOD_LABELS, METHODS, nrmse
 from etdmp_ros.nodes._spin import BackgroundNode
 from etdmp_ros.planning import place_demo
 from etdmp_ros.plotting import DEMO_STYLE, METHOD_STYLE
@@ -100,8 +100,6 @@ NODES = ('ur10_sim', 'perception', 'dmp_server', 'controller')
 #: perception and the controller stamp with their inputs' stamps (images, joint states).
 SIM_TIME_NODES = ('dmp_server',)
 SKILLS = ('G', 'P', 'R', 'W', 'wipe', 'stir')
-METHODS = ('etdmp', 'dmp')
-METHOD_NAMES = {'etdmp': 'ET-DMP', 'dmp': 'DMP'}
 #: Layouts of the 2D skills other than G on the shipped scene (default start pose and task
 #: plane): ur10_sim's goal_position and obstacle_positions (base_link, m). G uses scene.yaml.
 LAYOUTS = {
@@ -900,7 +898,7 @@ def plot_run(path, run, metrics, extra):
     fig.legend(handles.values(), handles.keys(), loc='outside lower center', ncol=2,
                fontsize=8, frameon=False)
     fig.suptitle(
-        f'{scene.skill}: {METHOD_NAMES[run.method]} executed by the simulated UR10\n'
+        f'{scene.skill}: {METHOD_LABELS[run.method]} executed by the simulated UR10\n'
         f'start direction {metrics["start_turn_deg"]:+.0f} deg from the demonstration\'s '
         f'(quadrant {metrics["start_quadrant"]} of the goal; demonstration: '
         f'{metrics["demo_quadrant"]})\ntracking error RMS {metrics["tracking_rms_mm"]:.2f} mm, '
@@ -1160,11 +1158,11 @@ def run_demo(options, env):
         recorder.set_server_parameters(method=other, execute=False)
         _, o_t, o_x, _, reason = _generalize(recorder, nodes, scene.explicit_goal)
         if len(o_x):
-            progress(f'{METHOD_NAMES[other]} plan (not executed): {len(o_x)} poses over '
+            progress(f'{METHOD_LABELS[other]} plan (not executed): {len(o_x)} poses over '
                      f'{o_t[-1]:.2f} s')
             other_plan = (other, o_t, o_x)
         else:
-            progress(f'{METHOD_NAMES[other]} plan refused: {reason}')
+            progress(f'{METHOD_LABELS[other]} plan refused: {reason}')
             other_plan = (other, None, reason)
         recorder.set_server_parameters(method=options.method, execute=True)
         n_status = len(recorder.state())
@@ -1178,7 +1176,7 @@ def run_demo(options, env):
         # skills) and ends at the goal it was given (the perceived one, projected).
         start = p_x[0]
         goal = p_x[-1] if scene.explicit_goal is None else scene.explicit_goal
-        progress(f'{METHOD_NAMES[options.method]} plan: {len(p_x)} poses over {p_t[-1]:.2f} s,'
+        progress(f'{METHOD_LABELS[options.method]} plan: {len(p_x)} poses over {p_t[-1]:.2f} s,'
                  f' published on /etdmp/path; the controller executes it')
         deadline = time.monotonic() + p_t[-1] + options.timeout
         seen, end_ns, failure = 0, None, None
@@ -1254,7 +1252,7 @@ def run_demo(options, env):
 def summary(metrics, written):
     """Return the short summary printed at the end."""
     m = metrics
-    method = METHOD_NAMES[m['method']]
+    method = METHOD_LABELS[m['method']]
     other = 'dmp' if m['method'] == 'etdmp' else 'etdmp'
     value = m['nrmse_dmp_baseline'] if other == 'dmp' else m.get('nrmse_etdmp_plan')
     lines = [
@@ -1262,7 +1260,7 @@ def summary(metrics, written):
         f'goal (demonstration: {m["demo_quadrant"]}; start direction turned by '
         f'{m["start_turn_deg"]:+.0f} deg), goal: {m["goal_source"]}',
         f'  nRMSE vs the demonstration: {method} plan {_fmt(m["nrmse_plan"])}, executed pen '
-        f'trace {_fmt(m["nrmse_trace"])}; {METHOD_NAMES[other]} plan (not executed) '
+        f'trace {_fmt(m["nrmse_trace"])}; {METHOD_LABELS[other]} plan (not executed) '
         + ('refused' if value is None else _fmt(value)),
         f'  tracking error RMS {m["tracking_rms_mm"]:.3f} mm, max {m["tracking_max_mm"]:.3f} mm;'
         f' goal error {m["goal_error_mm"]:.2f} mm; min obstacle clearance '

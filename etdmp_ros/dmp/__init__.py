@@ -28,13 +28,14 @@ from ._demos import builtin_demo, builtin_demo_names, Demonstration, load_demo, 
 from ._errors import DemonstrationError, GeneralizationError
 from ._obstacles import obstacle_coupling, ObstacleGains
 from ._similarity import clearance, nrmse, Similarity, similarity
-from ._skill import FORMULATIONS, learn, METHODS, OBSTACLE_MARGIN, Skill, Trajectory
+from ._skill import (FORMULATIONS, learn, METHOD_LABELS, METHODS, OBSTACLE_MARGIN, Skill,
+                     Trajectory)
 from ._transform import euclidean_transform, EuclideanTransform
 
 __all__ = [
     'Demonstration', 'DemonstrationError', 'EuclideanTransform', 'FORMULATIONS',
-    'GeneralizationError', 'METHODS', 'OBSTACLE_MARGIN', 'ObstacleGains', 'Similarity', 'Skill',
-    'Trajectory',
+    'GeneralizationError', 'METHOD_LABELS', 'METHODS', 'OBSTACLE_MARGIN', 'ObstacleGains',
+    'Similarity', 'Skill', 'Trajectory',
     'builtin_demo', 'builtin_demo_names', 'clearance', 'euclidean_transform', 'learn',
     'load_demo', 'nrmse', 'obstacle_coupling', 'save_demo', 'similarity',
 ]

@@ -14,6 +14,8 @@ from ._transform import EPS, EuclideanTransform, transforms
 
 FORMULATIONS = ('ijspeert', 'hoffmann')
 METHODS = ('etdmp', 'dmp')
+#: How the methods are named in reports, plots and logs.
+METHOD_LABELS = {'etdmp': 'ET-DMP', 'dmp': 'DMP'}
 #: Below this fraction of the demonstration's size, ``(g_D - x0_D)_i`` counts as zero for the
 #: plain Ijspeert DMP, whose per-dimension scaling would divide by it.
 PLAIN_DMP_MIN_OFFSET = 1e-3
