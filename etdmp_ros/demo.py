@@ -147,6 +147,10 @@ DEFINITIONS = {
                       'acceleration limit_j over all joint-velocity commands received',
     'quadrant': 'quadrant of start - goal in the task plane (I: +x +y, II: -x +y, ...); for '
                 'the demonstration in its own coordinates',
+    'moving_commands_per_s': 'non-zero joint-velocity commands per simulated second from the '
+                             'first to the last of them (approach, plan, hold); the time from '
+                             'the /generalize call to the first is '
+                             'first_moving_command_after_call_s',
 }
 
 
@@ -1022,8 +1026,14 @@ def system_figures(monitor, rec, call_ns, end_ns, nodes):
     t = rec['command_time']
     inside = (t >= call_ns) & (t <= (end_ns or 0))
     moving = inside & np.any(rec['commands'] != 0.0, axis=1) if len(t) else inside
-    if end_ns and end_ns > call_ns:
-        figures['moving_commands_per_s'] = float(moving.sum() / ((end_ns - call_ns) * 1e-9))
+    moving_t = t[moving]
+    if len(moving_t) >= 2:
+        # While the arm moves: from the first non-zero command to the last. The time before
+        # the first (planning, the path check, numba loading a kernel) is a latency, reported
+        # apart; zero commands in between (a halt) count against the rate.
+        span = (moving_t[-1] - moving_t[0]) * 1e-9
+        figures['moving_commands_per_s'] = float((len(moving_t) - 1) / span) if span > 0 else 0.0
+        figures['first_moving_command_after_call_s'] = float((moving_t[0] - call_ns) * 1e-9)
     periods = np.diff(rec['command_wall_time'][inside]) * 1e3
     if len(periods):
         figures['command_period_ms'] = {'p50': float(np.median(periods)),

@@ -88,8 +88,8 @@ def test_generalize_with_empty_frame_ids_plans_from_the_tool(run):
 
 def test_commands_move_the_arm_within_its_limits(run):
     m, _ = run
-    # Commands at the controller's 125 Hz while the arm moves (approach + plan + hold), per
-    # simulated second, idle or next to a busy core.
+    # Commands at the controller's 125 Hz while the arm moves (approach + plan + hold: from the
+    # first non-zero command to the last), per simulated second, idle or next to a busy core.
     rate = float(read_parameter_file(config_path('controller.yaml'), 'controller')['control_rate'])
     assert m['system']['moving_commands_per_s'] >= 0.95 * rate
     assert 0.05 < m['max_joint_velocity_ratio'] <= 1.0 + 1e-9
@@ -165,3 +165,31 @@ def test_quadrants_and_the_pen_tip():
         ['I', 'II', 'III', 'IV']
     from etdmp_ros.robot._sim import PEN_TIP_RADIUS
     assert demo.PEN_TIP_RADIUS == PEN_TIP_RADIUS
+
+
+def test_command_rate_is_taken_while_the_arm_moves():
+    class Logs:
+
+        def log(self, node):
+            return ''
+
+    period = 8_000_000                                   # ns, 125 Hz
+    call = 1_000_000_000
+    t = call + period * np.arange(-50, 1200)             # commands from before the call on
+    commands = np.zeros((len(t), 6))
+    first = 110                                          # 0.48 s after the call: planning
+    commands[first:first + 1000, 0] = 0.1                # 8 s of motion, then zeros
+    rec = {'command_time': t, 'commands': commands, 'command_wall_time': t * 1e-9}
+    end = int(t[first + 1060])
+    figures = demo.system_figures(_NoMonitor(), rec, call, end, Logs())
+    assert figures['moving_commands_per_s'] == pytest.approx(125.0)
+    assert figures['first_moving_command_after_call_s'] == pytest.approx(0.48)
+    commands[first + 400:first + 425, 0] = 0.0          # a 0.2 s halt in the middle
+    figures = demo.system_figures(_NoMonitor(), rec, call, end, Logs())
+    assert figures['moving_commands_per_s'] == pytest.approx(974 / (999 * 0.008))
+
+
+class _NoMonitor:
+
+    def window(self, start, end):
+        return None

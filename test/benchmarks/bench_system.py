@@ -17,8 +17,8 @@ e-series, idle only). ``busy`` adds one process busy-looping on a core for the w
 - control steps per control period while tracking (the controller's own count: its steps
   against the periods that its joint states' stamps spanned), joint states received, and the
   largest wall-clock gap between two joint states at the controller;
-- moving commands per simulated second and the wall-clock period between commands as the
-  recorder received them, p50 / p99;
+- moving commands per simulated second (first to last non-zero command) and the wall-clock
+  period between commands as the recorder received them, p50 / p99;
 - the real-time factor over the motion and its lowest over any 1 s;
 - tracking RMS / max (true pen tip vs the controller's reference) and stale-input halts.
 
