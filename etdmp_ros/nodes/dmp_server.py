@@ -110,7 +110,7 @@ PARAMETERS = (
     ('obstacle_gamma', 250.0, 'Steering gain gamma (paper Eq. 24).', _range(0.0, 1e5)),
     ('obstacle_beta', 20.0 / math.pi, 'Steering decay beta (paper Eq. 24).', _range(0.0, 1e3)),
     ('obstacle_gamma2', 300.0, 'Distance gain gamma2 (paper Eq. 26).', _range(0.0, 1e5)),
-    ('obstacle_k', 0.0, '1/m; distance decay k (paper Eq. 26); 0 = obstacle_k_relative / '
+    ('obstacle_k', 60.0, '1/m; distance decay k (paper Eq. 26); 0 = obstacle_k_relative / '
      '|start - goal|.', _range(0.0, 1e4)),
     ('obstacle_k_relative', 10.0, 'k times |start - goal| when obstacle_k is 0.',
      _range(0.0, 1e3)),
