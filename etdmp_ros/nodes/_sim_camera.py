@@ -30,6 +30,7 @@ import signal
 import socket
 import struct
 import sys
+import time
 
 import numpy as np
 
@@ -56,6 +57,50 @@ def decode(data, nq, nmocap):
                         mocap[3 * nmocap:].reshape(nmocap, 4), obstacles), stamp_ns)
 
 
+class CameraPublishers:
+    """
+    The colour and depth images of one camera and their camera_info, on ``topics``.
+
+    One piece for both places that publish frames: this process, and ur10_sim itself when it
+    renders in the calling thread (``UR10SimNode.run_for``: benchmarks, in-process tests).
+    """
+
+    def __init__(self, node, topics, intrinsics):
+        """Create the four publishers on ``node``; ``topics`` maps color, depth, *_info."""
+        from etdmp_ros.nodes.ur10_sim import OPTICAL_FRAME
+        from etdmp_ros.ros_conversions import camera_info_msg
+        from rclpy.qos import QoSProfile
+        from sensor_msgs.msg import CameraInfo, Image
+        images = QoSProfile(depth=2)   # frames are big: never queue more than one behind
+        self.color = node.create_publisher(Image, topics['color'], images)
+        self.depth = node.create_publisher(Image, topics['depth'], images)
+        self.infos = [node.create_publisher(CameraInfo, topics[name], QoSProfile(depth=10))
+                      for name in ('color_info', 'depth_info')]
+        self.info = camera_info_msg(intrinsics, frame_id=OPTICAL_FRAME)
+        self.frame_id = OPTICAL_FRAME
+
+    def publish(self, sim, state, stamp, times=None):
+        """
+        Publish a frame of ``sim`` in ``state``: images only while someone subscribes.
+
+        ``times``, if given, gets the CPU seconds of rendering and of publishing the images
+        added to its ``render`` and ``publish_images``.
+        """
+        from etdmp_ros.ros_conversions import image_msg
+        if self.color.get_subscription_count() or self.depth.get_subscription_count():
+            c0 = time.process_time()
+            rgb, depth_mm = sim.render_rgb_depth(state)
+            c1 = time.process_time()
+            self.color.publish(image_msg(rgb, 'rgb8', stamp, self.frame_id))
+            self.depth.publish(image_msg(depth_mm, '16UC1', stamp, self.frame_id))
+            if times is not None:
+                times['render'] += c1 - c0
+                times['publish_images'] += time.process_time() - c1
+        self.info.header.stamp = stamp
+        for publisher in self.infos:
+            publisher.publish(self.info)
+
+
 def command(fd, parameters, topics, node_name, namespace):
     """Return the argv of the camera process (``fd``: its end of the socket)."""
     return [sys.executable, '-m', 'etdmp_ros.nodes._sim_camera', '--fd', str(fd),
@@ -74,26 +119,18 @@ def main(argv=None):
     link = socket.socket(fileno=args.fd)
 
     from etdmp_ros.nodes._spin import init
-    from etdmp_ros.nodes.ur10_sim import build_sim, OPTICAL_FRAME
-    from etdmp_ros.ros_conversions import camera_info_msg, image_msg, ns_to_stamp
+    from etdmp_ros.nodes.ur10_sim import build_sim
+    from etdmp_ros.ros_conversions import ns_to_stamp
     import rclpy
     from rclpy.node import Node
-    from rclpy.qos import QoSProfile
-    from sensor_msgs.msg import CameraInfo, Image
 
     init(ros_args)
     node = Node('camera', start_parameter_services=False)
     log = node.get_logger()
-    topics = json.loads(args.topics)
-    images = QoSProfile(depth=2)   # frames are big: never queue more than one behind
-    color = node.create_publisher(Image, topics['color'], images)
-    depth = node.create_publisher(Image, topics['depth'], images)
-    infos = [node.create_publisher(CameraInfo, topics[name], QoSProfile(depth=10))
-             for name in ('color_info', 'depth_info')]
     published = skipped = early = 0       # early: snapshots sent while this process started
     try:
         sim = build_sim(json.loads(args.parameters))
-        info = camera_info_msg(sim.intrinsics, frame_id=OPTICAL_FRAME)
+        camera = CameraPublishers(node, json.loads(args.topics), sim.intrinsics)
         nq, nmocap = sim.model.nq, sim.model.nmocap
         while rclpy.ok():
             data = link.recv(65536)
@@ -114,14 +151,7 @@ def main(argv=None):
                 pass
             link.setblocking(True)
             state, stamp_ns = decode(data, nq, nmocap)
-            stamp = ns_to_stamp(stamp_ns)
-            if color.get_subscription_count() or depth.get_subscription_count():
-                rgb, depth_mm = sim.render_rgb_depth(state)
-                color.publish(image_msg(rgb, 'rgb8', stamp, OPTICAL_FRAME))
-                depth.publish(image_msg(depth_mm, '16UC1', stamp, OPTICAL_FRAME))
-            info.header.stamp = stamp
-            for publisher in infos:
-                publisher.publish(info)
+            camera.publish(sim, state, ns_to_stamp(stamp_ns))
             published += 1
     except Exception as exc:   # noqa: B902 - say why the camera stopped, then exit
         log.error(f'camera stopped: {type(exc).__name__}: {exc}')

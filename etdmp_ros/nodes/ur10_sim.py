@@ -28,12 +28,13 @@ import subprocess
 import threading
 import time
 
-from etdmp_ros.nodes._sim_camera import command as camera_command, encode as camera_snapshot
+from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_command,
+                                         encode as camera_snapshot)
 from etdmp_ros.nodes._spin import rate_qos, run
 from etdmp_ros.robot import (MAX_OBSTACLES, node_defaults, parse_goal_position,
                              parse_obstacle_positions, SCENE_PARAMETERS, SceneConfig, UR10Sim)
-from etdmp_ros.ros_conversions import (camera_info_msg, image_msg, joint_state_msg, ns_to_stamp,
-                                       pose_array_from_numpy, velocity_command_array)
+from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, pose_array_from_numpy,
+                                       velocity_command_array)
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -42,7 +43,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 import yaml
 
@@ -53,6 +54,8 @@ COLOR_TOPIC = '/camera/camera/color/image_raw'
 COLOR_INFO_TOPIC = '/camera/camera/color/camera_info'
 DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
 DEPTH_INFO_TOPIC = '/camera/camera/aligned_depth_to_color/camera_info'
+CAMERA_TOPICS = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR_INFO_TOPIC,
+                 'depth_info': DEPTH_INFO_TOPIC}
 GOAL_TOPIC = '/ur10_sim/ground_truth/goal'
 OBSTACLES_TOPIC = '/ur10_sim/ground_truth/obstacles'
 TOOL_TIP_TOPIC = '/ur10_sim/ground_truth/tool_tip'
@@ -364,30 +367,12 @@ class UR10SimNode(Node):
         Render a camera state here and publish it (images only while someone subscribes).
 
         What :meth:`run_for` does (benchmarks, in-process tests); the running node renders in
-        its camera process instead, which publishes the same topics.
+        its camera process instead, which publishes the same topics the same way.
         """
-        stats = self.stats
         if self._camera_publishers is None:
-            images, infos = QoSProfile(depth=2), QoSProfile(depth=10)
-            self._camera_publishers = (
-                self.create_publisher(Image, COLOR_TOPIC, images),
-                self.create_publisher(Image, DEPTH_TOPIC, images),
-                self.create_publisher(CameraInfo, COLOR_INFO_TOPIC, infos),
-                self.create_publisher(CameraInfo, DEPTH_INFO_TOPIC, infos),
-                camera_info_msg(self.sim.intrinsics, frame_id=OPTICAL_FRAME))
-        color, depth_pub, color_info, depth_info, info = self._camera_publishers
-        if color.get_subscription_count() or depth_pub.get_subscription_count():
-            c0 = time.process_time()
-            rgb, depth = self.sim.render_rgb_depth(state)
-            c1 = time.process_time()
-            color.publish(image_msg(rgb, 'rgb8', stamp, OPTICAL_FRAME))
-            depth_pub.publish(image_msg(depth, '16UC1', stamp, OPTICAL_FRAME))
-            stats['render'] += c1 - c0
-            stats['publish_images'] += time.process_time() - c1
-        info.header.stamp = stamp
-        color_info.publish(info)
-        depth_info.publish(info)
-        stats['frames'] += 1
+            self._camera_publishers = CameraPublishers(self, CAMERA_TOPICS, self.sim.intrinsics)
+        self._camera_publishers.publish(self.sim, state, stamp, self.stats)
+        self.stats['frames'] += 1
 
     def _publish_state(self, stamp):
         sim = self.sim
@@ -417,12 +402,10 @@ class _CameraProcess:
         self._node = node
         self._link, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         self._link.setblocking(False)
-        topics = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR_INFO_TOPIC,
-                  'depth_info': DEPTH_INFO_TOPIC}
         parameters = {k: (list(v) if isinstance(v, tuple) else v)
                       for k, v in node._parameter_values.items()}
-        argv = camera_command(theirs.fileno(), parameters, topics, f'{node.get_name()}_camera',
-                              node.get_namespace())
+        argv = camera_command(theirs.fileno(), parameters, CAMERA_TOPICS,
+                              f'{node.get_name()}_camera', node.get_namespace())
         self.process = subprocess.Popen(argv, pass_fds=(theirs.fileno(),))
         theirs.close()
         self._lost = False
