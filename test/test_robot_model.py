@@ -47,3 +47,31 @@ def test_jacobian_matches_finite_differences(ur10):
         np.testing.assert_allclose(jac[:3, j], (p1 - p0) / (2 * eps), atol=1e-6)
         skew = (r1 - r0) @ ur10.frame_pose(q)[1].T / (2 * eps)
         np.testing.assert_allclose(jac[3:, j], [skew[2, 1], skew[0, 2], skew[1, 0]], atol=1e-6)
+
+
+def test_kinematics_is_frame_pose_and_jacobian_in_one_call(ur10):
+    q = np.random.default_rng(2).uniform(-2.0, 2.0, 6)
+    p, rot, jac = ur10.kinematics(q)
+    p_ref, rot_ref = ur10.frame_pose(q)
+    np.testing.assert_allclose(p, p_ref, atol=1e-15)
+    np.testing.assert_allclose(rot, rot_ref, atol=1e-15)
+    np.testing.assert_allclose(jac, ur10.tool_jacobian(q), atol=1e-15)
+
+
+def test_solve_pose_reaches_a_reachable_pose_and_reports_the_error(ur10):
+    rng = np.random.default_rng(3)
+    q_goal = rng.uniform(-1.5, 1.5, 6)
+    position, rotation = ur10.frame_pose(q_goal)
+    q0 = q_goal + rng.uniform(-0.2, 0.2, 6)
+    start = q0.copy()
+    q, error = ur10.solve_pose(position, rotation, q0, iterations=200, tolerance=1e-9)
+    np.testing.assert_array_equal(q0, start)            # the start is not modified
+    assert error.shape == (6,) and np.linalg.norm(error) < 1e-9
+    p, rot = ur10.frame_pose(q)
+    np.testing.assert_allclose(p, position, atol=1e-9)
+    np.testing.assert_allclose(rot, rotation, atol=1e-9)
+    # Out of reach (3 m away): the error at the returned joints is what is left.
+    far = np.array([3.0, 0.0, 0.5])
+    q, error = ur10.solve_pose(far, rotation, q0)
+    np.testing.assert_allclose(error[:3], far - ur10.frame_pose(q)[0], atol=1e-12)
+    assert np.linalg.norm(error[:3]) > 1.0

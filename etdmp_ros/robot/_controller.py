@@ -514,7 +514,8 @@ class TrajectoryController:
         targets += [(f'pose #{i} (t = {path.t[i]:.2f} s)', path.positions[i], path.rotations[i])
                     for i in idx]
         for name, p, rot in targets:
-            q, residual = self._solve_pose(ik, q, p, rot)
+            q, error = ik.model.solve_pose(p, rot, q)
+            residual = float(np.linalg.norm(error))
             where = f'{name} at ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m'
             if residual > 1e-4:
                 return (f'{where} is out of reach: the closest the UR10 gets is '
@@ -530,19 +531,3 @@ class TrajectoryController:
                 return (f'{where} is at a singular configuration (Jacobian condition number '
                         f'{kappa:.0f} >= {ik.condition_halt:g})')
         return ''
-
-    @staticmethod
-    def _solve_pose(ik, q, p, rot, iterations=60):
-        """Damped Newton IK for one pose; return (q, remaining error, position and angle, m)."""
-        for _ in range(iterations):
-            pc, rc, jac = ik.kinematics(q)
-            err = np.r_[p - pc, pin.log3(rot @ rc.T)]
-            norm = float(np.linalg.norm(err))
-            if norm < 1e-6:
-                break
-            step = jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), err)
-            step_norm = np.linalg.norm(step)
-            if step_norm > 0.3:
-                step *= 0.3 / step_norm
-            q = q + step
-        return q, norm

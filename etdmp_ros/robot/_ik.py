@@ -34,7 +34,6 @@ below is the same computation, kept as the oracle of the tests (``solve(..., fas
 from dataclasses import dataclass
 
 import numpy as np
-import pinocchio as pin
 
 from . import _ik_fast
 from ._ur10 import JOINT_NAMES
@@ -126,18 +125,12 @@ class DifferentialIK:
             raise ValueError('posture must be 6 finite joint positions')
 
     def kinematics(self, q):
-        """Return the tool tip (position (3,), rotation (3, 3), Jacobian (6, 6)) at ``q``."""
-        m = self.model
-        jac = pin.computeFrameJacobian(m.model, m.data, q, m.tool_frame_id,
-                                       pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-        pose = m.data.oMf[m.tool_frame_id]   # updated by computeFrameJacobian
-        return pose.translation.copy(), pose.rotation.copy(), jac
+        """Return the tool tip (position, rotation, Jacobian) at ``q``: the model's kinematics."""
+        return self.model.kinematics(q)
 
     def jacobian(self, q):
-        """Return the tool tip Jacobian (6, 6) at ``q`` (as in :meth:`kinematics`)."""
-        m = self.model
-        return pin.computeFrameJacobian(m.model, m.data, q, m.tool_frame_id,
-                                        pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        """Return the tool tip Jacobian (6, 6) at ``q``: the model's :meth:`tool_jacobian`."""
+        return self.model.tool_jacobian(q)
 
     def condition(self, q):
         """Return the Jacobian condition number at ``q`` (inf when singular)."""

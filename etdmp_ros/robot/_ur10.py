@@ -58,7 +58,11 @@ def ur10_urdf_path():
 
 class UR10Model:
     """
-    UR10 kinematics: forward kinematics and Jacobians of the tool tip, limits.
+    UR10 kinematics: forward kinematics, Jacobian and pose IK of the tool tip, limits.
+
+    The one kinematics module of the project: the simulation checks itself against it, the
+    controller drives it (:class:`DifferentialIK` calls :meth:`kinematics` /
+    :meth:`tool_jacobian`) and the planner and the demo find the tool with it.
 
     The Pinocchio model and data are created once and reused; call from one thread at a time
     (or give each thread its own UR10Model).
@@ -103,6 +107,44 @@ class UR10Model:
         Columns are joints; rows map joint velocities to the tool tip's linear velocity and the
         tool's angular velocity, both expressed in base_link (LOCAL_WORLD_ALIGNED).
         """
-        q = np.asarray(q, dtype=float)
-        return pin.computeFrameJacobian(self.model, self.data, q, self.tool_frame_id,
-                                        pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).copy()
+        # Pinocchio returns a new array (it copies data.J out).
+        return pin.computeFrameJacobian(self.model, self.data, np.asarray(q, dtype=float),
+                                        self.tool_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+
+    def kinematics(self, q):
+        """
+        Return the tool tip (position (3,), rotation (3, 3), Jacobian (6, 6)) at ``q``.
+
+        One Pinocchio call for all three (the Jacobian as in :meth:`tool_jacobian`): what the
+        controller needs every control period.
+        """
+        jac = self.tool_jacobian(q)
+        pose = self.data.oMf[self.tool_frame_id]   # updated by computeFrameJacobian
+        return pose.translation.copy(), pose.rotation.copy(), jac
+
+    def solve_pose(self, position, rotation, q0, iterations=60, tolerance=1e-6, max_step=0.3):
+        """
+        Return joints putting the tool tip at ``position`` with ``rotation``, and the error.
+
+        Pose IK by damped Newton from ``q0`` (not modified): ``q += J^T (J J^T + 1e-6 I)^-1
+        e`` with the step norm clipped to ``max_step`` rad, where the pose error is
+        ``e = (position - p(q), log3(rotation R(q)^T))`` (m; rad, base_link axes). Stops when
+        ``|e| < tolerance`` or after ``iterations`` steps. Returns ``(q, e)``: ``q`` (6,) the
+        last iterate, ``e`` (6,) the pose error at that ``q``; ``np.linalg.norm(e)`` is the
+        residual and ``np.linalg.norm(e[:3])`` the position error. It does not check joint
+        limits (compare ``q`` with :attr:`lower` / :attr:`upper`) nor wrap angles; which
+        solution it finds (elbow up or down, ...) is the one nearest ``q0`` in Newton's sense.
+        """
+        q = np.array(q0, dtype=float)
+        damping = 1e-6 * np.eye(6)
+        for k in range(iterations + 1):
+            p, rot, jac = self.kinematics(q)
+            error = np.r_[position - p, pin.log3(rotation @ rot.T)]
+            if k == iterations or np.linalg.norm(error) < tolerance:
+                break
+            step = jac.T @ np.linalg.solve(jac @ jac.T + damping, error)
+            step_norm = np.linalg.norm(step)
+            if step_norm > max_step:
+                step *= max_step / step_norm
+            q = q + step
+        return q, error

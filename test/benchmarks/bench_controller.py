@@ -63,10 +63,8 @@ def percentiles(samples_ns):
 
 def start_configuration(ur10, path):
     """Return joints putting the tool on the path's first pose (Newton from the scene's start)."""
-    controller = TrajectoryController(ur10)
-    q, residual = controller._solve_pose(controller.ik, Q_INITIAL.copy(), path.positions[0],
-                                         path.rotations[0])
-    assert residual < 1e-6
+    q, error = ur10.solve_pose(path.positions[0], path.rotations[0], Q_INITIAL)
+    assert np.linalg.norm(error) < 1e-6
     return q
 
 
