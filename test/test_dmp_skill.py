@@ -1,6 +1,7 @@
 """Learning and generalizing skills: DMP vs ET-DMP, formulations, batches, bad input."""
 
-from etdmp_ros.dmp import builtin_demo, DemonstrationError, GeneralizationError, learn, nrmse
+from etdmp_ros.dmp import (builtin_demo, DemonstrationError, GeneralizationError, learn, nrmse,
+                           OBSTACLE_MARGIN, ObstacleGains)
 import numpy as np
 import pytest
 
@@ -355,6 +356,25 @@ def test_bad_generalization_requests(kwargs, message):
     with pytest.raises(GeneralizationError, match=message):
         skill.generalize(**kwargs)
     assert np.all(np.isfinite(skill.generalize([1.0, 1.0], [0.0, 0.0]).x))
+
+
+def test_checked_request_is_batched_with_defaults():
+    skill = learn(letter_like(), dt=1 / 199)
+    one = skill._check_request([1.0, 1.0], [0.0, 0.0], (), 'etdmp', None, None, None, None)
+    assert one.single and one.starts.shape == (1, 2) and one.goals.shape == (1, 2)
+    assert one.obstacles.shape == (0, 2)
+    assert (one.tau, one.dt, one.n_out) == (skill.tau, skill.dt, len(skill.demo))
+    assert one.gains == ObstacleGains()
+    batch = skill._check_request([[1.0, 1.0], [2.0, 0.0]], [0.0, 0.0], [3.0, 3.0], 'dmp', 0.01,
+                                 2.0, None, None)
+    assert not batch.single and batch.starts.shape == batch.goals.shape == (2, 2)
+    np.testing.assert_array_equal(batch.goals, 0.0)
+    assert batch.obstacles.shape == (1, 2)
+    assert batch.n_out == round(2.0 * (1.0 + OBSTACLE_MARGIN) / 0.01) + 1
+    # The first problem found is the one reported: shapes before the method name.
+    with pytest.raises(GeneralizationError, match='obstacles must have shape'):
+        skill._check_request([1.0, 1.0], [0.0, 0.0], [[1.0, 2.0, 3.0]], 'spline', None, None,
+                             None, None)
 
 
 def test_bad_mode_in_3d():

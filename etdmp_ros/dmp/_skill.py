@@ -2,6 +2,7 @@
 
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,6 +47,19 @@ class Trajectory:
     method: str
     rotation: np.ndarray
     virtual_start: np.ndarray
+
+
+class _Request(NamedTuple):
+    """A checked :meth:`Skill.generalize` request (see :meth:`Skill._check_request`)."""
+
+    starts: np.ndarray
+    goals: np.ndarray
+    obstacles: np.ndarray
+    single: bool
+    gains: ObstacleGains
+    tau: float
+    dt: float
+    n_out: int
 
 
 def _finite_array(value, name):
@@ -141,6 +155,45 @@ class Skill:
         and OBSTACLE_MARGIN with them, since a detour delays arrival at the goal.
         Raises GeneralizationError on bad or degenerate input.
         """
+        r = self._check_request(start, goal, obstacles, method, dt, tau, margin, gains)
+        d, B = self.dim, len(r.starts)
+        i_current = r.starts - r.goals
+        if method == 'etdmp':
+            transform = transforms(self.start - self.goal, i_current, mode, independent_axis,
+                                   self.size)
+        else:
+            transform = EuclideanTransform(np.broadcast_to(np.eye(d), (B, d, d)).copy(),
+                                           self._plain_scale(i_current))
+        virtual_start = transform.to_virtual(r.starts[:, None], r.goals[:, None])[:, 0]
+        virtual_obs = transform.to_virtual(np.broadcast_to(r.obstacles, (B,) + r.obstacles.shape),
+                                           r.goals[:, None])
+        if self.formulation == 'ijspeert':
+            A = np.zeros_like(r.starts)
+            M = transform.scale * self.size
+        else:
+            A = -self.K * (r.goals - virtual_start)
+            M = np.full_like(r.starts, self.K * self.size)
+        substeps = max(1, int(np.ceil(r.dt / (MAX_SUBSTEP * r.tau))))
+        s_mid, f_mid, s_out, f_out = self._forcing_table(r.tau, r.dt, r.n_out, substeps)
+        k = np.array([r.gains.decay(gap) for gap in np.linalg.norm(i_current, axis=1)])
+        x, v, a = rollout(virtual_start, r.goals, A, M, s_mid, f_mid, s_out, f_out, virtual_obs,
+                          (r.gains.gamma, r.gains.beta, r.gains.gamma2, k), self.K, self.D,
+                          r.tau, r.dt / substeps, substeps, transform.R, fast=fast)
+        t = np.arange(r.n_out) * r.dt
+        if r.single:
+            return Trajectory(t, x[0], v[0], a[0], r.starts[0], r.goals[0], method,
+                              transform.R[0], virtual_start[0])
+        return Trajectory(t, x, v, a, r.starts, r.goals, method, transform.R, virtual_start)
+
+    def _check_request(self, start, goal, obstacles, method, dt, tau, margin, gains):
+        """
+        Validate the arguments of :meth:`generalize` and return them as a :class:`_Request`.
+
+        Shapes become batches: ``starts`` and ``goals`` (B, d), ``obstacles`` (n_obs, d). The
+        defaults of ``dt``, ``tau``, ``margin`` and ``gains`` are filled in. ``mode`` and
+        ``independent_axis`` are checked by the transform, which alone uses them. Raises
+        GeneralizationError for the first problem found.
+        """
         d = self.dim
         start = _finite_array(start, 'start')
         goal = _finite_array(goal, 'goal')
@@ -184,9 +237,7 @@ class Skill:
         if n_out > MAX_SAMPLES:
             raise GeneralizationError(f'{n_out} samples requested (dt={dt:g}, tau={tau:g}); '
                                       f'at most {MAX_SAMPLES}')
-
-        i_current = starts - goals
-        gaps = np.linalg.norm(i_current, axis=1)
+        gaps = np.linalg.norm(starts - goals, axis=1)
         if np.any(gaps <= EPS * self.size):
             b = int(np.argmin(gaps))
             raise GeneralizationError(
@@ -196,34 +247,7 @@ class Skill:
             to_goal = np.linalg.norm(obs[None] - goals[:, None], axis=2)
             if np.any(to_goal <= EPS * self.size):
                 raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
-
-        i_demo = self.start - self.goal
-        if method == 'etdmp':
-            transform = transforms(i_demo, i_current, mode, independent_axis, self.size)
-        else:
-            B = len(starts)
-            transform = EuclideanTransform(np.broadcast_to(np.eye(d), (B, d, d)).copy(),
-                                           self._plain_scale(i_current))
-        virtual_start = transform.to_virtual(starts[:, None], goals[:, None])[:, 0]
-        virtual_obs = transform.to_virtual(np.broadcast_to(obs, (len(starts),) + obs.shape),
-                                           goals[:, None])
-        if self.formulation == 'ijspeert':
-            A = np.zeros_like(starts)
-            M = transform.scale * self.size
-        else:
-            A = -self.K * (goals - virtual_start)
-            M = np.full_like(starts, self.K * self.size)
-        substeps = max(1, int(np.ceil(dt / (MAX_SUBSTEP * tau))))
-        s_mid, f_mid, s_out, f_out = self._forcing_table(tau, dt, n_out, substeps)
-        k = np.array([gains.decay(g) for g in gaps])
-        x, v, a = rollout(virtual_start, goals, A, M, s_mid, f_mid, s_out, f_out, virtual_obs,
-                          (gains.gamma, gains.beta, gains.gamma2, k), self.K, self.D, tau,
-                          dt / substeps, substeps, transform.R, fast=fast)
-        t = np.arange(n_out) * dt
-        if single:
-            return Trajectory(t, x[0], v[0], a[0], starts[0], goals[0], method, transform.R[0],
-                              virtual_start[0])
-        return Trajectory(t, x, v, a, starts, goals, method, transform.R, virtual_start)
+        return _Request(starts, goals, obs, single, gains, tau, dt, n_out)
 
     def _plain_scale(self, i_current):
         """
