@@ -10,7 +10,7 @@ STAMP       := $(VENV)/.installed
 PYTEST_ARGS ?= -q test
 LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 
-.PHONY: venv test test-fast demo reproduce docs bench clean distclean help
+.PHONY: venv test test-fast demo reproduce docs config bench clean distclean help
 .DEFAULT_GOAL := help
 
 help:
@@ -19,6 +19,7 @@ help:
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
 	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
 	@echo "make docs       regenerate the README pictures in docs/img/"
+	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
 	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
@@ -53,6 +54,10 @@ SKILL  ?= G
 METHOD ?= etdmp
 demo: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo --skill $(SKILL) --method $(METHOD) --out out/demo
+
+# config/*.yaml and the parameter tables of docs/<node>.md are written from the system description.
+config: $(STAMP)
+	$(VENV_PY) -m etdmp_ros.config_files
 
 # The paper's letter experiments, offline (Figs. 5, 7-8, 13 and metrics.json in out/reproduce/).
 reproduce: $(STAMP)

@@ -186,7 +186,7 @@ def _cmd_generalize(args):
             continue
         print(f"{label:<9}{_fmt(r.nrmse['conventional']):>11}{_fmt(r.nrmse['paper']):>12}"
               f"{_fmt(r.final_distance_to_goal):>11}{_fmt(r.min_clearance, '.3f'):>11}")
-    print('(* = selected method; nRMSE vs the demonstration, SPEC 3.4)')
+    print('(* = selected method; nRMSE vs the demonstration, docs/design.md)')
 
     if json_path:
         traj = chosen.trajectory

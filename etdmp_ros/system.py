@@ -25,7 +25,8 @@ from pathlib import Path
 from etdmp_ros._paths import config_path
 from etdmp_ros.dmp import builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.planning import PlanSettings, TOOL_DOWN, Workspace
-from etdmp_ros.robot import ControllerConfig, DEFAULT_ACCELERATION_LIMITS
+from etdmp_ros.robot import (ControllerConfig, DEFAULT_ACCELERATION_LIMITS, SCENE_PARAMETERS,
+                             SceneConfig)
 from etdmp_ros.skill_library import RECORDED_DIMS
 
 #: ROS types of parameters whose default is an empty list (ROS cannot type ``[]``).
@@ -119,8 +120,7 @@ SCENE = (
       '(orthogonal to x).'),
     P('camera.position', [1.55, 0.05, 0.85], 'Position of the colour optical frame of the '
       'RealSense D435 (z forward, x right, y down) in base_link.', unit='m',
-      section='Simulated workcell (ur10_sim builds it; perception reads the camera pose and '
-      'the object sizes)',
+      section='Simulated workcell: ur10_sim builds it, perception reads camera and sizes',
       note='RealSense D435 colour optical frame (ROS: z forward, x right, y down) in '
       'base_link: position [x, y, z] and orientation quaternion [x, y, z, w]. The ONE copy of '
       'the extrinsics: ur10_sim renders from it and perception deprojects with it. Computed '
@@ -174,16 +174,10 @@ def _scene(*names, **changes):
 # --------------------------------------------------------------------------------- ur10_sim
 #: Parameters of ur10_sim that may change while it runs.
 _SIM_DYNAMIC = {'dynamic': True, 'dynamic_typing': True}
-UR10_SIM_SCENE = (
-    *_scene('tool_offset', 'initial_joint_positions', 'task_plane.origin', 'camera.position',
-            'camera.orientation', 'table.center', 'table.size', 'table.height', 'table.color',
-            'whiteboard.size', 'whiteboard.color', 'bottle.position', 'bottle.radius',
-            'bottle.height', 'bottle.color'),
-    *_scene('goal_position', **_SIM_DYNAMIC),
-    *_scene('goal_marker.radius', 'goal_marker.color'),
-    *_scene('obstacle_positions', **_SIM_DYNAMIC),
-    *_scene('obstacle.radius', 'obstacle.height', 'obstacle.color'),
-)
+#: What the simulation builds from: the parameters of SceneConfig.
+UR10_SIM_SCENE = tuple(
+    _scene(name, **(_SIM_DYNAMIC if name in ('goal_position', 'obstacle_positions') else {}))[0]
+    for name in SCENE_PARAMETERS)
 UR10_SIM = (
     P('control_rate', 125.0, 'Rate of /joint_states, /clock and the ground truth; velocity '
       'commands take effect at these ticks. 125 Hz is a UR10 (CB3), 500 Hz an e-series.',
@@ -514,6 +508,18 @@ def defaults(name):
 def scene_defaults():
     """Return ``{parameter: default}`` of the whole workcell (config/scene.yaml)."""
     return {p.name: p.default for p in SCENE}
+
+
+def scene_config(overrides=None):
+    """
+    Return the default workcell as a validated SceneConfig.
+
+    ``overrides``: optional ``{flat name: value}`` replacing defaults, e.g.
+    ``{'goal_position': [0.7, 0.2, 0.002]}``; ValueError names a bad value.
+    """
+    values = scene_defaults()
+    values.update(overrides or {})
+    return SceneConfig.from_parameters(values)
 
 
 def parameter_files(name, config_dir=None):

@@ -10,13 +10,13 @@ Reference plans and plants shared by the controller tests and benchmark (not a t
 
 from dataclasses import dataclass, field
 
-from etdmp_ros._paths import config_path
+from etdmp_ros import system
 from etdmp_ros.dmp import builtin_demo, learn
-from etdmp_ros.robot import PoseTrajectory, read_parameter_file, UR10Model
+from etdmp_ros.robot import PoseTrajectory, UR10Model
 from etdmp_ros.task_plane import TaskPlane
 import numpy as np
 
-SCENE = read_parameter_file(config_path('scene.yaml'))
+SCENE = system.scene_defaults()
 TOOL_OFFSET = tuple(SCENE['tool_offset'])
 Q_INITIAL = np.array(SCENE['initial_joint_positions'], dtype=float)
 PLANE = TaskPlane.create(SCENE['task_plane.origin'], SCENE['task_plane.x_axis'],

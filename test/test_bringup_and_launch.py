@@ -17,6 +17,7 @@ import time
 import types
 
 from conftest import REPO, sourced
+from etdmp_ros import system
 from etdmp_ros.nodes._spin import BackgroundNode
 from geometry_msgs.msg import PointStamped
 from nav_msgs.srv import GetPlan
@@ -24,7 +25,7 @@ import numpy as np
 import pytest
 from std_msgs.msg import Float64MultiArray, String
 
-NODES = ('ur10_sim', 'perception', 'dmp_server', 'controller')
+NODES = system.NODE_NAMES
 
 
 class Listener(BackgroundNode):

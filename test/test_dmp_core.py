@@ -119,7 +119,8 @@ def test_forcing_vanishes_with_the_phase_and_fits_a_smooth_target():
     forcing.fit(s, target)
     rms = np.sqrt(np.mean((forcing(s) - target) ** 2))
     assert rms < 0.5                                # of amplitudes 100 and 12.5
-    # The factor s (SPEC fix of Eq. 3): far past the end of the movement f is ~0.
+    # The factor s (docs/design.md, corrections to the paper): far past the end of the
+    # movement f is ~0.
     late = forcing(phase(np.array([3.0, 6.0]), 1.0, 4.0))
     assert np.all(np.abs(late) < 1e-3 * np.abs(target).max())
 

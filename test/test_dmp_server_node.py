@@ -535,19 +535,3 @@ def test_unusable_configuration_stops_the_node_with_the_reason(
     log = node.log()
     assert '[FATAL]' in log and 'invalid parameter' in log and reason in log, log
     assert 'Traceback' not in log, log
-
-
-def test_built_in_defaults_agree_with_the_shipped_parameter_file():
-    # The table serves a node without its share folder; it must say what dmp_server.yaml says.
-    from etdmp_ros.nodes.dmp_server import PARAMETERS
-    from etdmp_ros.robot import node_defaults
-
-    def same(default, value):
-        textual = isinstance(default, (str, bool)) or (
-            isinstance(default, list) and default and isinstance(default[0], str))
-        return default == value if textual else np.allclose(default, value)
-
-    shipped = node_defaults('dmp_server')
-    differ = {name: (default, shipped[name]) for name, default, _, _ in PARAMETERS
-              if name in shipped and not same(default, shipped[name])}
-    assert not differ, f'built-in default vs config/dmp_server.yaml: {differ}'

@@ -1,4 +1,4 @@
-"""nRMSE (paper Eq. 15-16, SPEC §3.4) and clearance."""
+"""nRMSE (paper Eq. 15-16; docs/design.md#similarity-measure) and clearance."""
 
 from etdmp_ros.dmp import clearance, nrmse, similarity
 import numpy as np

@@ -59,7 +59,8 @@ def test_2d_etdmp_is_the_reproduction_rotated_and_scaled(angle):
     traj = skill.generalize(goal + i_c, goal, method='etdmp')
     assert similarity_residual(skill, traj, goal + i_c, goal) < 1e-9
     np.testing.assert_allclose(traj.x[0], goal + i_c, atol=1e-12)
-    # The rotation is proper and turns I_C onto the direction of I_D (signed angle, SPEC fix).
+    # The rotation is proper and turns I_C onto the direction of I_D (signed angle:
+    # docs/design.md, corrections to the paper).
     R = traj.rotation
     assert np.linalg.det(R) == pytest.approx(1.0)
     i_d = skill.start - skill.goal

@@ -1,5 +1,5 @@
 """
-Reproduce the paper's Table 2 experiment on its letter data (SPEC §3, issue 'Must show').
+Reproduce the paper's Table 2 experiment on its letter data (docs/design.md#reproducing-the-paper).
 
 Reads ``../shared/data/pbdlib_2Dletters`` beside the repository; skips when it is absent.
 """

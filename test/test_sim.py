@@ -7,10 +7,12 @@ and the camera's geometry (pixels + depth -> base_link).
 
 import os
 
+from etdmp_ros import system
 from etdmp_ros._paths import config_path
-from etdmp_ros.robot import (CameraIntrinsics, CameraPose, load_scene, matrix_to_quaternion,
-                             MAX_OBSTACLES, quaternion_to_matrix, read_parameter_file,
-                             SCENE_PARAMETERS, SceneConfig, UR10Model, UR10Sim)
+from etdmp_ros.config_files import read_parameter_file
+from etdmp_ros.robot import (CameraIntrinsics, CameraPose, matrix_to_quaternion, MAX_OBSTACLES,
+                             quaternion_to_matrix, SCENE_PARAMETERS, SceneConfig, UR10Model,
+                             UR10Sim)
 import numpy as np
 import pytest
 
@@ -329,7 +331,7 @@ def test_quaternion_conversions_round_trip():
 def test_scene_file_has_every_parameter_and_camera_pose_is_shared():
     params = read_parameter_file(_scene_path())
     assert set(SCENE_PARAMETERS) <= set(params)
-    scene = load_scene()
+    scene = system.scene_config()
     assert np.allclose(scene.camera_pose.position, params['camera.position'])
 
 

@@ -12,10 +12,10 @@ objects do not overlap in the image (overlaps and occlusions have their own test
 import math
 
 import cv2
-from etdmp_ros._paths import config_path
+from etdmp_ros.config_files import read_node_parameters
 from etdmp_ros.robot import (check_frame, Detections, Detector, detector_from_parameters,
                              DetectorSettings, FrameSynchronizer, HsvRange, ObjectModel,
-                             read_parameter_file, Rejection, UR10Sim)
+                             Rejection, UR10Sim)
 from etdmp_ros.robot._vision import fit_circle
 import numpy as np
 import pytest
@@ -32,9 +32,7 @@ AREA_Y = (-0.45, 0.50)
 
 def parameters():
     """Return the perception node's parameters as its parameter files give them."""
-    p = read_parameter_file(config_path('scene.yaml'), 'perception')
-    p.update(read_parameter_file(config_path('perception.yaml'), 'perception'))
-    return p
+    return read_node_parameters('perception')
 
 
 @pytest.fixture(scope='module')

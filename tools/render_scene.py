@@ -19,7 +19,8 @@ import os
 from pathlib import Path
 
 import cv2
-from etdmp_ros.robot import CameraPose, load_scene, UR10Sim
+from etdmp_ros import system
+from etdmp_ros.robot import CameraPose, UR10Sim
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,7 +52,7 @@ def main():
         print('camera:\n  position: [%s]\n  orientation: [%s]' % (
             ', '.join(f'{v:.6g}' for v in pose.position),
             ', '.join(f'{v:.6f}' for v in pose.orientation)))
-    with UR10Sim(load_scene(overrides=overrides)) as sim:
+    with UR10Sim(system.scene_config(overrides)) as sim:
         rgb, depth_mm = sim.render_rgb_depth()
         k = sim.intrinsics
     args.out.mkdir(parents=True, exist_ok=True)

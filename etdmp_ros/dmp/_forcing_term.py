@@ -1,5 +1,7 @@
 """
-Canonical system and forcing term (paper Eq. 3-5, with the factor s of SPEC §3.1).
+Canonical system and forcing term (paper Eq. 3-5, with the factor s).
+
+The mathematics: docs/design.md#canonical-system-and-forcing-term.
 
 The phase decays as ``tau ds/dt = -alpha s`` so ``s(t) = exp(-alpha t / tau)``. The forcing term is
 ``f(s) = s * sum_i psi_i(s) w_i / sum_i psi_i(s)`` with Gaussian kernels

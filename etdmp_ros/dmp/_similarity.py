@@ -1,4 +1,8 @@
-"""Similarity between a generalized movement and the demonstration (paper Eq. 15-16, SPEC §3.4)."""
+"""
+Similarity between a generalized movement and the demonstration (paper Eq. 15-16).
+
+The definitions: docs/design.md#similarity-measure.
+"""
 
 from typing import NamedTuple
 

@@ -2,44 +2,49 @@
 bringup: ur10_sim, perception, dmp_server and controller in ONE process (no ros2launch needed).
 
 ``ros2 run etdmp_ros bringup`` runs the same node classes with the same parameter files as
-``ros2 launch etdmp_ros etdmp.launch.py`` runs in four processes: config/scene.yaml, then each
-node's config/<node>.yaml (every file is keyed by node name, so all of them can be given to the
-one process), then the arguments given here (e.g. ``--ros-args --params-file my.yaml``).
-dmp_server runs on simulated time (``use_sim_time``: it stamps plans with the ROS clock), as the
-launch file sets it; the other nodes stamp with their inputs' stamps. One executor spins them
+``ros2 launch etdmp_ros etdmp.launch.py`` runs in four processes, as the system description
+(:mod:`etdmp_ros.system`) says: config/scene.yaml, then each node's config/<node>.yaml (every
+file is keyed by node name, so all of them can be given to the one process), then the system's
+overrides (``use_sim_time`` for dmp_server, which stamps plans with the ROS clock), then the
+arguments given here (e.g. ``--ros-args --params-file my.yaml``). One executor spins them
 (the simulation steps in its own threads); on Ctrl-C the controller sends zero velocity before
 anything shuts down (``_spin.run``).
 """
 
+import importlib
 import sys
 import tempfile
 
-from etdmp_ros._paths import config_path
-from etdmp_ros.nodes._spin import run
+from etdmp_ros import system
 import yaml
-
-NODES = ('ur10_sim', 'perception', 'dmp_server', 'controller')
-#: Nodes that follow the simulation's /clock: those that stamp with the ROS clock (plans).
-SIM_TIME_NODES = ('dmp_server',)
 
 
 def parameter_files():
     """Return the parameter files of the system: scene.yaml, then every node's own file."""
-    return [str(config_path('scene.yaml'))] + [str(config_path(f'{n}.yaml')) for n in NODES]
+    files = []
+    for spec in system.NODES:
+        files += [str(f) for f in system.parameter_files(spec.name) if str(f) not in files]
+    return files
 
 
-def sim_time_file(directory):
-    """Write a parameter file setting ``use_sim_time`` for the nodes that follow /clock."""
-    path = f'{directory}/use_sim_time.yaml'
+def overrides_file(directory):
+    """Write the system's overrides of every node (use_sim_time) into one parameter file."""
+    path = f'{directory}/system_overrides.yaml'
     with open(path, 'w') as f:
-        yaml.safe_dump({n: {'ros__parameters': {'use_sim_time': True}} for n in SIM_TIME_NODES},
-                       f)
+        yaml.safe_dump({n: {'ros__parameters': system.wiring_overrides(n)}
+                        for n in system.NODE_NAMES if system.wiring_overrides(n)}, f)
     return path
+
+
+def node_class(spec):
+    """Return the class of a NodeSpec (``module:Class``), imported."""
+    module, name = spec.node_class.split(':')
+    return getattr(importlib.import_module(module), name)
 
 
 def ros_arguments(user_args, directory):
     """Return the rclpy arguments: the system's parameter files first, the user's last."""
-    files = parameter_files() + [sim_time_file(directory)]
+    files = parameter_files() + [overrides_file(directory)]
     args = list(user_args)
     head = args[:1]                     # the program name, as rclpy expects it
     rest = args[1:]
@@ -54,16 +59,14 @@ def ros_arguments(user_args, directory):
 
 def main(args=None):
     """Run the four nodes in one process until Ctrl-C (or SIGTERM)."""
-    from etdmp_ros.nodes.controller import ControllerNode
-    from etdmp_ros.nodes.dmp_server import DmpServer, InvalidConfiguration
-    from etdmp_ros.nodes.perception import PerceptionNode
-    from etdmp_ros.nodes.ur10_sim import UR10SimNode
+    from etdmp_ros.nodes._spin import run
+    from etdmp_ros.nodes.dmp_server import InvalidConfiguration
 
     def make(nodes):
-        nodes.append(UR10SimNode())
-        nodes[-1].start()
-        for node_class in (PerceptionNode, DmpServer, ControllerNode):
-            nodes.append(node_class())
+        for spec in system.NODES:   # the simulation first: its thread starts at once
+            nodes.append(node_class(spec)())
+            if hasattr(nodes[-1], 'start'):
+                nodes[-1].start()
 
     with tempfile.TemporaryDirectory(prefix='etdmp_bringup_') as directory:
         argv = ros_arguments(sys.argv if args is None else args, directory)

@@ -31,17 +31,17 @@ import sys
 import threading
 import time
 
+from etdmp_ros import system
+from etdmp_ros.nodes._parameters import declare
 from etdmp_ros.nodes._spin import normal_scheduling, rate_qos, run, set_realtime_priority
-from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, node_defaults,
-                             trajectory_from_path, TrajectoryController, TrajectoryError,
-                             UR10Model)
+from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, trajectory_from_path,
+                             TrajectoryController, TrajectoryError, UR10Model)
 from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr, stamp_to_ns,
                                        velocity_command_msg)
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
@@ -65,75 +65,11 @@ EXIT_ZEROS = 3
 #: s a path received before the first joint state waits for one (e.g. a latched path).
 WAIT_FOR_JOINT_STATES = 5.0
 
-# name -> (description, (min, max) or None, changeable at runtime). Defaults: the YAML files.
-PARAMETERS = {
-    'control_rate': ('Hz, commands per second at most (125: UR10 CB3, 500: e-series)',
-                     (1.0, 1000.0), False),
-    'actuation_delay': ('s from a measurement to its command taking effect; -1 = one control '
-                        'period (real UR through ros2_control), 0 for ur10_sim', (-1.0, 0.5),
-                        False),
-    'estimate_delay': ('estimate the actuation delay online from the joint motion (0 to 2 '
-                       'periods; actuation_delay is the starting value)', None, True),
-    'joint_state_timeout': ('s without joint states before the command is forced to zero',
-                            (0.001, 10.0), True),
-    'position_gain': ('1/s, position error feedback (below control_rate)', (0.0, 1000.0), True),
-    'orientation_gain': ('1/s, orientation error feedback (below control_rate)', (0.0, 1000.0),
-                         True),
-    'singular_value_threshold': ('damping starts when the smallest singular value of the tool '
-                                 'Jacobian falls below this', (0.0, 1.0), False),
-    'max_damping': ('damping lambda at a singularity', (0.0, 1.0), False),
-    'condition_slowdown': ('Jacobian condition number where slowing down starts', (1.0, 1e6),
-                           False),
-    'condition_halt': ('Jacobian condition number where the arm halts', (1.0, 1e6), False),
-    'posture_gain': ('1/s, null-space pull towards initial_joint_positions (0 = off)',
-                     (0.0, 100.0), False),
-    'velocity_scale': ('fraction of the UR10 joint velocity limits', (0.01, 1.0), False),
-    'joint_acceleration_limits': ('rad/s^2 per joint, UR order', None, False),
-    'joint_limit_margin': ('rad kept from each joint position limit', (0.0, 0.5), False),
-    'approach_speed': ('m/s, peak tool speed of the approach to a path', (0.001, 1.0), True),
-    'approach_angular_speed': ('rad/s, peak tool rotation speed of the approach', (0.001, 3.0),
-                               True),
-    'approach_acceleration': ('m/s^2, peak tool acceleration of the approach', (0.01, 10.0),
-                              True),
-    'approach_tolerance': ('m; a path starting closer to the tool (at rest) needs no approach',
-                           (0.0, 0.1), True),
-    'approach_angle_tolerance': ('rad; the same for the orientation', (0.0, 0.5), True),
-    'resume_ramp_time': ('s for the path clock to ramp back to full speed after a pause',
-                         (0.0, 10.0), True),
-    'hold_time': ('s holding the last pose before sending zeros', (0.0, 60.0), True),
-    'max_tracking_error': ('m; a larger tracking error stops the arm (unreachable)',
-                           (0.001, 1.0), True),
-    'untimed_path_speed': ('m/s, peak speed given to a path without timing', (0.001, 1.0),
-                           True),
-    'untimed_path_angular_speed': ('rad/s, the same for rotations', (0.001, 3.0), True),
-    'check_paths': ('check each path with position IK before moving (reach, joint limits, '
-                    'singularities)', None, True),
-    'thread_priority': ('SCHED_FIFO priority (1-99) of the thread that runs the control steps; '
-                        '0 = normal scheduling. Needs CAP_SYS_NICE or an rtprio limit, else a '
-                        'warning and normal scheduling', (0, 99), False),
-}
-SCENE_PARAMETERS = {
-    'tool_offset': 'm, tool tip in the flange frame tool0 (config/scene.yaml)',
-    'initial_joint_positions': 'rad, the posture of posture_gain (config/scene.yaml)',
-}
+DESCRIPTION = system.node(NODE_NAME)
+#: The controller's own parameters (the scene's are read-only).
+PARAMETERS = frozenset(p.name for p in DESCRIPTION.parameters)
 # Node parameters that are fields of ControllerConfig under another name.
 CONFIG_NAMES = {'control_rate': 'rate', 'joint_acceleration_limits': 'acceleration_limits'}
-
-
-def _descriptor(name, description, value_range, dynamic):
-    descriptor = ParameterDescriptor(name=name, description=description,
-                                     read_only=not dynamic)
-    if value_range is not None and isinstance(value_range[0], int):
-        descriptor.integer_range = [IntegerRange(
-            from_value=value_range[0], to_value=value_range[1], step=1)]
-    elif value_range is not None:
-        descriptor.floating_point_range = [FloatingPointRange(
-            from_value=float(value_range[0]), to_value=float(value_range[1]), step=0.0)]
-    return descriptor
-
-
-def _float_list(value):
-    return [float(v) for v in value] if isinstance(value, (list, tuple)) else value
 
 
 class TrackingSummary:
@@ -254,20 +190,7 @@ class ControllerNode(Node):
 
     # ---------------------------------------------------------------------------- parameters
     def _declare_parameters(self):
-        defaults = node_defaults(NODE_NAME)
-        for name, description in SCENE_PARAMETERS.items():
-            self.declare_parameter(name, _float_list(defaults[name]),
-                                   ParameterDescriptor(name=name, description=description,
-                                                       read_only=True))
-        for name, (description, value_range, dynamic) in PARAMETERS.items():
-            value = defaults[name]
-            if value_range is not None and isinstance(value, int) \
-                    and not isinstance(value_range[0], int):
-                value = float(value)    # a float parameter written as 125 in YAML
-            self.declare_parameter(name, _float_list(value),
-                                   _descriptor(name, description, value_range, dynamic))
-        names = list(SCENE_PARAMETERS) + list(PARAMETERS)
-        return {name: self.get_parameter(name).value for name in names}
+        return declare(self, DESCRIPTION)
 
     @staticmethod
     def _config(params, base=None):

@@ -1,5 +1,8 @@
 """
-dmp_server: learn skills from recorded demonstrations and serve ``/generalize`` (SPEC §4-6).
+dmp_server: learn skills from recorded demonstrations and serve ``/generalize``.
+
+Its place in the system: docs/design.md#nodes-and-interfaces; what it does with bad input:
+docs/design.md#bad-input-policy.
 
 ``ros2 run etdmp_ros dmp_server --ros-args --params-file config/scene.yaml --params-file
 config/dmp_server.yaml``. The logic lives in ROS-free modules: :mod:`etdmp_ros.skill_library`
@@ -23,15 +26,16 @@ replaced whole when parameters change.
 """
 
 from dataclasses import dataclass, replace
-import math
 import pathlib
 import threading
 import time
 
-from etdmp_ros.dmp import builtin_demo, builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
+from etdmp_ros import system
+from etdmp_ros.dmp import builtin_demo, FORMULATIONS, METHODS, ObstacleGains
+from etdmp_ros.nodes._parameters import declare, values as parameter_values
 from etdmp_ros.nodes._spin import run
-from etdmp_ros.planning import place_demo, plan_path, PlanSettings, TOOL_DOWN, Workspace
-from etdmp_ros.robot import node_defaults, UR10Model
+from etdmp_ros.planning import place_demo, plan_path, PlanSettings, Workspace
+from etdmp_ros.robot import UR10Model
 from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_numpy, path_to_numpy,
                                        point_to_numpy, points_from_numpy, pose_array_to_numpy,
                                        serialize_path)
@@ -43,135 +47,20 @@ from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 import numpy as np
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterUninitializedException)
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 NODE_NAME = 'dmp_server'
-TOOL_SOURCES = ('joint_states', 'tool_pose')
+DESCRIPTION = system.node(NODE_NAME)
+TOOL_SOURCES = DESCRIPTION.parameter('tool_position_source').choices
 _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _THROTTLE = 5.0   # s between repeated warnings about the same bad input
-
-
-def _range(low, high):
-    return {'floating_point_range': [FloatingPointRange(from_value=float(low),
-                                                        to_value=float(high))]}
-
-
-def _int_range(low, high):
-    return {'integer_range': [IntegerRange(from_value=low, to_value=high, step=1)]}
-
-
-_STRING_ARRAY, _DOUBLE_ARRAY = Parameter.Type.STRING_ARRAY, Parameter.Type.DOUBLE_ARRAY
-
-# name, default, description, descriptor extras. Types follow the defaults; read_only ones are
-# used at start-up only.
-PARAMETERS = (
-    ('skill', 'G', 'Active skill planned by /generalize (a known or later taught skill name).',
-     {}),
-    ('builtin_skills', builtin_demo_names(), 'Built-in demonstrations learned at start-up.',
-     {'read_only': True}),
-    ('demo_files', [], 'Demonstration files or folders learned at start-up (.csv .npy .npz '
-     '.mcap); the skill is named after the file stem.',
-     {'read_only': True, 'type': _STRING_ARRAY}),
-    ('mcap_topic', '', 'Topic (PoseStamped or Path) to learn from in .mcap files; empty = the '
-     'only such topic.', {'read_only': True}),
-    ('recorded_dim', 'auto', 'How a recorded or taught base_link path becomes a skill: 2d '
-     '(projected onto the task plane), 3d (base_link) or auto (2d when flat and parallel to the '
-     'plane).', {'additional_constraints': 'one of ' + ', '.join(RECORDED_DIMS)}),
-    ('plane_tolerance', 0.01, 'm; recorded_dim auto: a path whose heights above the task plane '
-     'spread less than this is a 2D skill.', _range(0.0, 1.0)),
-    ('skills_dir', '', 'Folder where taught skills are saved and loaded from at start-up; '
-     'empty = $ROS_HOME/etdmp_ros/skills or ~/.ros/etdmp_ros/skills.', {'read_only': True}),
-    ('teach_skill_name', 'taught', 'Name of the skill a Path on /etdmp/demonstrations becomes '
-     '(replacing a skill of that name).', {}),
-    ('formulation', 'ijspeert', 'DMP formulation.',
-     {'additional_constraints': 'one of ' + ', '.join(FORMULATIONS)}),
-    ('n_basis', 100, 'Basis functions of the forcing term.', _int_range(2, 1000)),
-    ('method', 'etdmp', 'etdmp (Euclidean transformation DMP) or dmp (the plain baseline).',
-     {'additional_constraints': 'one of ' + ', '.join(METHODS)}),
-    ('mode', 1, '3D skills: 1 = Rodrigues rotation, 2 = independent axis (1D rule) + 2D rule.',
-     _int_range(1, 2)),
-    ('independent_axis', 2, 'Mode 2: the axis following the 1D rule (0 x, 1 y, 2 z).',
-     _int_range(0, 2)),
-    ('duration', 0.0, "s; tau of a plan; 0 = the demonstration's own duration.",
-     _range(0.0, 600.0)),
-    ('output_period', 0.01, 's between the poses of a plan.', _range(0.001, 1.0)),
-    ('tool_orientation', list(TOOL_DOWN), 'Tool orientation (x, y, z, w) in base_link of every '
-     'pose of a plan (normalised).', {}),
-    ('obstacle_gamma', 250.0, 'Steering gain gamma (paper Eq. 24).', _range(0.0, 1e5)),
-    ('obstacle_beta', 20.0 / math.pi, 'Steering decay beta (paper Eq. 24).', _range(0.0, 1e3)),
-    ('obstacle_gamma2', 300.0, 'Distance gain gamma2 (paper Eq. 26).', _range(0.0, 1e5)),
-    ('obstacle_k', 60.0, '1/m; distance decay k (paper Eq. 26); 0 = obstacle_k_relative / '
-     '|start - goal|.', _range(0.0, 1e4)),
-    ('obstacle_k_relative', 10.0, 'k times |start - goal| when obstacle_k is 0.',
-     _range(0.0, 1e3)),
-    ('obstacle_margin', 0.5, 'Extra time, as a fraction of tau, of a plan with obstacles.',
-     _range(0.0, 10.0)),
-    ('obstacle_max_age', 2.0, 's; /etdmp/obstacles older than this are ignored; 0 = no limit.',
-     _range(0.0, 86400.0)),
-    ('static_obstacles', [], 'Obstacle points always used, flat [x1, y1, z1, x2, ...] in '
-     'base_link (m).', {'type': _DOUBLE_ARRAY}),
-    ('goal_clearance', 0.02, 'm; a request with an obstacle closer than this to the goal fails.',
-     _range(0.0, 1.0)),
-    ('min_distance', 0.005, 'm; start and goal closer than this fail the request (start equals '
-     'goal).', _range(0.0, 1.0)),
-    ('tool_position_source', 'joint_states', 'Tool position for an empty start frame: '
-     'joint_states (UR10 forward kinematics) or tool_pose (/etdmp/tool_pose).',
-     {'additional_constraints': 'one of ' + ', '.join(TOOL_SOURCES)}),
-    ('tool_state_max_age', 1.0, 's; an older tool state counts as unknown; 0 = no limit.',
-     _range(0.0, 86400.0)),
-    ('goal_max_age', 0.0, 's; an older /etdmp/goal counts as none; 0 = no limit.',
-     _range(0.0, 86400.0)),
-    ('reach_radius', 1.3, 'm; UR10 reach about the shoulder (reach check).', _range(0.1, 5.0)),
-    ('reach_margin', 0.15, 'm subtracted from reach_radius (reach check).', _range(0.0, 1.0)),
-    ('min_reach_radius', 0.2, "m; points closer to the base's z axis are out of reach.",
-     _range(0.0, 1.0)),
-    ('min_height', -0.005, 'm; points below this z (table top z = 0) are out of reach.',
-     _range(-2.0, 2.0)),
-    ('execute', True, 'Publish each plan on /etdmp/path for the controller.', {}),
-    ('publish_markers', True, 'Publish /etdmp/markers (built only while subscribed).', {}),
-    ('task_plane.origin', [0.75, 0.15, 0.0], 'Task plane origin in base_link (m).', {}),
-    ('task_plane.x_axis', [1.0, 0.0, 0.0], 'Task plane x axis in base_link.', {}),
-    ('task_plane.y_axis', [0.0, 1.0, 0.0], 'Task plane y axis in base_link (orthogonal to x).',
-     {}),
-    ('task_plane.scale', 0.02, 'Metres per demo unit of 2D skills.', _range(1e-5, 10.0)),
-    ('tool_offset', [0.0, 0.0, 0.16], 'Tool tip in the flange frame tool0 (m).',
-     {'read_only': True}),
-)
-_DEFAULTS = {name: default for name, default, _, _ in PARAMETERS}
-
-
-def _file_defaults():
-    """
-    Return the defaults, taken where possible from the installed scene.yaml and dmp_server.yaml.
-
-    So a node started without parameter files still uses the one description of the workcell.
-    A file value replaces a built-in default only if it has the same type (ints count as floats).
-    """
-    defaults = dict(_DEFAULTS)
-    try:
-        found = node_defaults(NODE_NAME)
-    except (OSError, ValueError):   # no share folder (e.g. a bare copy of the module): built-ins
-        return defaults
-    for name, value in found.items():
-        default = defaults.get(name)
-        if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        elif isinstance(default, list) and isinstance(value, list) and default and \
-                isinstance(default[0], float):
-            value = [float(v) if isinstance(v, int) else v for v in value]
-        if name in defaults and type(value) is type(default):
-            defaults[name] = value
-    return defaults
 
 
 def _choice(values, name, choices):
@@ -269,17 +158,8 @@ class DmpServer(Node):
         """Declare parameters, learn the skills, warm up, then start serving."""
         super().__init__(NODE_NAME, **kwargs)
         log = self.get_logger()
-        self._defaults = _file_defaults()
         try:
-            for name, _, description, extra in PARAMETERS:
-                extra = dict(extra)
-                kind = extra.pop('type', None)
-                descriptor = ParameterDescriptor(description=description, **extra)
-                default = self._defaults[name]
-                # An empty list has no ROS type: declare the type alone (unset means empty).
-                self.declare_parameter(name, default if kind is None or default else kind,
-                                       descriptor)
-            self._settings = Settings.from_values(self._values())
+            self._settings = Settings.from_values(declare(self, DESCRIPTION))
         except (InvalidParameterValueException, InvalidParameterTypeException, ValueError) as err:
             log.fatal(f'invalid parameter: {err}')
             raise InvalidConfiguration(str(err)) from None
@@ -325,16 +205,7 @@ class DmpServer(Node):
     # -- parameters -------------------------------------------------------------------------------
 
     def _values(self, changes=()):
-        values = {}
-        for name in _DEFAULTS:
-            try:
-                values[name] = self.get_parameter(name).value
-            except ParameterUninitializedException:   # an empty YAML list leaves it unset
-                values[name] = self._defaults[name]
-        for param in changes:
-            unset = param.type_ == param.Type.NOT_SET
-            values[param.name] = self._defaults.get(param.name) if unset else param.value
-        return values
+        return parameter_values(self, DESCRIPTION, changes)
 
     def _validate_parameters(self, params):
         try:

@@ -1,5 +1,7 @@
 """
-perception: the goal marker and the obstacles from the RealSense-style camera (SPEC §4-5).
+perception: the goal marker and the obstacles from the RealSense-style camera.
+
+Its place in the system: docs/design.md#nodes-and-interfaces.
 
 ``ros2 run etdmp_ros perception --ros-args --params-file config/scene.yaml --params-file
 config/perception.yaml``. Subscribes ``/camera/camera/color/image_raw`` (rgb8),
@@ -29,13 +31,14 @@ import time
 
 import cv2
 
+from etdmp_ros import system
+from etdmp_ros.nodes._parameters import declare, plain, values as parameter_values
 from etdmp_ros.nodes._spin import run
-from etdmp_ros.robot import detector_from_parameters, FrameSynchronizer, node_defaults
+from etdmp_ros.robot import detector_from_parameters, FrameSynchronizer
 from etdmp_ros.ros_conversions import (image_from_msg, image_msg, intrinsics_from_camera_info,
                                        pose_array_from_numpy, stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
@@ -53,40 +56,7 @@ DEPTH_ENCODINGS = ('16UC1', 'mono16')
 # Without a processed frame for this long while images arrive, say why (s).
 STALL_WARNING = 2.0
 
-# Workcell parameters from config/scene.yaml: read-only (the simulation renders with them).
-SCENE = {
-    'camera.position': 'm, [x, y, z] of the colour optical frame in base_link',
-    'camera.orientation': 'quaternion [x, y, z, w] of the colour optical frame in base_link',
-    'goal_marker.radius': 'm, radius of the goal marker disc',
-    'obstacle.radius': 'm, radius of the obstacle cylinders',
-    'obstacle.height': 'm, height of the obstacle cylinders',
-}
-# Node parameters: name -> (description, range or None). All can change at runtime except
-# reliable_images.
-NODE_PARAMETERS = {
-    'goal_hsv_low': ('[h, s, v] lower corner of the goal colour (OpenCV: H 0..179)', None),
-    'goal_hsv_high': ('[h, s, v] upper corner of the goal colour; h < low h wraps', None),
-    'obstacle_hsv_low': ('[h, s, v] lower corner of the obstacle colour', None),
-    'obstacle_hsv_high': ('[h, s, v] upper corner of the obstacle colour; h < low h wraps',
-                          None),
-    'min_blob_area': ('px; smaller colour blobs are ignored', (1, 1_000_000)),
-    'min_depth_pixels': ('a blob needs this many pixels with depth', (1, 1_000_000)),
-    'top_band': ('m; band below the highest points taken as the top face', (1e-4, 0.1)),
-    'occlusion_gap': ('m; outline next to something nearer by more: occlusion edge',
-                      (1e-3, 1.0)),
-    'min_rim_points': ('rim pixels needed for the circle fit (else top-face centroid)',
-                       (3, 100_000)),
-    'max_rim_rms': ('m; a worse rim fit flags overlapping objects', (1e-4, 0.1)),
-    'stamp_tolerance': ('s; colour, depth and camera_info stamps of one frame', (0.0, 1.0)),
-    'match_camera_info': ('match camera_info by stamp (else use the latest one)', None),
-    'max_rate': ('Hz; process at most this many frames per second (0: every frame)',
-                 (0.0, 1000.0)),
-    'debug_image_rate': ('Hz; annotated image at most this often, when subscribed (0: never)',
-                         (0.0, 1000.0)),
-    'warn_period': ('s; repeated warnings at most this often', (0.0, 3600.0)),
-    'reliable_images': ('reliable image subscriptions (false: best effort)', None),
-}
-ARRAYS = ('goal_hsv_low', 'goal_hsv_high', 'obstacle_hsv_low', 'obstacle_hsv_high')
+DESCRIPTION = system.node(NODE_NAME)
 
 
 @dataclass(frozen=True)
@@ -118,24 +88,6 @@ class Settings:
                    debug_period=(1.0 / rates['debug_image_rate']
                                  if rates['debug_image_rate'] > 0 else -1.0),
                    warn_period=float(p['warn_period']))
-
-
-def _descriptor(description, value, value_range, read_only, dynamic=False):
-    descriptor = ParameterDescriptor(description=description, read_only=read_only,
-                                     dynamic_typing=dynamic)
-    if value_range is not None:
-        if isinstance(value_range[0], int):
-            descriptor.integer_range = [IntegerRange(from_value=value_range[0],
-                                                     to_value=value_range[1], step=1)]
-        else:
-            descriptor.floating_point_range = [FloatingPointRange(
-                from_value=value_range[0], to_value=value_range[1], step=0.0)]
-    return descriptor
-
-
-def _parameter_value(value):
-    """Return a parameter value as plain Python (arrays as lists)."""
-    return list(value) if hasattr(value, '__len__') and not isinstance(value, str) else value
 
 
 class PerceptionNode(Node):
@@ -182,32 +134,10 @@ class PerceptionNode(Node):
 
     # --------------------------------------------------------------------------- parameters
     def _declare_parameters(self):
-        defaults = node_defaults(NODE_NAME)
-        for name, description in SCENE.items():
-            value = defaults.get(name)
-            if isinstance(value, list):
-                value = [float(v) for v in value]
-            elif isinstance(value, int):
-                value = float(value)
-            self.declare_parameter(name, value,
-                                   _descriptor(f'{description} (config/scene.yaml)', value, None,
-                                               read_only=True))
-        for name, (description, value_range) in NODE_PARAMETERS.items():
-            value = defaults.get(name)
-            if value_range is not None and isinstance(value_range[0], float) and \
-                    isinstance(value, int):
-                value = float(value)
-            # HSV corners: integers, but `ros2 param set` users may type floats; validated below.
-            self.declare_parameter(name, value, _descriptor(
-                description, value, value_range, read_only=name == 'reliable_images',
-                dynamic=name in ARRAYS))
+        declare(self, DESCRIPTION)
 
     def _values(self, updates=()):
-        values = {name: _parameter_value(self.get_parameter(name).value)
-                  for name in (*SCENE, *NODE_PARAMETERS)}
-        for parameter in updates:
-            values[parameter.name] = _parameter_value(parameter.value)
-        return values
+        return parameter_values(self, DESCRIPTION, updates)
 
     def _validate_parameters(self, parameters):
         try:
@@ -223,7 +153,7 @@ class PerceptionNode(Node):
                 (old.tolerance_ns, old.match_camera_info):
             self._sync = self._synchronizer(self.settings)
         self.get_logger().info('parameters changed: ' + ', '.join(
-            f'{p.name} = {_parameter_value(p.value)}' for p in parameters))
+            f'{p.name} = {plain(p.value)}' for p in parameters))
 
     @staticmethod
     def _synchronizer(settings):

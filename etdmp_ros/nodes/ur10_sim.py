@@ -19,8 +19,9 @@ latest command (and scene changes), step the physics, publish the state, then sl
 and publishes the images: the physics and the joint states never wait for rendering or image
 transport, nor share an interpreter lock with them. The executor thread only receives commands
 and parameter changes, validates them and hands them over. Parameters: config/scene.yaml and
-config/ur10_sim.yaml (both read from the package's share folder as defaults); ``goal_position``,
-``obstacle_positions``, ``real_time_factor`` and ``watchdog_timeout`` can be changed at runtime.
+config/ur10_sim.yaml (their values are also the built-in defaults: etdmp_ros.system);
+``goal_position``, ``obstacle_positions``, ``real_time_factor`` and ``watchdog_timeout`` can be
+changed at runtime.
 """
 
 import socket
@@ -28,17 +29,18 @@ import subprocess
 import threading
 import time
 
+from etdmp_ros import system
+from etdmp_ros.nodes._parameters import declare
 from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_command,
                                          encode as camera_snapshot)
 from etdmp_ros.nodes._spin import rate_qos, run
-from etdmp_ros.robot import (MAX_OBSTACLES, node_defaults, parse_goal_position,
-                             parse_obstacle_positions, SCENE_PARAMETERS, SceneConfig, UR10Sim)
+from etdmp_ros.robot import (MAX_OBSTACLES, parse_goal_position, parse_obstacle_positions,
+                             SceneConfig, UR10Sim)
 from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, pose_array_from_numpy,
                                        velocity_command_array)
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
@@ -59,61 +61,13 @@ CAMERA_TOPICS = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR
 GOAL_TOPIC = '/ur10_sim/ground_truth/goal'
 OBSTACLES_TOPIC = '/ur10_sim/ground_truth/obstacles'
 TOOL_TIP_TOPIC = '/ur10_sim/ground_truth/tool_tip'
-# Parameters that may change while running; the others need a rebuild of the model.
-DYNAMIC = ('goal_position', 'obstacle_positions', 'real_time_factor', 'watchdog_timeout')
+DESCRIPTION = system.node(NODE_NAME)
 # Fell this far behind real time (overload, debugger): restart pacing instead of bursting.
 MAX_LAG = 0.25
 #: A wall-clock gap between two ticks longer than this many periods is a stall (warned).
 LATE_TICKS = 3
 #: Hz of the goal and obstacle ground truth when the camera is off.
 GROUND_TRUTH_RATE = 10.0
-
-SCENE_DESCRIPTIONS = {
-    'goal_position': '[x, y, z] m in base_link: centre of the top face of the goal marker; '
-                     'moves it at runtime',
-    'obstacle_positions': '[x1, y1, z1, x2, ...] m in base_link: centres of the top faces of '
-                          f'the obstacle cylinders (at most {MAX_OBSTACLES}); moves them at '
-                          'runtime',
-}
-# Node-only parameters: name -> (description, range (min, max) or None).
-NODE_PARAMETERS = {
-    'control_rate': ('Hz of /joint_states, /clock and ground truth; commands apply at these '
-                     'ticks', (1.0, 2000.0)),
-    'physics_timestep': ('s per physics step; the control period is a whole number of them',
-                         (1e-4, 0.02)),
-    'real_time_factor': ('simulated s per wall s; 0 = as fast as possible', (0.0, 100.0)),
-    'watchdog_timeout': ('s of simulated time without a command before braking to zero; '
-                         '0 = never (the last command applies forever)', (0.0, 60.0)),
-    'camera_rate': ('Hz of the camera topics; 0 = no camera', (0.0, 90.0)),
-    'image_width': ('camera image width in pixels', (16, 4096)),
-    'image_height': ('camera image height in pixels', (16, 4096)),
-    'fovy_deg': ('vertical field of view of the colour camera in degrees', (1.0, 170.0)),
-    'depth_min': ('m; nearer depth reads 0 (no data)', (0.0, 65.0)),
-    'depth_max': ('m; farther depth reads 0 (no data)', (0.0, 65.0)),
-    'depth_noise': ('m, standard deviation of the depth noise at 1 m (grows with z^2)',
-                    (0.0, 1.0)),
-    'multisamples': ('MSAA samples of the colour image (0 = fastest)', (0, 16)),
-}
-
-
-def _descriptor(name, value, description, value_range=None, read_only=True, dynamic=False):
-    descriptor = ParameterDescriptor(name=name, description=description, read_only=read_only,
-                                     dynamic_typing=dynamic)
-    if value_range is not None:
-        if isinstance(value, int):
-            descriptor.integer_range = [IntegerRange(from_value=int(value_range[0]),
-                                                     to_value=int(value_range[1]), step=1)]
-        else:
-            descriptor.floating_point_range = [FloatingPointRange(
-                from_value=float(value_range[0]), to_value=float(value_range[1]), step=0.0)]
-    return descriptor
-
-
-def _typed(value):
-    """Return a YAML default with ints in float lists made floats (ROS types lists strictly)."""
-    if isinstance(value, list) and any(isinstance(v, float) for v in value):
-        return [float(v) for v in value]
-    return value
 
 
 def build_sim(p):
@@ -134,10 +88,13 @@ class UR10SimNode(Node):
     def __init__(self, **kwargs):
         """Declare parameters, build the simulation, create publishers and the subscription."""
         super().__init__(NODE_NAME, **kwargs)
-        self._declare_parameters()
-        p = {name: self.get_parameter(name).value for name in self._declared}
-        if p['obstacle_positions'] is None:   # `obstacle_positions: []` in YAML: rcl leaves it
-            p['obstacle_positions'] = []      # untyped (NOT_SET); the user meant no obstacles
+        # Dynamic typing of goal_position and obstacle_positions: `ros2 param set` types
+        # "[1, 0, 0]" as integer[], "[0.7, 0.2, 0]" as a string and "[]" as bool[];
+        # _number_list takes them all as numbers. `obstacle_positions: []` in YAML leaves the
+        # parameter unset: no obstacles.
+        p = declare(self, DESCRIPTION)
+        if p['obstacle_positions'] is None:
+            p['obstacle_positions'] = []
         self._parameter_values = p   # (not _parameters: rclpy Node uses that name)
         self.sim = build_sim(p)
         self.steps_per_tick = max(1, round(1.0 / (p['control_rate'] * self.sim.timestep)))
@@ -184,27 +141,6 @@ class UR10SimNode(Node):
             f'{self.sim.watchdog_timeout:g} s, real-time factor {self.real_time_factor:g}')
 
     # --------------------------------------------------------------------------- parameters
-    def _declare_parameters(self):
-        defaults = node_defaults(NODE_NAME)
-        self._declared = []
-        for name in SCENE_PARAMETERS:
-            dynamic = name in DYNAMIC
-            # Dynamic typing: `ros2 param set` types "[1, 0, 0]" as integer[], "[0.7, 0.2, 0]"
-            # as a string and "[]" as bool[]; _number_list takes them all as numbers.
-            descriptor = _descriptor(name, None, SCENE_DESCRIPTIONS.get(
-                name, 'workcell (config/scene.yaml); fixed while running'),
-                read_only=not dynamic, dynamic=dynamic)
-            self.declare_parameter(name, _typed(defaults.get(name)), descriptor)
-            self._declared.append(name)
-        for name, (description, value_range) in NODE_PARAMETERS.items():
-            value = defaults.get(name)
-            if isinstance(value_range[0], float) and isinstance(value, int):
-                value = float(value)
-            descriptor = _descriptor(name, value, description, value_range,
-                                     read_only=name not in DYNAMIC)
-            self.declare_parameter(name, value, descriptor)
-            self._declared.append(name)
-
     def _validate_parameters(self, parameters):
         for parameter in parameters:
             try:

@@ -8,27 +8,19 @@ neither (dmp_server, controller) start without loading MuJoCo or OpenCV.
 """
 
 import importlib
-import os
-import sys
 
 from ._camera import CameraIntrinsics, CameraPose, matrix_to_quaternion, quaternion_to_matrix
 from ._controller import Command, ControllerConfig, DelayEstimator, STATUSES, TrajectoryController
 from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, IKResult
-from ._scene import (load_scene, node_defaults, parse_goal_position,
-                     parse_obstacle_positions, read_parameter_file, SCENE_PARAMETERS,
+from ._scene import (parse_goal_position, parse_obstacle_positions, SCENE_PARAMETERS,
                      SceneConfig)
 from ._trajectory import (MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
                           trajectory_from_path, TrajectoryError)
 from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_urdf_path,
                     UR10Model)
 
-# Headless by default: MuJoCo chooses its OpenGL platform when it is imported, and without a
-# display only EGL works (MUJOCO_GL=egl, as the Makefile sets it too).
-if sys.platform.startswith('linux') and not os.environ.get('DISPLAY'):
-    os.environ.setdefault('MUJOCO_GL', 'egl')
-
 _LAZY = {
-    '_sim': ('CameraState', 'MAX_OBSTACLES', 'UR10Sim'),
+    '_sim': ('CameraState', 'MAX_OBSTACLES', 'PEN_TIP_RADIUS', 'UR10Sim'),
     '_vision': ('check_frame', 'Detection', 'Detections', 'Detector', 'detector_from_parameters',
                 'DETECTOR_PARAMETERS', 'DetectorSettings', 'FrameSynchronizer', 'HsvRange',
                 'ObjectModel', 'Rejection'),
@@ -51,8 +43,8 @@ __all__ = [
     'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'IKResult', 'JOINT_NAMES',
     'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PoseTrajectory', 'SCENE_PARAMETERS',
     'STATUSES', 'SceneConfig', 'TrajectoryController', 'TrajectoryError', 'UR10Model',
-    'load_scene', 'matrix_to_quaternion', 'node_defaults', 'parse_goal_position',
+    'matrix_to_quaternion', 'parse_goal_position',
     'parse_obstacle_positions', 'quaternion_to_matrix', 'quaternions_to_rotations',
-    'read_parameter_file', 'robot_data_dir', 'trajectory_from_path', 'ur10_urdf_path',
+    'robot_data_dir', 'trajectory_from_path', 'ur10_urdf_path',
     *_LAZY_NAMES,
 ]

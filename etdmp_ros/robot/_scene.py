@@ -1,10 +1,11 @@
 """
-The workcell description shared by every node (``config/scene.yaml``), read without ROS.
+The workcell every node shares, validated: :class:`SceneConfig`.
 
-Parameter files have the ROS 2 layout (``<node or /**>: ros__parameters: {...}``); nested keys
-become dotted parameter names (``camera.position``), exactly as ``--params-file`` declares them.
-:class:`SceneConfig` is the validated scene: the simulation builds from it, and the nodes build
-it from their parameters with :meth:`SceneConfig.from_parameters`.
+Its values are flat parameter names (``camera.position``), as the nodes declare them; the
+defaults and the file ``config/scene.yaml`` are the system description's
+(:data:`etdmp_ros.system.SCENE`, :func:`etdmp_ros.system.scene_config`). The simulation builds
+from a SceneConfig, and the nodes build it from their parameters with
+:meth:`SceneConfig.from_parameters`.
 
 Objects and the point that stands for each (all in base_link, metres; table top is z = 0):
 
@@ -22,10 +23,8 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-import yaml
 
 from ._camera import CameraPose
-from .._paths import config_path
 
 # Scene keys (flat ROS parameter names) that SceneConfig.from_parameters reads.
 SCENE_PARAMETERS = (
@@ -38,49 +37,6 @@ SCENE_PARAMETERS = (
     'obstacle_positions', 'obstacle.radius', 'obstacle.height', 'obstacle.color',
 )
 GOAL_MARKER_THICKNESS = 0.002
-
-
-def read_parameter_file(path, node_name=None):
-    """
-    Return the parameters of a ROS 2 parameter file as a flat dict ``{'a.b': value}``.
-
-    Sections ``/**`` and, if given, ``node_name`` / ``/node_name`` are merged in that order (a
-    node's own section wins), as rcl does for ``--params-file``.
-    """
-    with open(path, encoding='utf-8') as f:
-        doc = yaml.safe_load(f) or {}
-    sections = ['/**']
-    if node_name:
-        sections += [node_name, '/' + node_name]
-    flat = {}
-    for section in sections:
-        params = (doc.get(section) or {}).get('ros__parameters') or {}
-        flat.update(_flatten(params))
-    return flat
-
-
-def node_defaults(node_name):
-    """
-    Return a node's parameter values from the package's files: scene.yaml, then <node>.yaml.
-
-    The same files, in the same order, as the launch file passes; nodes declare their
-    parameters with these values, so a node started without parameter files still uses the one
-    description of the workcell.
-    """
-    values = read_parameter_file(config_path('scene.yaml'), node_name)
-    values.update(read_parameter_file(config_path(f'{node_name}.yaml'), node_name))
-    return values
-
-
-def _flatten(tree, prefix=''):
-    flat = {}
-    for key, value in tree.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, dict):
-            flat.update(_flatten(value, name + '.'))
-        else:
-            flat[name] = value
-    return flat
 
 
 def _vector(name, value, size=None, multiple_of=None):
@@ -132,8 +88,8 @@ class SceneConfig:
     """
     The validated workcell: robot start, tool, table, objects and camera pose (base_link, m).
 
-    Build it with :func:`load_scene` (from ``config/scene.yaml``) or
-    :meth:`from_parameters` (from a node's parameters); the constructor takes the values
+    Build it with :meth:`from_parameters` (from a node's parameters, or
+    :func:`etdmp_ros.system.scene_config` for the defaults); the constructor takes the values
     as they are and :meth:`from_parameters` validates them. Colours are rgba in 0..1.
     """
 
@@ -203,17 +159,3 @@ class SceneConfig:
             obstacle_height=_positive('obstacle.height', p['obstacle.height']),
             obstacle_color=_color('obstacle.color', p['obstacle.color']),
         )
-
-
-def load_scene(path=None, overrides=None):
-    """
-    Return the :class:`SceneConfig` of a scene parameter file (default: ``config/scene.yaml``).
-
-    ``overrides`` is an optional dict of flat parameter names replacing file values, e.g.
-    ``{'goal_position': [0.7, 0.2, 0.002]}``.
-    """
-    if path is None:
-        path = config_path('scene.yaml')
-    params = read_parameter_file(path)
-    params.update(overrides or {})
-    return SceneConfig.from_parameters(params)

@@ -4,7 +4,7 @@ The simulated workcell: a MuJoCo UR10 driven by joint velocities, and a RealSens
 :class:`UR10Sim` is ROS-free (the ``ur10_sim`` node is a thin shell around it) and can be used
 in-process by tests::
 
-    sim = UR10Sim()                       # scene from config/scene.yaml
+    sim = UR10Sim()                       # the default workcell (config/scene.yaml)
     sim.set_velocity_command([0.1, 0, 0, 0, 0, 0])
     sim.advance(0.5)                      # 0.5 s of simulated time
     sim.q, sim.qd, sim.tool_tip_position
@@ -43,15 +43,35 @@ maps cost ~40 ms a frame instead of ~2 ms.
 
 from dataclasses import dataclass
 import math
+import os
+import sys
 import xml.etree.ElementTree as ElementTree
 
-import mujoco
 import numpy as np
 
 from ._camera import CameraIntrinsics
-from ._scene import GOAL_MARKER_THICKNESS, load_scene, parse_goal_position, \
-    parse_obstacle_positions
+from ._scene import GOAL_MARKER_THICKNESS, parse_goal_position, parse_obstacle_positions
 from ._ur10 import JOINT_NAMES, robot_data_dir, ur10_urdf_path, UR10Model
+
+mujoco = None   # imported by _import_mujoco() when the first simulation is built
+
+
+def _import_mujoco():
+    """
+    Import MuJoCo once, headless by default.
+
+    MuJoCo chooses its OpenGL platform when it is imported; without a display only EGL works.
+    So when nobody chose one (``MUJOCO_GL``) and there is no display, choose EGL, as the Makefile
+    does: here, when a simulation is first built, not when a module is imported.
+    """
+    global mujoco
+    if mujoco is None:
+        if sys.platform.startswith('linux') and not os.environ.get('DISPLAY'):
+            os.environ.setdefault('MUJOCO_GL', 'egl')
+        import mujoco as module
+        mujoco = module
+    return mujoco
+
 
 CAMERA_NAME = 'd435_color'
 MAX_OBSTACLES = 8
@@ -150,7 +170,7 @@ class UR10Sim:
                  image_size=(640, 480), fovy_deg=42.5, depth_range=(0.1, 3.0),
                  depth_noise=0.0, seed=None, multisamples=0, kv=DEFAULT_KV):
         """
-        Build the model (``scene``: a :class:`SceneConfig`, default ``config/scene.yaml``).
+        Build the model (``scene``: a :class:`SceneConfig`; default: the system's workcell).
 
         ``timestep``: physics step (s). ``watchdog_timeout``: brake after this long without a
         command (s of simulated time; 0 disables). ``image_size``: (width, height) of the camera
@@ -160,7 +180,11 @@ class UR10Sim:
         z^2 like a stereo camera's; 0 for none. ``multisamples``: MSAA samples (0 is fastest).
         ``kv``: velocity-servo gains per joint (N m s/rad).
         """
-        self.scene = load_scene() if scene is None else scene
+        if scene is None:   # the defaults of the system description (config/scene.yaml)
+            from etdmp_ros.system import scene_config
+            scene = scene_config()
+        self.scene = scene
+        _import_mujoco()
         if not timestep > 0:
             raise ValueError(f'timestep must be positive, got {timestep}')
         self.watchdog_timeout = float(watchdog_timeout)

@@ -1,0 +1,131 @@
+"""
+The system description (etdmp_ros.system) is the one place of every parameter and node.
+
+The files written from it (config/*.yaml, the docs' parameter tables) must be up to date and
+give back its defaults; the nodes must declare exactly what it describes, with its descriptors.
+"""
+
+from etdmp_ros import config_files, system
+from etdmp_ros.nodes._parameters import declare, descriptor
+import numpy as np
+import pytest
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from conftest import REPO
+
+
+def test_config_files_and_docs_tables_are_written_from_the_description():
+    stale = [str(path.relative_to(REPO)) for path, text in config_files.generated_files(REPO)
+             .items() if path.read_text(encoding='utf-8') != text]
+    assert not stale, f'out of date (run `make config`): {stale}'
+
+
+@pytest.mark.parametrize('name', system.NODE_NAMES)
+def test_the_parameter_files_give_back_every_default(name):
+    spec = system.node(name)
+    from_files = config_files.read_node_parameters(name)
+    for p in spec.all_parameters:
+        if p.array_type and not p.default:
+            assert p.name not in from_files   # ROS cannot type an empty list: left out
+            continue
+        value = from_files[p.name]
+        assert type(value) is type(p.default), (p.name, value, p.default)
+        if isinstance(p.default, float) or (isinstance(p.default, list)
+                                            and isinstance(p.default[0], float)):
+            assert np.allclose(value, p.default, rtol=1e-15, atol=0), p.name
+        else:
+            assert value == p.default, p.name
+
+
+def test_a_default_outside_its_range_or_choices_is_refused():
+    with pytest.raises(ValueError, match='outside'):
+        system.Parameter('gain', 2.0, 'a gain', value_range=(0.0, 1.0))
+    with pytest.raises(ValueError, match='not in'):
+        system.Parameter('method', 'x', 'a method', choices=('etdmp', 'dmp'))
+    with pytest.raises(ValueError, match='array_type'):
+        system.Parameter('files', [], 'files')
+
+
+def test_wiring_scene_first_then_the_node_then_sim_time():
+    for spec in system.NODES:
+        files = system.parameter_files(spec.name)
+        assert [f.name for f in files] == ['scene.yaml', f'{spec.name}.yaml']
+        assert all(f.is_file() for f in files)
+        assert system.wiring_overrides(spec.name) == (
+            {'use_sim_time': True} if spec.sim_time else {})
+    assert [n.name for n in system.NODES if n.sim_time] == ['dmp_server']
+    assert system.NODE_NAMES[0] == 'ur10_sim'   # started first: the others wait for it
+    with pytest.raises(KeyError, match='nodes: ur10_sim'):
+        system.node('planner')
+
+
+def test_scene_parameters_are_one_description_shared_by_the_nodes():
+    scene = {p.name: p for p in system.SCENE}
+    for spec in system.NODES:
+        for p in spec.scene:
+            assert p.default == scene[p.name].default, (spec.name, p.name)
+        own = {p.name for p in spec.parameters}
+        assert not own & set(scene), f'{spec.name} redefines scene parameters'
+    assert system.scene_config().goal_position.tolist() == scene['goal_position'].default
+
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, args=['--ros-args', '--disable-rosout-logs'])
+    yield ctx
+    ctx.try_shutdown()
+
+
+def _node(context, name, overrides=()):
+    return Node(name, context=context, parameter_overrides=list(overrides),
+                enable_rosout=False, start_parameter_services=False)
+
+
+def test_declare_gives_each_parameter_its_default_and_descriptor(context):
+    spec = system.node('dmp_server')
+    node = _node(context, spec.name)
+    try:
+        values = declare(node, spec)
+        assert values == {**spec.defaults()}
+        assert values['static_obstacles'] == [] and values['demo_files'] == []
+        k = node.describe_parameter('obstacle_k')
+        assert k.description.endswith('[1/m]') and not k.read_only
+        assert (k.floating_point_range[0].from_value, k.floating_point_range[0].to_value) == \
+            spec.parameter('obstacle_k').value_range
+        n = node.describe_parameter('n_basis')
+        assert (n.integer_range[0].from_value, n.integer_range[0].to_value) == (2, 1000)
+        assert node.describe_parameter('tool_offset').read_only
+        assert 'one of etdmp, dmp' in node.describe_parameter('method').additional_constraints
+        result = node.set_parameters([Parameter('obstacle_k', value=-1.0)])[0]
+        assert not result.successful   # below the range: refused by rcl
+        result = node.set_parameters([Parameter('tool_offset', value=[0.0, 0.0, 0.2])])[0]
+        assert not result.successful   # read-only
+    finally:
+        node.destroy_node()
+
+
+def test_declare_refuses_file_values_out_of_range_or_of_another_type(context):
+    spec = system.node('controller')
+    for override, error in ((Parameter('control_rate', value=5000.0),
+                             InvalidParameterValueException),
+                            (Parameter('control_rate', value=125), InvalidParameterTypeException)):
+        node = _node(context, spec.name, [override])
+        try:
+            with pytest.raises(error):
+                declare(node, spec)
+        finally:
+            node.destroy_node()
+
+
+def test_every_descriptor_matches_its_parameter():
+    for spec in system.NODES:
+        for p in spec.all_parameters:
+            d = descriptor(p)
+            assert d.name == p.name and d.read_only == (not p.dynamic)
+            assert d.dynamic_typing == p.dynamic_typing
+            assert bool(d.floating_point_range or d.integer_range) == (
+                p.value_range is not None and not isinstance(p.default, list))
