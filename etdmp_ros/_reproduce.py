@@ -25,9 +25,8 @@ from pathlib import Path
 
 from etdmp_ros.dmp import (clearance, DemonstrationError, GeneralizationError, learn, load_demo,
                            METHODS, OBSTACLE_MARGIN, similarity)
+from etdmp_ros.task_plane import quadrant as task_plane_quadrant, QUADRANTS
 import numpy as np
-
-QUADRANTS = ('I', 'II', 'III', 'IV')
 
 # Where the obstacles of the Figs. 7-8 runs sit on the obstacle-free ET-DMP path, as fractions of
 # its arc length: on the path is where they disturb the most (paper: "limited to the vicinity of
@@ -53,14 +52,11 @@ class ReproductionError(ValueError):
 
 
 def quadrant(relative):
-    """Return the relative quadrant, "I" to "IV", of a 2D vector such as ``x0 - g``."""
-    rel = np.asarray(relative, dtype=float)
-    if rel.shape != (2,) or not np.all(np.isfinite(rel)):
-        raise ReproductionError(f'quadrants need a finite 2D vector, got {rel.tolist()}')
-    if np.hypot(*rel) == 0.0:
-        raise ReproductionError('start and goal coincide: the relative quadrant is undefined')
-    angle = math.atan2(rel[1], rel[0]) % (2.0 * math.pi)
-    return QUADRANTS[min(int(angle // (0.5 * math.pi)), 3)]
+    """Return the relative quadrant of ``relative`` (:func:`etdmp_ros.task_plane.quadrant`)."""
+    try:
+        return task_plane_quadrant(relative)
+    except ValueError as exc:
+        raise ReproductionError(str(exc)) from None
 
 
 def _finite_or_none(value):

@@ -13,8 +13,8 @@ rotation or scaling, so the reader sees the demonstrated shape as recorded).
 
 from pathlib import Path
 
-from etdmp_ros._reproduce import QUADRANTS
 from etdmp_ros.dmp import METHOD_LABELS, METHODS
+from etdmp_ros.task_plane import QUADRANTS
 import numpy as np
 
 DPI = 110

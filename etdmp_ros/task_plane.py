@@ -13,14 +13,36 @@ an ``origin`` and two orthonormal axes ``x_axis``, ``y_axis`` in base_link (metr
 ET-DMP scales the movement by ``|x0 - g|``, so the scale does not change a plan between given
 points; it fixes the size of demonstrations recorded in metres (a taught path becomes a skill in
 demo units) and of the demonstration drawn "in place" next to a plan.
+
+The *relative quadrant* of a start (paper Table 2) is the quadrant of ``x0 - g`` in the plane's
+coordinates (:func:`quadrant`): half-open angular sectors of ``atan2(y, x)``, I = [0, 90) deg,
+II = [90, 180), III = [180, 270), IV = [270, 360), so a vector exactly on an axis belongs to the
+sector that begins there.
 """
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
 #: Largest |x_axis . y_axis| accepted for the (normalised) plane axes.
 ORTHOGONALITY_TOLERANCE = 1e-3
+QUADRANTS = ('I', 'II', 'III', 'IV')
+
+
+def quadrant(relative):
+    """
+    Return the relative quadrant, "I" to "IV", of a 2D vector such as ``x0 - g``.
+
+    Raises ValueError for anything but a finite, non-zero 2D vector.
+    """
+    rel = np.asarray(relative, dtype=float)
+    if rel.shape != (2,) or not np.all(np.isfinite(rel)):
+        raise ValueError(f'quadrants need a finite 2D vector, got {rel.tolist()}')
+    if np.hypot(*rel) == 0.0:
+        raise ValueError('start and goal coincide: the relative quadrant is undefined')
+    angle = math.atan2(rel[1], rel[0]) % (2.0 * math.pi)
+    return QUADRANTS[min(int(angle // (0.5 * math.pi)), 3)]
 
 
 @dataclass(frozen=True, eq=False)

@@ -10,10 +10,11 @@ import contextlib
 import itertools
 import os
 from pathlib import Path
-import signal
 import subprocess
 import sys
 
+from etdmp_ros import processes, system
+from etdmp_ros.processes import installed_argv, isolated_environment, sourced  # noqa: F401
 import pytest
 import yaml
 
@@ -32,9 +33,10 @@ _DOMAIN_IDS = itertools.count(1 + os.getpid() % 50)
 SUITES = {
     'unit': ('test_cli', 'test_controller_sim', 'test_demos', 'test_dmp_core',
              'test_dmp_obstacles', 'test_dmp_similarity', 'test_dmp_skill', 'test_flake8',
-             'test_ik', 'test_paper_reproduction', 'test_pep257', 'test_planning', 'test_readme',
-             'test_robot_model', 'test_ros_conversions_geometry', 'test_ros_conversions_sim',
-             'test_sim', 'test_skill_library', 'test_system', 'test_vision'),
+             'test_ik', 'test_metrics', 'test_paper_reproduction', 'test_pep257', 'test_planning',
+             'test_readme', 'test_robot_model', 'test_ros_conversions_geometry',
+             'test_ros_conversions_image', 'test_ros_conversions_sim', 'test_sim',
+             'test_skill_library', 'test_system', 'test_vision'),
     'nodes': ('test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
               'test_install_layout', 'test_perception_node', 'test_ur10_sim_node'),
     'system': ('test_end_to_end',),
@@ -87,12 +89,6 @@ def colcon_install(tmp_path_factory):
     return tmp / 'install'
 
 
-def sourced(install, command):
-    """Return an argv that runs a shell command after sourcing the install, as a user would."""
-    # local_setup.sh: colcon-core always writes it (setup.bash needs the colcon-bash extension).
-    return ['sh', '-c', f'. "{install}/local_setup.sh" && exec {command}']
-
-
 def isolate_dds(patch):
     """
     Give this process (via ``patch``, a pytest MonkeyPatch) its own DDS domain; return the env.
@@ -101,10 +97,12 @@ def isolate_dds(patch):
     localhost-only discovery, so parallel runs on one machine cannot hear each other. Pass the
     returned env to the node processes; rclpy in this process sees it too.
     """
-    patch.setenv('ROS_DOMAIN_ID', str(next(_DOMAIN_IDS) % 101 + 1))
-    patch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    patch.delenv('ROS_LOCALHOST_ONLY', raising=False)
-    patch.delenv('ROS_STATIC_PEERS', raising=False)
+    env = isolated_environment(next(_DOMAIN_IDS) % 101 + 1)
+    for name in set(os.environ) - set(env):
+        patch.delenv(name)
+    for name, value in env.items():
+        if os.environ.get(name) != value:
+            patch.setenv(name, value)
     patch.setenv('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     return dict(os.environ)
 
@@ -122,47 +120,25 @@ def module_ros_env():
         yield isolate_dds(patch)
 
 
-class NodeProcess:
+class NodeProcess(processes.NodeProcess):
     """
     An installed node started as `ros2 run etdmp_ros <node>` would be, its output in a file.
 
-    Parameters: config/scene.yaml, then config/<node>.yaml from the install's share folder, then
-    ``overrides`` written as the node's own section in a third file (a `-p name:=value` would
-    lose against the node's section of its YAML), then ``extra_args`` verbatim.
+    Parameters: the system's files (:func:`etdmp_ros.system.parameter_files`: config/scene.yaml,
+    then config/<node>.yaml) from the install's share folder, then ``overrides`` written as the
+    node's own section in a third file (a `-p name:=value` would lose against the node's section
+    of its YAML), then ``extra_args`` verbatim. Stopping: :meth:`stop` (SIGINT, then kill).
     """
 
     def __init__(self, install, env, tmp, node, overrides=None, name=None, extra_args=''):
         """Start the node; ``name`` (default: the node's) names its log and override files."""
-        share = install / 'share' / PKG / 'config'
         name = name or node
-        files = [share / 'scene.yaml', share / f'{node}.yaml']
+        files = system.parameter_files(node, install / 'share' / PKG / 'config')
         if overrides:
             files.append(tmp / f'{name}_overrides.yaml')
             files[-1].write_text(yaml.safe_dump({node: {'ros__parameters': overrides}}))
-        command = (f'{install}/lib/{PKG}/{node} --ros-args '
-                   + ' '.join(f'--params-file {f}' for f in files) + f' {extra_args}')
-        env = dict(env, ROS_HOME=str(tmp / 'ros_home'), PYTHONUNBUFFERED='1',
-                   RCUTILS_COLORIZED_OUTPUT='0', MUJOCO_GL='egl')
-        self.log_path = tmp / f'{name}.log'
-        self._log = open(self.log_path, 'w')
-        self.process = subprocess.Popen(sourced(install, command), env=env, stdout=self._log,
-                                        stderr=subprocess.STDOUT)
-
-    def log(self):
-        """Return the node's output so far."""
-        return self.log_path.read_text()
-
-    def stop(self):
-        """SIGINT (a clean shutdown, as Ctrl-C), then kill; return the exit code."""
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
-        self._log.close()
-        return self.process.returncode
+        super().__init__(installed_argv(install, node, files, extra_args), tmp / f'{name}.log',
+                         dict(env, ROS_HOME=str(tmp / 'ros_home'), MUJOCO_GL='egl'))
 
 
 #: The busy loop of :func:`busy_core`: spins until killed or until its time is up.

@@ -4,24 +4,23 @@ End to end (issue 7): see the goal, plan with ET-DMP, write with the simulated U
 The four INSTALLED nodes (``<install>/lib/etdmp_ros/<node>`` after sourcing the colcon install,
 what ``ros2 run`` runs; parameters from the install's share folder) run as separate processes
 on an isolated DDS domain, driven by the demo's code (:func:`etdmp_ros.demo.run_demo`, what
-``make demo`` runs): goal and obstacles perceived from the camera images, ``/generalize`` called
-with empty frame ids (the DMP baseline without execution first), the controller executing the
-ET-DMP plan. Checked against the simulation's ground truth, for the letter G and for stirring
-in 3D, each on an idle machine and next to a process busy-looping on one core: while the arm
-moves, commands at 0.95 of the control rate or more per simulated second, within the UR10's
-velocity and the controller's acceleration limits; the true pen trace reaches the goal within
-5 mm, clears every obstacle and keeps the demonstration's shape (nRMSE at most twice the
-plan's), and the DMP baseline from the same start is clearly worse. One run per skill and load
-(~15 s each) serves all the checks.
+``make demo`` runs; the nodes started by :mod:`etdmp_ros.processes`): goal and obstacles
+perceived from the camera images, ``/generalize`` called with empty frame ids (the DMP baseline
+without execution first), the controller executing the ET-DMP plan. Checked against the
+simulation's ground truth, for the letter G and for stirring in 3D, each on an idle machine and
+next to a process busy-looping on one core: while the arm moves, commands at 0.95 of the
+control rate or more per simulated second, within the UR10's velocity and the controller's
+acceleration limits; the true pen trace reaches the goal within 5 mm, clears every obstacle and
+keeps the demonstration's shape (nRMSE at most twice the plan's), and the DMP baseline from the
+same start is clearly worse. One run per skill and load (~15 s each) serves all the checks.
 """
 
 import json
-import math
 
-from conftest import busy_core, sourced
-from etdmp_ros import demo
-from etdmp_ros._paths import config_path
-from etdmp_ros.robot import read_parameter_file
+from conftest import busy_core
+from etdmp_ros import demo, system
+from etdmp_ros.config_files import read_parameter_file
+from etdmp_ros.processes import installed_command
 import numpy as np
 import pytest
 
@@ -33,14 +32,6 @@ CASES = [(skill, load) for load in ('idle', 'busy') for skill in SKILLS]
 #: tracking error of ~0.1 mm on a 0.2 m movement are of this order. ET-DMP's stirring plan
 #: (no obstacle near it) is an exact copy of the demonstration: nRMSE 1.5e-4.
 NRMSE_FLOOR = 1e-3
-
-
-def installed_command(install):
-    """Return a ``command(node, param_files)`` that runs the installed executable."""
-    def command(node, param_files):
-        files = ' '.join(f'--params-file {f}' for f in param_files)
-        return sourced(install, f'{install}/lib/etdmp_ros/{node} --ros-args {files}')
-    return command
 
 
 @pytest.fixture(scope='module', params=CASES, ids=[f'{s}-{load}' for s, load in CASES])
@@ -90,7 +81,8 @@ def test_commands_move_the_arm_within_its_limits(run):
     m, _ = run
     # Commands at the controller's 125 Hz while the arm moves (approach + plan + hold: from the
     # first non-zero command to the last), per simulated second, idle or next to a busy core.
-    rate = float(read_parameter_file(config_path('controller.yaml'), 'controller')['control_rate'])
+    rate = float(read_parameter_file(system.parameter_files('controller')[1],
+                                     'controller')['control_rate'])
     assert m['system']['moving_commands_per_s'] >= 0.95 * rate
     assert 0.05 < m['max_joint_velocity_ratio'] <= 1.0 + 1e-9
     assert m['max_joint_acceleration_ratio'] <= 1.0 + 1e-9
@@ -134,62 +126,3 @@ def test_outputs_and_clean_shutdown(run):
     # SIGINT stops every node cleanly.
     codes = m['node_exit_codes']
     assert [codes[n] for n in ('ur10_sim', 'perception', 'dmp_server', 'controller')] == [0] * 4
-
-
-# -- the demo's measuring functions, without ROS --------------------------------------------------
-
-
-def test_cylinder_gap_is_the_distance_to_the_cylinder_surface():
-    top = [[1.0, 0.0, 0.08]]            # a cylinder of radius 0.025 standing on the table
-    points = [[1.1, 0.0, 0.0], [1.0, 0.0, 0.18], [1.0, 0.0, 0.05], [1.1, 0.0, 0.18],
-              [1.01, 0.0, 0.079]]
-    gap = demo.cylinder_gap(points, top, 0.025)
-    np.testing.assert_allclose(gap, [0.075, 0.1, -0.025, math.hypot(0.075, 0.1), -0.001],
-                               atol=1e-12)
-    assert demo.cylinder_gap(points, np.zeros((0, 3)), 0.025)[0] == math.inf
-
-
-def test_tracking_start_is_found_from_the_reference():
-    t = np.arange(0.0, 3.0, 0.01)
-    plan = np.stack([0.1 * np.sin(2 * t), 0.1 * np.cos(3 * t), 0 * t], axis=1)
-    t0 = 12.34567
-    stamps = np.arange(10.0, 16.0, 0.008)
-    tau = np.clip(stamps - t0, 0.0, t[-1])
-    reference = np.column_stack([stamps * 1e9] + [np.interp(tau, t, plan[:, i])
-                                                  for i in range(3)])
-    assert demo.fit_tracking_start(reference, t, plan, t0 + 0.02) == pytest.approx(t0, abs=2e-4)
-
-
-def test_quadrants_and_the_pen_tip():
-    assert [demo.quadrant(v) for v in ([1, 1], [-1, 1], [-1, -1], [1, -1])] == \
-        ['I', 'II', 'III', 'IV']
-    from etdmp_ros.robot._sim import PEN_TIP_RADIUS
-    assert demo.PEN_TIP_RADIUS == PEN_TIP_RADIUS
-
-
-def test_command_rate_is_taken_while_the_arm_moves():
-    class Logs:
-
-        def log(self, node):
-            return ''
-
-    period = 8_000_000                                   # ns, 125 Hz
-    call = 1_000_000_000
-    t = call + period * np.arange(-50, 1200)             # commands from before the call on
-    commands = np.zeros((len(t), 6))
-    first = 110                                          # 0.48 s after the call: planning
-    commands[first:first + 1000, 0] = 0.1                # 8 s of motion, then zeros
-    rec = {'command_time': t, 'commands': commands, 'command_wall_time': t * 1e-9}
-    end = int(t[first + 1060])
-    figures = demo.system_figures(_NoMonitor(), rec, call, end, Logs())
-    assert figures['moving_commands_per_s'] == pytest.approx(125.0)
-    assert figures['first_moving_command_after_call_s'] == pytest.approx(0.48)
-    commands[first + 400:first + 425, 0] = 0.0          # a 0.2 s halt in the middle
-    figures = demo.system_figures(_NoMonitor(), rec, call, end, Logs())
-    assert figures['moving_commands_per_s'] == pytest.approx(974 / (999 * 0.008))
-
-
-class _NoMonitor:
-
-    def window(self, start, end):
-        return None

@@ -209,41 +209,9 @@ def run(make_nodes, name, args=None, startup_errors=()):
     return code
 
 
-class BackgroundNode:
-    """
-    An rclpy node in a context of its own, spun by a background thread (for tools and tests).
-
-    Create subscriptions and clients on ``self.node``, then call :meth:`start`; :meth:`close`
-    stops the thread and shuts the context down. ``domain_id`` None means ROS_DOMAIN_ID.
-    """
-
-    def __init__(self, name, domain_id=None):
-        """Create the context and the node (not spinning yet)."""
-        use_dds_profile()
-        self.context = rclpy.Context()
-        kwargs = {} if domain_id is None else {'domain_id': int(domain_id)}
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO,
-                   **kwargs)
-        self.node = rclpy.create_node(name, context=self.context)
-        self.executor = make_executor(self.context)
-        self._thread = threading.Thread(target=self._spin, daemon=True, name=f'{name}_spin')
-
-    def start(self):
-        """Start spinning in the background thread; return self."""
-        self.executor.add_node(self.node)
-        self._thread.start()
-        return self
-
-    def _spin(self):
-        while self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=SLICE)
-            except Exception:   # noqa: B902 - the context was shut down while waiting
-                break
-
-    def close(self):
-        """Stop spinning, shut the context down and destroy the node."""
-        rclpy.shutdown(context=self.context)
-        if self._thread.is_alive():
-            self._thread.join(timeout=5)
-        self.node.destroy_node()
+def __getattr__(name):
+    """``BackgroundNode`` moved to :mod:`etdmp_ros.nodes.background`; found here too (PEP 562)."""
+    if name == 'BackgroundNode':
+        from .background import BackgroundNode
+        return BackgroundNode
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

@@ -7,6 +7,10 @@ message and milliseconds per image. Recorders keep the bytes and decode later; t
 one field they need at once: the stamp of a message that starts with a std_msgs/Header
 (4-byte encapsulation header ``\x00\x01`` little endian or ``\x00\x00`` big endian, then
 int32 sec and uint32 nanosec).
+
+:class:`CdrReader` reads the fields of a plain message one after the other (XCDR1, as Fast DDS
+writes it: each primitive aligned to its size relative to the start of the payload, after the
+encapsulation header); the image reader (:func:`image_from_cdr`) is built on it.
 """
 
 import struct
@@ -18,3 +22,59 @@ def header_stamp_ns(data):
         raise ValueError('not a CDR-encoded message with a header')
     sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
     return sec * 1_000_000_000 + nanosec
+
+
+class CdrReader:
+    """
+    Read the fields of a serialized (CDR) message in order: ``uint32()``, ``string()``, ....
+
+    Offsets are payload-relative (after the 4-byte encapsulation header). Raises ValueError on
+    bytes that are not CDR or end too early.
+    """
+
+    def __init__(self, data):
+        """Check the encapsulation header; position the reader at the payload's first byte."""
+        if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
+            raise ValueError('not a CDR-encoded message (bad encapsulation header)')
+        self.data = data
+        self.order = '<' if data[1] == 1 else '>'
+        self.offset = 0
+
+    def _unpack(self, fmt, size):
+        self.offset += -self.offset % size
+        try:
+            (value,) = struct.unpack_from(self.order + fmt, self.data, 4 + self.offset)
+        except struct.error:
+            raise ValueError('serialized message ends too early') from None
+        self.offset += size
+        return value
+
+    def int32(self):
+        """Return the next int32."""
+        return self._unpack('i', 4)
+
+    def uint32(self):
+        """Return the next uint32."""
+        return self._unpack('I', 4)
+
+    def uint8(self):
+        """Return the next uint8."""
+        return self._unpack('B', 1)
+
+    def string(self):
+        """Return the next string: uint32 length (with the NUL), the bytes, the NUL."""
+        length = self.uint32()
+        start = 4 + self.offset
+        if length == 0 or start + length > len(self.data):
+            raise ValueError('malformed string in serialized message')
+        self.offset += length
+        return bytes(self.data[start:start + length - 1]).decode('utf-8', errors='replace')
+
+    def byte_sequence(self):
+        """Return the next sequence<uint8> as a memoryview of the data (no copy)."""
+        length = self.uint32()
+        start = 4 + self.offset
+        if start + length > len(self.data):
+            raise ValueError(f'serialized sequence of {length} bytes is longer than the message')
+        self.offset += length
+        return memoryview(self.data)[start:start + length]

@@ -48,6 +48,7 @@ os.environ.setdefault('MUJOCO_GL', 'egl')
 
 from conftest import busy_core  # noqa: E402
 from etdmp_ros import demo  # noqa: E402
+from etdmp_ros.processes import isolated_environment  # noqa: E402
 import yaml  # noqa: E402
 
 #: (key, label, target text, check) of the table's rows; check(value, rate) -> bool. The CPU
@@ -122,7 +123,7 @@ def run_once(skill, load, rate, out, extra=()):
         parameters.setdefault(node, {})[name] = value
     options = demo.Options(skill=skill, out=out, animation=False, quiet=True,
                            parameters=parameters)
-    env = demo.isolated_environment()
+    env = isolated_environment()
     os.environ.update(env)
     with busy_core(load == 'busy'):
         try:
@@ -208,7 +209,7 @@ GC_NODES = (('controller', 'etdmp_ros.nodes.controller:ControllerNode'),
 def gc_pauses():
     """Print the full-collection pause of each node before and after freezing its heap."""
     import subprocess
-    env = dict(os.environ, **demo.isolated_environment())
+    env = dict(os.environ, **isolated_environment())
     print('| node | objects after start-up | full collection, before freeze (ms) | after (ms) |')
     print('|---|---|---|---|')
     for name, target in GC_NODES:

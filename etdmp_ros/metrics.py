@@ -1,0 +1,455 @@
+"""
+What a closed-loop run is measured by: computed from its recording, without ROS.
+
+How the numbers are measured (``metrics.json`` repeats this under ``definitions``):
+
+- nRMSE: SPEC §3.4, conventional variant (``etdmp_ros.dmp.nrmse``) against the demonstration,
+  over the plan's ``tau`` only (its duration; a plan with obstacles runs 1.5 tau; its tail
+  would be squeezed into the phase resampling, as in ``etdmp reproduce``). 2D skills are
+  compared in the task plane (base_link points projected onto it), 3D skills in base_link.
+  The executed trace is cut to the same span of the plan: from the moment the controller
+  started tracking (found by fitting the controller's stamped reference to the plan, to a
+  tenth of a millisecond) to that plus ``tau``; the approach before it is left out.
+- tracking error: true pen tip minus the controller's reference at the same simulated stamps,
+  while the plan is tracked.
+- goal error: the pen tip at the end (after the hold) to the true goal marker projected onto
+  the task plane (2D) or to the requested goal (stir).
+- clearance: smallest distance from the pen tip's surface (radius
+  :data:`~etdmp_ros.robot.PEN_TIP_RADIUS`, 3 mm) to an obstacle cylinder's surface (true
+  positions from the simulation; cylinders of ``obstacle.radius`` standing on the table up to
+  their top point), over the whole executed motion; > 0: no contact. For a pen on the table it
+  is the distance to the axis minus 25 mm minus 3 mm.
+- commands: the largest ``|qd_j| / limit_j`` (limits: ``UR10Model.velocity_limits`` times the
+  controller's ``velocity_scale``) and ``|qd_j[k] - qd_j[k-1]| * control_rate / a_j``
+  (the controller's ``joint_acceleration_limits``) over every command received.
+
+:func:`system_figures` adds what the closed loop cost (CPU, rates) from a :class:`CpuMonitor`
+window and the nodes' logs.
+"""
+
+from dataclasses import dataclass
+import math
+import re
+
+from etdmp_ros.dmp import nrmse
+from etdmp_ros.robot import PEN_TIP_RADIUS, UR10Model
+from etdmp_ros.task_plane import quadrant
+import numpy as np
+
+DEFINITIONS = {
+    'nrmse': 'SPEC 3.4 conventional variant (etdmp_ros.dmp.nrmse) vs the demonstration, over '
+             "the plan's tau (without the obstacle margin); 2D skills in the task plane, 3D in "
+             'base_link; '
+             'trace: true pen tip from the start of tracking (controller reference fitted to '
+             'the plan) to that + tau',
+    'tracking_error': 'true pen tip minus the controller reference at the same simulated '
+                      'stamps, while tracking the plan',
+    'goal_error': 'pen tip after the hold to the true goal marker projected onto the task '
+                  'plane (2D) or to the requested goal (3D)',
+    'min_clearance': 'smallest distance from the pen tip surface (radius 3 mm) to an obstacle '
+                     'cylinder surface (true positions), over the executed motion; > 0: clear',
+    'command_ratios': 'max |qd_j| / velocity limit_j and max |dqd_j| * control_rate / '
+                      'acceleration limit_j over all joint-velocity commands received',
+    'quadrant': 'quadrant of start - goal in the task plane (I: +x +y, II: -x +y, ...); for '
+                'the demonstration in its own coordinates',
+    'moving_commands_per_s': 'non-zero joint-velocity commands per simulated second from the '
+                             'first to the last of them (approach, plan, hold); the time from '
+                             'the /generalize call to the first is '
+                             'first_moving_command_after_call_s',
+}
+
+
+class MeasurementError(ValueError):
+    """The run cannot be measured (e.g. the controller published no reference)."""
+
+
+@dataclass
+class Run:
+    """
+    Everything the demo measured in one run (inputs of :func:`compute_metrics`).
+
+    ``scene``: the run's :class:`etdmp_ros.scenario.Scenario`; ``rec``: the recorded streams
+    (:meth:`etdmp_ros.recording.Recorder.arrays`); times are simulated ns.
+    """
+
+    scene: object
+    method: str
+    start: np.ndarray                 # tool position when the plans were requested
+    goal: np.ndarray                  # the goal as requested (perceived or explicit)
+    plan: tuple                       # (t, positions, quaternions) executed
+    other: tuple                      # (method, t, positions) or (method, None, reason)
+    rec: dict                         # Recorder.arrays()
+    status: list                      # (sim ns, text) after the call
+    call_ns: int
+    plan_stamp_ns: int
+    end_ns: int
+    goal_truth: np.ndarray
+    goal_seen: np.ndarray
+    obstacles_truth: np.ndarray
+    obstacles_seen: np.ndarray
+    wall_time: float = 0.0
+
+
+def format_nrmse(value):
+    """Format an nRMSE: three decimals, or two significant digits when it is that small."""
+    return 'n/a' if value is None else (f'{value:.3f}' if value >= 0.01 else f'{value:.2g}')
+
+
+# ------------------------------------------------------------------------------- geometry
+
+
+def cylinder_gap(points, obstacles, radius):
+    """
+    Return the distance (n,) from points to the nearest upright cylinder's surface.
+
+    Each obstacle point (m, 3) is the centre of a cylinder's top face; the cylinder of
+    ``radius`` stands on the table (z = 0) up to that point. Negative inside a cylinder.
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    obstacles = np.asarray(obstacles, dtype=float).reshape(-1, 3)
+    if not len(obstacles):
+        return np.full(len(points), np.inf)
+    radial = np.linalg.norm(points[:, None, :2] - obstacles[None, :, :2], axis=2) - radius
+    above = points[:, None, 2] - obstacles[None, :, 2]
+    outside = np.where(above > 0.0, np.hypot(np.maximum(radial, 0.0), above), radial)
+    inside = np.where(above > 0.0, above, np.maximum(radial, above))
+    gap = np.where((radial > 0.0) | (above > 0.0), outside, inside)
+    return gap.min(axis=1)
+
+
+def clearance_mm(points, obstacles, radius):
+    """Return the smallest gap (mm) between the pen tip's surface at ``points`` and a cylinder."""
+    return float((cylinder_gap(points, obstacles, radius).min() - PEN_TIP_RADIUS) * 1e3)
+
+
+def fit_tracking_start(reference, plan_t, plan_x, rough_s, window=0.3):
+    """
+    Return the simulated time (s) at which the controller's reference started the plan.
+
+    ``reference``: (n, 4) stamps (ns) and positions; the reference is ``plan(t - t0)`` while
+    tracking. Searched around ``rough_s`` (±``window`` s) by least squares on a 0.1 ms grid.
+    Raises MeasurementError when no reference lies inside the plan.
+    """
+    s = reference[:, 0] * 1e-9
+    best = (math.inf, rough_s)
+    for step, half in ((1e-3, window), (1e-4, 2e-3)):
+        for t0 in best[1] + np.arange(-half, half + step / 2, step):
+            inside = (s >= t0 + 0.05) & (s <= t0 + plan_t[-1] - 0.05)
+            if inside.sum() < 10:
+                continue
+            tau = s[inside] - t0
+            model = np.stack([np.interp(tau, plan_t, plan_x[:, i]) for i in range(3)], axis=1)
+            cost = float(np.mean(np.sum((model - reference[inside, 1:]) ** 2, axis=1)))
+            if cost < best[0]:
+                best = (cost, float(t0))
+    if not math.isfinite(best[0]):
+        raise MeasurementError('the controller published no reference while tracking the plan')
+    return best[1]
+
+
+def nrmse_over_tau(points, tau, t, scene):
+    """Return the nRMSE against the demonstration of ``points`` at times ``t`` up to ``tau``."""
+    keep = t <= tau + 1e-9
+    x = points[keep]
+    if scene.planar:
+        x = scene.plane.to_plane(x)
+    return float(nrmse(x, scene.demo.positions))
+
+
+def tracking_errors(rec, t0, plan_duration):
+    """Return |true tip - reference| (m) at the stamps both have while the plan is tracked."""
+    ref = rec['reference']
+    ref_by_stamp = {int(s): p for s, p in zip(ref[:, 0], ref[:, 1:])}
+    pairs = [(x, ref_by_stamp[int(s)]) for s, x in zip(rec['tip'][:, 0], rec['tip'][:, 1:])
+             if int(s) in ref_by_stamp and 0.0 <= s * 1e-9 - t0 <= plan_duration]
+    return np.array([np.linalg.norm(a - b) for a, b in pairs]) if pairs else np.full(1, np.nan)
+
+
+def start_direction(scene, start, goal):
+    """
+    Return (start - goal, demonstration start - goal, turn in rad between the two).
+
+    2D skills: in the task plane, the turn signed; 3D: in base_link, the unsigned angle.
+    """
+    demo_rel = scene.demo.positions[0] - scene.demo.positions[-1]
+    if scene.planar:
+        start_rel = scene.plane.to_plane(start) - scene.plane.to_plane(goal)
+        turn = math.atan2(demo_rel[0] * start_rel[1] - demo_rel[1] * start_rel[0],
+                          demo_rel @ start_rel)
+    else:
+        start_rel = start - goal
+        turn = math.acos(np.clip(demo_rel @ start_rel / np.linalg.norm(demo_rel)
+                                 / np.linalg.norm(start_rel), -1.0, 1.0))
+    return start_rel, demo_rel, turn
+
+
+def matched_errors(seen, truth):
+    """Return, per true point, the distance (mm) to the nearest perceived one."""
+    if seen is None or truth is None or not len(truth):
+        return []
+    seen = np.asarray(seen).reshape(-1, 3)
+    if not len(seen):
+        return [None] * len(truth)
+    return [float(np.min(np.linalg.norm(seen - p, axis=1)) * 1e3) for p in truth]
+
+
+# -------------------------------------------------------------------------------- metrics
+
+
+@dataclass
+class _Trace:
+    """The executed motion, cut as the metrics need it."""
+
+    t0: float              # simulated s at which the controller started tracking the plan
+    tau: float
+    tip_t: np.ndarray
+    tip_x: np.ndarray
+    span: np.ndarray       # tip_t - t0
+    in_plan: np.ndarray    # samples within the plan's duration from t0
+    trace: np.ndarray      # pen tip from the call to the end
+    final: np.ndarray      # pen tip at the end
+    goal: np.ndarray       # the goal the pen is measured against
+
+
+def _trace(run):
+    scene, rec = run.scene, run.rec
+    plan_t, plan_x, _ = run.plan
+    tip_t, tip_x = rec['tip'][:, 0] * 1e-9, rec['tip'][:, 1:]
+    tracking = [ns for ns, text in run.status if text.split(':')[0] == 'tracking']
+    rough = tracking[0] * 1e-9 if tracking else run.call_ns * 1e-9
+    t0 = fit_tracking_start(rec['reference'], plan_t, plan_x, rough)
+    span = tip_t - t0
+    moving = tip_t >= run.call_ns * 1e-9
+    trace = tip_x[moving & (tip_t <= run.end_ns * 1e-9 + 1e-9)]
+    # Goal: the true marker projected onto the task plane (2D); the requested goal (3D).
+    goal = (scene.plane.from_plane(scene.plane.to_plane(run.goal_truth)) if scene.planar
+            else run.goal)
+    return _Trace(t0, float(scene.server['duration']) or float(scene.demo.duration), tip_t,
+                  tip_x, span, (span >= -1e-6) & (span <= plan_t[-1] + 1e-6), trace,
+                  trace[-1] if len(trace) else tip_x[-1], goal)
+
+
+def _dmp_plan(run):
+    """Return (t, positions) of the plain-DMP plan of the run (executed or not), or None."""
+    plan_t, plan_x, _ = run.plan
+    other_method, other_t, other_x = run.other
+    if run.method == 'dmp':
+        return plan_t, plan_x
+    return (other_t, other_x) if other_method == 'dmp' and other_t is not None else None
+
+
+def _headline(run, tr):
+    scene, radius = run.scene, float(run.scene.scene['obstacle.radius'])
+    plan_t, plan_x, _ = run.plan
+    dmp = _dmp_plan(run)
+    errors = tracking_errors(run.rec, tr.t0, plan_t[-1])
+    return {
+        'skill': scene.skill,
+        'method': run.method,
+        'nrmse_plan': nrmse_over_tau(plan_x, tr.tau, plan_t, scene),
+        'nrmse_trace': nrmse_over_tau(tr.tip_x[tr.in_plan], tr.tau, tr.span[tr.in_plan], scene),
+        'nrmse_dmp_baseline': (nrmse_over_tau(dmp[1], tr.tau, dmp[0], scene)
+                               if dmp is not None else None),
+        'tracking_rms_mm': float(np.sqrt(np.mean(errors ** 2)) * 1e3),
+        'tracking_max_mm': float(np.max(errors) * 1e3),
+        'min_clearance_mm': (clearance_mm(tr.trace, run.obstacles_truth, radius)
+                             if len(tr.trace) else None),
+        'goal_error_mm': float(np.linalg.norm(tr.final - tr.goal) * 1e3),
+        'duration_s': float((run.end_ns - run.call_ns) * 1e-9),
+    }
+
+
+def _plan_details(run, tr):
+    radius = float(run.scene.scene['obstacle.radius'])
+    plan_t, plan_x, _ = run.plan
+    dmp = _dmp_plan(run)
+    return {
+        'plan_duration_s': float(plan_t[-1]),
+        'tau_s': tr.tau,
+        'approach_duration_s': float(tr.t0 - run.call_ns * 1e-9),
+        'min_clearance_plan_mm': clearance_mm(plan_x, run.obstacles_truth, radius),
+        'min_clearance_dmp_baseline_mm': (clearance_mm(dmp[1], run.obstacles_truth, radius)
+                                          if dmp is not None else None),
+        'goal_error_vs_plan_end_mm': float(np.linalg.norm(tr.final - plan_x[-1]) * 1e3),
+    }
+
+
+def _positions(run, tr):
+    scene = run.scene
+    start_rel, demo_rel, turn = start_direction(scene, run.start, run.goal)
+    at_call = max(int(np.searchsorted(tr.tip_t, run.call_ns * 1e-9, 'right')) - 1, 0)
+    return {
+        'start': run.start.tolist(),
+        'goal': run.goal.tolist(),
+        'plan_end': run.plan[1][-1].tolist(),
+        'tool_at_call': tr.tip_x[at_call].tolist(),
+        'perceived_goal': None if run.goal_seen is None else run.goal_seen.tolist(),
+        'true_goal_marker': None if run.goal_truth is None else run.goal_truth.tolist(),
+        'goal_source': 'perceived marker' if scene.explicit_goal is None else 'explicit',
+        'start_quadrant': quadrant(start_rel[:2]),
+        'demo_quadrant': quadrant(demo_rel[:2]),
+        'start_turn_deg': math.degrees(turn),
+    }
+
+
+def _perception(run):
+    return {
+        'perceived_goal_error_mm': (float(np.linalg.norm(run.goal_seen - run.goal_truth) * 1e3)
+                                    if run.goal_seen is not None else None),
+        'perceived_obstacle_errors_mm': matched_errors(run.obstacles_seen, run.obstacles_truth),
+        'obstacles': np.asarray(run.obstacles_truth).tolist(),
+    }
+
+
+def command_ratios(scene, qd):
+    """Return the commands' figures: counts and ratios to the limits the controller applies."""
+    model = UR10Model(tool_offset=scene.scene['tool_offset'])
+    v_lim = model.velocity_limits * float(scene.controller['velocity_scale'])
+    a_lim = np.asarray(scene.controller['joint_acceleration_limits'], dtype=float)
+    rate = float(scene.controller['control_rate'])
+    dqd = np.abs(np.diff(qd, axis=0)) * rate if len(qd) > 1 else np.zeros((1, 6))
+    return {
+        'commands_received': int(len(qd)),
+        'commands_nonzero': int(np.count_nonzero(np.any(qd != 0.0, axis=1))) if len(qd) else 0,
+        'max_joint_velocity_ratio': float(np.max(np.abs(qd) / v_lim)) if len(qd) else 0.0,
+        'max_joint_acceleration_ratio': float(np.max(dqd / a_lim)),
+        'max_joint_velocity_rad_s': np.max(np.abs(qd), axis=0).tolist() if len(qd) else [],
+        'joint_velocity_limits_rad_s': v_lim.tolist(),
+        'joint_acceleration_limits_rad_s2': a_lim.tolist(),
+    }
+
+
+def bottle_clearances(scene, trace, plan_x):
+    """Stirring: how close the pen tip came to the bottle's wall while inside it (mm)."""
+    mouth, r_b = scene.bottle_mouth, float(scene.scene['bottle.radius'])
+    out = {}
+    for key, points in (('bottle_wall_clearance_mm', trace),
+                        ('bottle_wall_clearance_plan_mm', plan_x)):
+        inside = points[points[:, 2] < mouth[2]]
+        gap = r_b - np.linalg.norm(inside[:, :2] - mouth[:2], axis=1) - PEN_TIP_RADIUS
+        out[key] = float(gap.min() * 1e3) if len(gap) else None
+    return out
+
+
+def _other_plan(run, tau):
+    other_method, other_t, other_x = run.other
+    out = {}
+    if other_method != 'dmp' or other_t is None:
+        out[f'nrmse_{other_method}_plan'] = (
+            nrmse_over_tau(other_x, tau, other_t, run.scene) if other_t is not None else None)
+    if other_t is None:
+        out[f'{other_method}_error'] = other_x
+    return out
+
+
+def compute_metrics(run):
+    """
+    Return (metrics, extra) of a run (the module docstring defines them).
+
+    ``extra``: what the figures need besides, ``{'t0', 'tau', 'trace', 'goal'}``. Raises
+    MeasurementError when the run tracked nothing that could be measured.
+    """
+    tr = _trace(run)
+    metrics = {**_headline(run, tr), **_plan_details(run, tr), **_positions(run, tr),
+               **_perception(run), **command_ratios(run.scene, run.rec['commands']),
+               'plan_stamp_minus_sim_time_s': float((run.plan_stamp_ns - run.call_ns) * 1e-9),
+               'controller_status': [text for _, text in run.status],
+               'wall_time_s': float(run.wall_time),
+               'definitions': DEFINITIONS}
+    if not run.scene.planar:
+        metrics.update(bottle_clearances(run.scene, tr.trace, run.plan[1]))
+    metrics.update(_other_plan(run, tr.tau))
+    return metrics, {'t0': tr.t0, 'tau': tr.tau, 'trace': tr.trace, 'goal': tr.goal}
+
+
+# -------------------------------------------------------------------------- system budget
+
+
+#: The controller's log line at the end of a tracked path (etdmp_ros.nodes.controller).
+_TRACKED = re.compile(r'path tracked: error RMS ([\d.]+) mm, max ([\d.]+) mm; (\d+) control '
+                      r'steps in (\d+) periods \((\d+) joint states received, largest gap '
+                      r'([\d.]+) ms(?: at t = ([\d.]+) s)?\)')
+#: The camera process's log line when it stops (etdmp_ros.nodes._sim_camera).
+_CAMERA_STOPPED = re.compile(r'camera stopped: (\d+) frames published, (\d+) skipped')
+#: ur10_sim's warning about a stalled simulation loop.
+_STALL = re.compile(r'simulation loop stalled: (\d+) ms between two ticks at t = ([\d.]+) s')
+#: ur10_sim's log line when it stops.
+_SIM_STOPPED = re.compile(r'(\d+) more than \d+ periods after the previous one, largest '
+                          r'wall-clock gap between two ([\d.]+) ms; camera frames published '
+                          r'(\d+), dropped (\d+)')
+
+
+def _cpu_figures(monitor, call_ns, end_ns):
+    window = monitor.window(call_ns * 1e-9, end_ns * 1e-9) if end_ns else None
+    if window is None:
+        return {}
+    return {'cpu_cores': window['cpu'],
+            'cpu_cores_total': window['total'],
+            'cpu_cores_nodes_but_sim': sum(v for k, v in window['cpu'].items()
+                                           if k != 'ur10_sim'),
+            'real_time_factor': window['real_time_factor'],
+            'min_real_time_factor_1s': window['min_real_time_factor_1s']}
+
+
+def _command_figures(rec, call_ns, end_ns):
+    figures = {}
+    t = rec['command_time']
+    inside = (t >= call_ns) & (t <= (end_ns or 0))
+    moving = inside & np.any(rec['commands'] != 0.0, axis=1) if len(t) else inside
+    moving_t = t[moving]
+    if len(moving_t) >= 2:
+        # While the arm moves: from the first non-zero command to the last. The time before
+        # the first (planning, the path check, numba loading a kernel) is a latency, reported
+        # apart; zero commands in between (a halt) count against the rate.
+        span = (moving_t[-1] - moving_t[0]) * 1e-9
+        figures['moving_commands_per_s'] = float((len(moving_t) - 1) / span) if span > 0 else 0.0
+        figures['first_moving_command_after_call_s'] = float((moving_t[0] - call_ns) * 1e-9)
+    periods = np.diff(rec['command_wall_time'][inside]) * 1e3
+    if len(periods):
+        figures['command_period_ms'] = {'p50': float(np.median(periods)),
+                                        'p99': float(np.percentile(periods, 99)),
+                                        'max': float(periods.max())}
+    return figures
+
+
+def _controller_figures(log):
+    found = _TRACKED.findall(log)
+    if not found:
+        return {}
+    rms, peak, steps, periods, received, gap, gap_at = found[-1]
+    return {'controller': {'tracking_rms_mm': float(rms), 'tracking_max_mm': float(peak),
+                           'steps': int(steps), 'periods': int(periods),
+                           'joint_states_received': int(received),
+                           'largest_joint_state_gap_ms': float(gap),
+                           'largest_joint_state_gap_at_s': float(gap_at or 'nan')}}
+
+
+def _simulation_figures(log, call_ns, end_ns):
+    stalls = _STALL.findall(log)
+    figures = {'simulation_stalls': [(float(t), float(ms)) for ms, t in stalls
+                                     if call_ns * 1e-9 <= float(t) <= (end_ns or 0) * 1e-9]}
+    found = _SIM_STOPPED.findall(log)
+    if found:
+        late, gap, frames, dropped = found[-1]
+        figures['simulation'] = {'late_ticks': int(late), 'largest_tick_gap_ms': float(gap),
+                                 'frames': int(frames), 'frames_dropped': int(dropped)}
+        camera = _CAMERA_STOPPED.findall(log)
+        if camera:   # snapshots the camera process skipped because it was still rendering
+            figures['simulation']['frames_rendered'] = int(camera[-1][0])
+            figures['simulation']['frames_dropped'] += int(camera[-1][1])
+    return figures
+
+
+def system_figures(monitor, rec, call_ns, end_ns, nodes):
+    """
+    Return what the closed loop cost and how well it kept time from the call to the end.
+
+    CPU per process (CPU-s per simulated s, from /proc), the real-time factor, the moving
+    commands per simulated second and the wall-clock period between commands as this process
+    received them, and what the controller and the simulation logged about their loops.
+    ``monitor``: a started and stopped :class:`etdmp_ros.cpu_monitor.CpuMonitor`; ``nodes``:
+    anything with ``log(node)`` returning a node's output.
+    """
+    return {**_cpu_figures(monitor, call_ns, end_ns), **_command_figures(rec, call_ns, end_ns),
+            **_controller_figures(nodes.log('controller')),
+            **_simulation_figures(nodes.log('ur10_sim'), call_ns, end_ns)}

@@ -1,0 +1,271 @@
+"""
+Pictures of a closed-loop run: the plot of plans and trace, the camera frames with ink, the GIF.
+
+:func:`plot_run` draws the top view (2D skills) or the top and side views (stir) of a
+:class:`etdmp_ros.metrics.Run` with its metrics; :func:`write_pictures` writes the camera's
+frames (PNG) and the animation (GIF) with the pen's trace drawn in as ink (:func:`draw_ink`;
+the simulation leaves none). matplotlib, OpenCV and Pillow are imported when a picture is made.
+"""
+
+from etdmp_ros.dmp import learn, METHOD_LABELS
+from etdmp_ros.metrics import format_nrmse
+from etdmp_ros.planning import place_demo
+from etdmp_ros.plotting import DEMO_STYLE, METHOD_STYLE
+from etdmp_ros.robot import CameraPose, PEN_TIP_RADIUS
+import numpy as np
+
+#: RGB of the pen's ink drawn into the camera frames.
+INK_COLOR = (25, 35, 150)
+PLAN_LABELS = {'etdmp': 'ET-DMP plan', 'dmp': 'DMP plan'}
+
+
+# ------------------------------------------------------------------------------------ plot
+
+
+def _curves(run, metrics, extra):
+    """Return (curves drawn first, executed curves drawn last): (points, style, label)."""
+    scene = run.scene
+    placed = place_demo(learn(scene.demo), run.start, run.goal,
+                        scene.plane if scene.planar else None)
+    curves = [(placed, DEMO_STYLE, 'demonstration, turned and scaled into place')]
+    executed = [(run.plan[1], dict(METHOD_STYLE[run.method], linewidth=3.5, alpha=0.5),
+                 f'{PLAN_LABELS[run.method]} (executed), nRMSE '
+                 f'{format_nrmse(metrics["nrmse_plan"])}'),
+                (extra['trace'], {'color': 'k', 'linewidth': 0.9},
+                 f'pen tip, true (MuJoCo), nRMSE {format_nrmse(metrics["nrmse_trace"])}')]
+    return curves, executed
+
+
+def _focus(run, curves):
+    """Return the points the view must show (curves, obstacles or the bottle) and the pad."""
+    scene = run.scene
+    focus = [np.reshape(c[0], (-1, 3)) for c in curves]
+    if scene.planar:
+        focus.append(np.asarray(run.obstacles_truth, dtype=float).reshape(-1, 3))
+    else:
+        mouth, r_b = scene.bottle_mouth, float(scene.scene['bottle.radius'])
+        focus.append(mouth + [[r_b, r_b, 0.0], [-r_b, -r_b, -mouth[2]]])
+    pad = 0.02 + (float(scene.scene['obstacle.radius']) if scene.planar else 0.0)
+    return np.concatenate(focus), pad
+
+
+def _other_curve(run, metrics, low, high):
+    """Return the curve of the plan not executed, or None if it was refused."""
+    other_method, other_t, other_x = run.other
+    if other_t is None:
+        return None
+    value = (metrics['nrmse_dmp_baseline'] if other_method == 'dmp'
+             else metrics.get(f'nrmse_{other_method}_plan'))
+    out_of_view = np.any((other_x[:, :2] < low[:2]) | (other_x[:, :2] > high[:2]))
+    return (other_x, dict(METHOD_STYLE[other_method], linewidth=1.6),
+            f'{PLAN_LABELS[other_method]} (not executed), nRMSE {format_nrmse(value)}'
+            + (', leaves the view' if out_of_view else ''))
+
+
+def _figure(scene, views, low, high):
+    """Return a figure sized to the data, so that equal axes leave no empty band."""
+    from matplotlib.figure import Figure
+
+    plane = scene.plane
+    width = (high - low) @ plane.y_axis
+    heights = [abs((high - low) @ plane.x_axis)] + ([high[2] - low[2]] if not scene.planar
+                                                    else [])
+    panel = 6.0 if scene.planar else 5.0
+    return Figure(figsize=(panel * len(views) + 0.8,
+                           min(max(panel * max(heights) / abs(width), 3.0), 9.0) + 2.2),
+                  layout='constrained')
+
+
+def _projection(plane, view):
+    """Return the map of base_link points to a view's (horizontal, vertical) coordinates."""
+    def xy(points):
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if view == 'top':
+            return points @ plane.y_axis, points @ plane.x_axis
+        return points @ plane.y_axis, points[:, 2]
+    return xy
+
+
+def _draw_bottle(ax, scene, view, xy):
+    from matplotlib.patches import Circle, Rectangle
+
+    mouth, r_b = scene.bottle_mouth, float(scene.scene['bottle.radius'])
+    (h,), (v,) = xy(mouth)
+    if view == 'top':
+        ax.add_patch(Circle((h, v), r_b, fill=False, edgecolor='tab:blue', linewidth=1.5,
+                            label='bottle'))
+    else:
+        ax.add_patch(Rectangle((h - r_b, 0.0), 2 * r_b, mouth[2], fill=False,
+                               edgecolor='tab:blue', linewidth=1.5, label='bottle'))
+        ax.axhline(0.0, color='0.6', linewidth=1.0)
+
+
+def _draw_obstacles(ax, run, view, xy, low, high):
+    from matplotlib.patches import Circle, Rectangle
+
+    radius = float(run.scene.scene['obstacle.radius'])
+    obstacles = np.asarray(run.obstacles_truth, dtype=float).reshape(-1, 3)
+    nearby = obstacles[np.all((obstacles[:, :2] > low[:2] - radius)
+                              & (obstacles[:, :2] < high[:2] + radius), axis=1)]
+    for j, o in enumerate(nearby):
+        (h,), (v,) = xy(o)
+        kind = {'color': 'tab:red', 'alpha': 0.45, 'label': 'obstacle' if j == 0 else None}
+        if view == 'top':
+            ax.add_patch(Circle((h, v), radius, **kind))
+            # Where the pen tip's centre would touch the cylinder.
+            ax.add_patch(Circle((h, v), radius + PEN_TIP_RADIUS, fill=False,
+                                edgecolor='tab:red', linestyle=':', linewidth=0.8))
+        else:
+            ax.add_patch(Rectangle((h - radius, 0.0), 2 * radius, o[2], **kind))
+
+
+def _draw_markers(ax, run, extra, xy):
+    planar = run.scene.planar
+    ax.plot(*xy(run.start), marker='*', markersize=14, color='gold', markeredgecolor='k',
+            linestyle='none', label='start (tool)', zorder=6)
+    ax.plot(*xy(extra['goal']), marker='o', markersize=12, markerfacecolor='none',
+            markeredgecolor='k', markeredgewidth=1.8, linestyle='none',
+            label='goal (true marker)' if planar else 'goal (requested)', zorder=6)
+    if planar:
+        ax.plot(*xy(run.goal), marker='x', markersize=8, color='tab:green',
+                linestyle='none', label='goal as perceived', zorder=7)
+
+
+def _frame_axes(ax, plane, view, name, xy, focus, pad):
+    h, v = xy(focus)
+    ax.set_xlim(h.min() - pad, h.max() + pad)
+    ax.set_ylim(v.min() - pad, v.max() + pad)
+    ax.set_aspect('equal', adjustable='box')
+    ax.grid(True, alpha=0.3)
+    standard = np.allclose(plane.x_axis, [1, 0, 0]) and np.allclose(plane.y_axis, [0, 1, 0])
+    ax.set_xlabel('y (m)' if standard else 'along task_plane.y_axis (m)')
+    if view == 'top':
+        ax.set_ylabel('x (m)' if standard else 'along task_plane.x_axis (m)')
+        ax.invert_yaxis()
+    else:
+        ax.set_ylabel('z (m)')
+    ax.set_title(name, fontsize=10)
+
+
+def _legend_and_title(fig, run, metrics):
+    handles = {}
+    for ax in fig.axes:
+        for handle, text in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(text, handle)
+    fig.legend(handles.values(), handles.keys(), loc='outside lower center', ncol=2,
+               fontsize=8, frameon=False)
+    fig.suptitle(
+        f'{run.scene.skill}: {METHOD_LABELS[run.method]} executed by the simulated UR10\n'
+        f'start direction {metrics["start_turn_deg"]:+.0f} deg from the demonstration\'s '
+        f'(quadrant {metrics["start_quadrant"]} of the goal; demonstration: '
+        f'{metrics["demo_quadrant"]})\ntracking error RMS {metrics["tracking_rms_mm"]:.2f} mm, '
+        f'goal error {metrics["goal_error_mm"]:.1f} mm, min obstacle clearance '
+        f'{metrics["min_clearance_mm"]:.1f} mm', fontsize=10)
+
+
+def plot_run(path, run, metrics, extra):
+    """Draw the top view (2D skills) or top and side views (stir) of a run into ``path``."""
+    scene = run.scene
+    curves, executed = _curves(run, metrics, extra)
+    # The view shows what was executed (a wild baseline may leave it).
+    focus, pad = _focus(run, curves + executed)
+    low, high = focus.min(axis=0) - pad, focus.max(axis=0) + pad
+    other = _other_curve(run, metrics, low, high)
+    curves += ([other] if other is not None else []) + executed
+    views = [('top', 'top view (robot base at the top)')]
+    if not scene.planar:
+        views.append(('side', 'side view (as the camera sees it)'))
+    fig = _figure(scene, views, low, high)
+    for i, (view, name) in enumerate(views):
+        ax = fig.add_subplot(1, len(views), i + 1)
+        xy = _projection(scene.plane, view)
+        if not scene.planar:
+            _draw_bottle(ax, scene, view, xy)
+        _draw_obstacles(ax, run, view, xy, low, high)
+        for points, style, text in curves:
+            ax.plot(*xy(points), label=text, **style)
+        _draw_markers(ax, run, extra, xy)
+        _frame_axes(ax, scene.plane, view, name, xy, focus, pad)
+    _legend_and_title(fig, run, metrics)
+    fig.savefig(path, dpi=110, bbox_inches='tight')
+
+
+# ---------------------------------------------------------------------------- camera frames
+
+
+def draw_ink(frame, depth_mm, points, camera, intrinsics, scale, thickness=1):
+    """
+    Draw the pen-tip trace ``points`` (n, 3, base_link) onto ``frame`` (in place) as ink.
+
+    The simulation leaves no ink: the trace is projected with the camera model (``scale``: the
+    frame's size relative to the camera's) and drawn where the camera sees it, i.e. where the
+    point is not farther than the depth image (plus 5 mm) or the depth has no data.
+    """
+    import cv2
+
+    if len(points) < 2:
+        return
+    in_camera = camera.from_base(points)
+    uv = intrinsics.project(in_camera) * scale
+    pixels = np.round(uv).astype(np.int64)
+    h, w = frame.shape[:2]
+    inside = (pixels[:, 0] >= 0) & (pixels[:, 0] < w) & (pixels[:, 1] >= 0) & (pixels[:, 1] < h)
+    visible = inside.copy()
+    if depth_mm is not None:
+        seen = depth_mm[pixels[inside, 1], pixels[inside, 0]].astype(float)
+        visible[inside] = (seen == 0) | (in_camera[inside, 2] * 1000.0 <= seen + 5.0)
+    # Runs of consecutive visible points become polylines (sub-pixel precision: shift 2).
+    edges = np.flatnonzero(np.diff(np.r_[0, visible.astype(int), 0]))
+    runs = [np.round(uv[a:b] * 4).astype(np.int32).reshape(-1, 1, 2)
+            for a, b in zip(edges[::2], edges[1::2]) if b - a >= 2]
+    if runs:
+        cv2.polylines(frame, runs, False, INK_COLOR, thickness, cv2.LINE_AA, shift=2)
+
+
+def _caption(frame, text, scale):
+    import cv2
+
+    cv2.putText(frame, text, (int(8 * scale), int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX,
+                0.45 * scale, (0, 0, 0), 1 if scale < 1.5 else 2, cv2.LINE_AA)
+
+
+def write_pictures(out, run, rec, snapshots, frames, intrinsics, animation=True):
+    """
+    Write the camera frames (PNG) and the animation (GIF), the pen's trace drawn in as ink.
+
+    Returns the paths written. Frames are captioned with the simulated time since the
+    ``/generalize`` call and the controller's status.
+    """
+    from PIL import Image as PilImage
+
+    camera = CameraPose(tuple(run.scene.scene['camera.position']),
+                        tuple(run.scene.scene['camera.orientation']))
+    tip = rec['tip'][rec['tip'][:, 0] >= run.call_ns]
+
+    def render(stamp, rgb, depth, scale):
+        frame = rgb.copy()
+        draw_ink(frame, depth, tip[tip[:, 0] <= stamp, 1:], camera, intrinsics, scale,
+                 thickness=1 if scale < 1 else 2)
+        state = [text.split(':')[0] for ns, text in run.status if ns <= stamp]
+        _caption(frame, f't = {(stamp - run.call_ns) * 1e-9:+.2f} s  '
+                        f'{state[-1] if state else "perceiving, planning"}', scale * 2)
+        return frame
+
+    written = []
+    for name in ('start', 'middle', 'end'):
+        if snapshots.get(name) is not None:
+            stamp, rgb, depth = snapshots[name]
+            path = out / f'camera_{name}.png'
+            PilImage.fromarray(render(stamp, rgb, depth, 1.0)).save(path)
+            written.append(path)
+    if not (animation and frames):
+        return written
+    stamps = sorted(frames)
+    images = [PilImage.fromarray(render(s, *frames[s], 0.5)) for s in stamps]
+    # Real-time playback: each frame lasts until the next one's stamp.
+    durations = [int(round(d * 1e-6)) for d in np.diff(stamps)] + [1500]
+    path = out / 'animation.gif'
+    images[0].save(path, save_all=True, append_images=images[1:], duration=durations, loop=0,
+                   optimize=True)
+    written.append(path)
+    return written

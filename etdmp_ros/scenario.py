@@ -1,0 +1,178 @@
+"""
+The demo's scenario for one skill: the parameter files read, the skill's layout, the overrides.
+
+The letter G uses config/scene.yaml's ``goal_position`` and ``obstacle_positions`` as shipped
+(they are G's layout: the pen starts in another quadrant of the goal than the demonstration, two
+obstacles sit 20 mm beside the obstacle-free path). The other 2D skills get their own layout
+(:data:`LAYOUTS`, given to ``ur10_sim`` like ``ros2 param set`` would): the goal 90 degrees round
+from the demonstration's start direction, so that each is drawn upright as the camera sees it,
+about 0.2 m tall, with two obstacles 20-35 mm beside its obstacle-free path (chosen offline with
+the planning core; layout ``scene`` keeps the scene file's). ``stir`` (3D, base_link): the
+simulation starts with the stirrer above the bottle, its start direction turned 30 degrees about
+the vertical from the demonstration's (:data:`STIR_START_TURN_DEG`); the goal is explicit: the
+bottle's mouth centre plus the demonstration's goal offset (the built-in stir demo's origin is
+the mouth), near the bottom, because the marker on the table cannot be seen inside a bottle.
+The request's start stays empty (the tool's current position). Letters are written in 4 s,
+wiping in 5 s (:data:`DURATIONS`, dmp_server's ``duration``).
+
+Each node gets the system's parameter files (:func:`etdmp_ros.system.parameter_files`), then an
+overrides file of its own: the system's wiring (:func:`etdmp_ros.system.wiring_overrides`), the
+skill's layout and the caller's parameters.
+"""
+
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+
+from etdmp_ros import system
+from etdmp_ros.config_files import read_parameter_file
+from etdmp_ros.dmp import builtin_demo
+from etdmp_ros.robot import quaternion_to_matrix, UR10Model
+from etdmp_ros.task_plane import TaskPlane
+import numpy as np
+import yaml
+
+SKILLS = ('G', 'P', 'R', 'W', 'wipe', 'stir')
+#: Layouts of the 2D skills other than G on the shipped scene (default start pose and task
+#: plane): ur10_sim's goal_position and obstacle_positions (base_link, m). G uses scene.yaml.
+LAYOUTS = {
+    'P': ([0.898, 0.111, 0.002], [0.826, 0.127, 0.08, 0.828, 0.233, 0.08]),
+    'R': ([0.993, 0.256, 0.002], [0.83, 0.126, 0.08, 0.843, 0.222, 0.08]),
+    'W': ([0.827, 0.329, 0.002], [0.909, 0.164, 0.08, 0.974, 0.257, 0.08]),
+    # A wiping motion covers an area with no room for a 5 cm cylinder: beside its turns.
+    'wipe': ([0.83, 0.256, 0.002], [0.746, 0.248, 0.08, 0.908, 0.296, 0.08]),
+}
+#: Plan duration (dmp_server ``duration``, s) per skill; stir: its demonstration's own 5 s.
+#: The letters are demonstrated in 2 s (wipe in 4 s): written 0.2 m tall, with the detours
+#: around the obstacles, in that time they ask the elbow for more than its acceleration limit
+#: (35 rad/s^2) at their sharpest turns and the tracking error grows to millimetres there.
+DURATIONS = {'G': 4.0, 'P': 4.0, 'R': 4.0, 'W': 4.0, 'wipe': 5.0}
+#: Stir: the stirrer starts at the demonstration's start offset from the goal turned by this
+#: angle about the vertical and scaled (the default Rodrigues ET-DMP then tilts the movement
+#: by 9 degrees, which keeps it inside the bottle; the plain DMP squeezes its circles).
+STIR_START_TURN_DEG = 30.0
+STIR_START_SCALE = 0.9
+
+
+class ScenarioError(ValueError):
+    """The scenario cannot be set up (an unknown node, a start pose out of reach)."""
+
+
+def _node_parameters(config_dir, name):
+    """Return node ``name``'s parameters from its files, in the order the node reads them."""
+    values = {}
+    for path in system.parameter_files(name, config_dir):
+        values.update(read_parameter_file(path, name))
+    return values
+
+
+@dataclass
+class Scenario:
+    """
+    What the demo needs from the parameter files (config folder + the skill's layout).
+
+    ``config_dir``: the folder of the parameter files (None: the package's); ``parameters``:
+    extra node parameters, ``{node: {name: value}}``, after the skill's layout.
+    """
+
+    config_dir: Path
+    skill: str
+    layout: str = 'skill'
+    parameters: dict = field(default_factory=dict)
+    scene: dict = field(init=False)
+    server: dict = field(init=False)
+    controller: dict = field(init=False)
+    plane: TaskPlane = field(init=False)
+    demo: object = field(init=False)
+    overrides: dict = field(init=False)
+    explicit_goal: np.ndarray = field(init=False, default=None)
+
+    def __post_init__(self):
+        """Read the files; work out the per-node overrides of this skill's scene."""
+        if self.config_dir is not None:
+            self.config_dir = Path(self.config_dir)
+        # Every node's files start with the scene file.
+        self.scene = read_parameter_file(system.parameter_files('ur10_sim', self.config_dir)[0])
+        self.server = _node_parameters(self.config_dir, 'dmp_server')
+        self.controller = _node_parameters(self.config_dir, 'controller')
+        self.plane = TaskPlane.create(self.scene['task_plane.origin'],
+                                      self.scene['task_plane.x_axis'],
+                                      self.scene['task_plane.y_axis'],
+                                      self.server['task_plane.scale'])
+        self.demo = builtin_demo(self.skill)
+        self.overrides = {name: dict(system.wiring_overrides(name)) for name in system.NODE_NAMES}
+        self.overrides['ur10_sim'].update(self._simulation_layout())
+        self.overrides['dmp_server']['skill'] = self.skill
+        if self.skill in DURATIONS:
+            self.overrides['dmp_server']['duration'] = DURATIONS[self.skill]
+            self.server['duration'] = DURATIONS[self.skill]
+        for name, values in self.parameters.items():
+            if name not in self.overrides:
+                raise ScenarioError(f'no node {name!r} (nodes: {", ".join(system.NODE_NAMES)})')
+            self.overrides[name].update(values)
+        if 'control_rate' in self.parameters.get('controller', {}):
+            self.controller['control_rate'] = self.parameters['controller']['control_rate']
+
+    def _simulation_layout(self):
+        """Return ur10_sim's overrides: the skill's goal and obstacles, the stir start pose."""
+        sim = {}
+        if self.layout == 'skill' and self.skill in LAYOUTS:
+            goal, obstacles = LAYOUTS[self.skill]
+            sim.update(goal_position=[float(v) for v in goal],
+                       obstacle_positions=[float(v) for v in obstacles])
+        if self.skill == 'stir':
+            self.explicit_goal = self.bottle_mouth + self.demo.positions[-1]
+            sim['initial_joint_positions'] = stir_start_joints(self).tolist()
+        return sim
+
+    @property
+    def planar(self):
+        """Whether the skill is a 2D one (drawn in the task plane)."""
+        return self.demo.positions.shape[1] == 2
+
+    @property
+    def bottle_mouth(self):
+        """Centre of the bottle's mouth (base_link)."""
+        return np.array([*self.scene['bottle.position'], self.scene['bottle.height']], float)
+
+    @property
+    def tool_rotation(self):
+        """Tool orientation of every planned pose (dmp_server's ``tool_orientation``)."""
+        return quaternion_to_matrix(self.server['tool_orientation'])
+
+    @property
+    def obstacle_count(self):
+        """Return how many obstacles the simulation shows (the layout's or the scene's)."""
+        positions = self.overrides['ur10_sim'].get('obstacle_positions',
+                                                   self.scene['obstacle_positions'])
+        return len(np.asarray(positions).reshape(-1, 3))
+
+    def param_files(self, name, directory):
+        """Write node ``name``'s overrides file into ``directory``; return its parameter files."""
+        path = Path(directory) / f'{name}_overrides.yaml'
+        path.write_text(yaml.safe_dump({name: {'ros__parameters': self.overrides[name]}}))
+        return [*system.parameter_files(name, self.config_dir), path]
+
+
+def stir_start(scenario):
+    """Return where the stirrer starts (base_link): see :data:`STIR_START_TURN_DEG`."""
+    a = math.radians(STIR_START_TURN_DEG)
+    turn = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
+                     [0.0, 0.0, 1.0]])
+    offset = scenario.demo.positions[0] - scenario.demo.positions[-1]
+    return scenario.explicit_goal + STIR_START_SCALE * turn @ offset
+
+
+def stir_start_joints(scenario):
+    """Return the simulation's initial joints for stir: the stirrer at :func:`stir_start`."""
+    model = UR10Model(tool_offset=scenario.scene['tool_offset'])
+    q0 = np.array(scenario.scene['initial_joint_positions'], dtype=float)
+    target = stir_start(scenario)
+    # Turn the base towards the bottle first, so Newton starts from the same elbow-up posture.
+    p0 = model.tool_position(q0)
+    q0[0] += math.atan2(target[1], target[0]) - math.atan2(p0[1], p0[0])
+    q, error = model.solve_pose(target, scenario.tool_rotation, q0, iterations=200,
+                                tolerance=1e-9)
+    if np.linalg.norm(error[:3]) > 1e-5 or np.any(q < model.lower) or np.any(q > model.upper):
+        raise ScenarioError(f'cannot put the tool at {np.round(target, 3).tolist()}')
+    return q
