@@ -5,6 +5,7 @@ The files written from it (config/*.yaml, the docs' parameter tables) must be up
 give back its defaults; the nodes must declare exactly what it describes, with its descriptors.
 """
 
+from conftest import REPO
 from etdmp_ros import config_files, system
 from etdmp_ros.nodes._parameters import declare, descriptor
 import numpy as np
@@ -13,8 +14,6 @@ import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-
-from conftest import REPO
 
 
 def test_config_files_and_docs_tables_are_written_from_the_description():
@@ -129,3 +128,27 @@ def test_every_descriptor_matches_its_parameter():
             assert d.dynamic_typing == p.dynamic_typing
             assert bool(d.floating_point_range or d.integer_range) == (
                 p.value_range is not None and not isinstance(p.default, list))
+
+
+@pytest.mark.parametrize('spec', system.NODES, ids=system.NODE_NAMES)
+def test_each_node_declares_exactly_its_description(context, spec, monkeypatch, tmp_path):
+    # Without parameter files: the built-in defaults are the description's.
+    monkeypatch.setenv('ROS_HOME', str(tmp_path))
+    monkeypatch.setenv('MUJOCO_GL', 'egl')
+    from etdmp_ros.nodes.bringup import node_class
+    node = node_class(spec)(context=context)
+    try:
+        declared = set(node._parameters) - {'use_sim_time', 'start_type_description_service'}
+        assert declared == {p.name for p in spec.all_parameters}
+        for p in spec.all_parameters:
+            described = node.describe_parameter(p.name)
+            assert described.read_only == (not p.dynamic), p.name
+            if p.array_type and not p.default:
+                continue
+            value = node.get_parameter(p.name).value
+            value = list(value) if isinstance(p.default, list) else value
+            assert value == p.default, p.name
+    finally:
+        if hasattr(node, 'stop'):
+            node.stop()
+        node.destroy_node()
