@@ -18,7 +18,7 @@ import types
 
 from conftest import REPO, sourced
 from etdmp_ros import system
-from etdmp_ros.nodes._spin import BackgroundNode
+from etdmp_ros.nodes.background import BackgroundNode
 from geometry_msgs.msg import PointStamped
 from nav_msgs.srv import GetPlan
 import numpy as np

@@ -16,7 +16,8 @@ import time
 
 from conftest import isolate_dds, NodeProcess
 from controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
-from etdmp_ros.nodes._spin import BackgroundNode, normal_scheduling, set_realtime_priority
+from etdmp_ros.nodes._spin import normal_scheduling, set_realtime_priority
+from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.robot import matrix_to_quaternion, PoseTrajectory, UR10Model
 from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, path_from_cdr, serialize_path,
                                        stamp_to_ns)

@@ -13,7 +13,7 @@ import time
 from conftest import NodeProcess
 from etdmp_ros._paths import config_path
 from etdmp_ros.config_files import read_parameter_file
-from etdmp_ros.nodes._spin import BackgroundNode
+from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.robot import CameraIntrinsics, JOINT_NAMES, UR10Model
 from etdmp_ros.ros_conversions import image_from_msg, intrinsics_from_camera_info, stamp_to_ns
 from geometry_msgs.msg import PointStamped, PoseArray

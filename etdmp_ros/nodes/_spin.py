@@ -207,11 +207,3 @@ def run(make_nodes, name, args=None, startup_errors=()):
             node.destroy_node()
         rclpy.try_shutdown()
     return code
-
-
-def __getattr__(name):
-    """``BackgroundNode`` moved to :mod:`etdmp_ros.nodes.background`; found here too (PEP 562)."""
-    if name == 'BackgroundNode':
-        from .background import BackgroundNode
-        return BackgroundNode
-    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

@@ -12,15 +12,15 @@ import importlib
 from ._camera import CameraIntrinsics, CameraPose, matrix_to_quaternion, quaternion_to_matrix
 from ._controller import Command, ControllerConfig, DelayEstimator, STATUSES, TrajectoryController
 from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, IKResult
-from ._scene import (parse_goal_position, parse_obstacle_positions, SCENE_PARAMETERS,
-                     SceneConfig)
+from ._scene import (parse_goal_position, parse_obstacle_positions, PEN_TIP_RADIUS,
+                     SCENE_PARAMETERS, SceneConfig)
 from ._trajectory import (MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
                           trajectory_from_path, TrajectoryError)
 from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_urdf_path,
                     UR10Model)
 
 _LAZY = {
-    '_sim': ('CameraState', 'MAX_OBSTACLES', 'PEN_TIP_RADIUS', 'UR10Sim'),
+    '_sim': ('CameraState', 'MAX_OBSTACLES', 'UR10Sim'),
     '_vision': ('check_frame', 'Detection', 'Detections', 'Detector', 'detector_from_parameters',
                 'DETECTOR_PARAMETERS', 'DetectorSettings', 'FrameSynchronizer', 'HsvRange',
                 'ObjectModel', 'Rejection'),
@@ -40,10 +40,10 @@ def __getattr__(name):
 
 __all__ = [
     'CameraIntrinsics', 'CameraPose', 'Command', 'ControllerConfig',
-    'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'IKResult', 'JOINT_NAMES',
-    'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PoseTrajectory', 'SCENE_PARAMETERS',
-    'STATUSES', 'SceneConfig', 'TrajectoryController', 'TrajectoryError', 'UR10Model',
-    'matrix_to_quaternion', 'parse_goal_position',
+    'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'IKResult',
+    'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_TIP_RADIUS',
+    'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES', 'SceneConfig', 'TrajectoryController',
+    'TrajectoryError', 'UR10Model', 'matrix_to_quaternion', 'parse_goal_position',
     'parse_obstacle_positions', 'quaternion_to_matrix', 'quaternions_to_rotations',
     'robot_data_dir', 'trajectory_from_path', 'ur10_urdf_path',
     *_LAZY_NAMES,

@@ -37,6 +37,8 @@ SCENE_PARAMETERS = (
     'obstacle_positions', 'obstacle.radius', 'obstacle.height', 'obstacle.color',
 )
 GOAL_MARKER_THICKNESS = 0.002
+#: m, radius of the pen's tip (its clearance to an obstacle counts from the surface).
+PEN_TIP_RADIUS = 0.003
 
 
 def _vector(name, value, size=None, multiple_of=None):

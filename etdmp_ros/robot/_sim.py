@@ -50,7 +50,8 @@ import xml.etree.ElementTree as ElementTree
 import numpy as np
 
 from ._camera import CameraIntrinsics
-from ._scene import GOAL_MARKER_THICKNESS, parse_goal_position, parse_obstacle_positions
+from ._scene import (GOAL_MARKER_THICKNESS, parse_goal_position, parse_obstacle_positions,
+                     PEN_TIP_RADIUS)
 from ._ur10 import JOINT_NAMES, robot_data_dir, ur10_urdf_path, UR10Model
 
 mujoco = None   # imported by _import_mujoco() when the first simulation is built
@@ -81,7 +82,6 @@ ARMATURE = 0.1   # kg m^2
 ROBOT_COLOR = (0.72, 0.74, 0.78, 1.0)
 PEN_COLOR = (0.15, 0.15, 0.18, 1.0)
 PEN_RADIUS = 0.009
-PEN_TIP_RADIUS = 0.003
 PEN_TIP_LENGTH = 0.02
 WHITEBOARD_THICKNESS = 0.0005
 TABLE_THICKNESS = 0.04

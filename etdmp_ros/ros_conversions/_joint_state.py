@@ -8,11 +8,10 @@ driver's ``forward_velocity_controller`` expects.
 
 import array
 
+from etdmp_ros.robot import JOINT_NAMES
 import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-
-from ..robot._ur10 import JOINT_NAMES
 
 
 def _doubles(values):
