@@ -25,7 +25,7 @@ import math
 from pathlib import Path
 
 from etdmp_ros import system
-from etdmp_ros.config_files import read_parameter_file
+from etdmp_ros.config_files import read_node_parameters, read_parameter_file
 from etdmp_ros.dmp import builtin_demo
 from etdmp_ros.robot import quaternion_to_matrix, UR10Model
 from etdmp_ros.task_plane import TaskPlane
@@ -58,14 +58,6 @@ class ScenarioError(ValueError):
     """The scenario cannot be set up (an unknown node, a start pose out of reach)."""
 
 
-def _node_parameters(config_dir, name):
-    """Return node ``name``'s parameters from its files, in the order the node reads them."""
-    values = {}
-    for path in system.parameter_files(name, config_dir):
-        values.update(read_parameter_file(path, name))
-    return values
-
-
 @dataclass
 class Scenario:
     """
@@ -93,8 +85,8 @@ class Scenario:
             self.config_dir = Path(self.config_dir)
         # Every node's files start with the scene file.
         self.scene = read_parameter_file(system.parameter_files('ur10_sim', self.config_dir)[0])
-        self.server = _node_parameters(self.config_dir, 'dmp_server')
-        self.controller = _node_parameters(self.config_dir, 'controller')
+        self.server = read_node_parameters('dmp_server', self.config_dir)
+        self.controller = read_node_parameters('controller', self.config_dir)
         self.plane = TaskPlane.create(self.scene['task_plane.origin'],
                                       self.scene['task_plane.x_axis'],
                                       self.scene['task_plane.y_axis'],
