@@ -5,7 +5,8 @@ A script, not a pytest test. It runs in the benchmark environment ``.venv-bench/
 ``pin-pink`` and its QP solvers, test/benchmarks/requirements-bench.txt)::
 
     make .venv-bench/.installed          # once
-    .venv-bench/bin/python test/benchmarks/bench_controller.py [--quick] [--no-ros] [--json P]
+    .venv-bench/bin/python test/benchmarks/bench_controller.py [--quick] [--no-ros] [--no-fast]
+        [--json P]
 
 Three parts, one workload: the ET-DMP plan of letter G on the task plane of config/scene.yaml
 (0.2 m tall, its nominal 2 s, pen pointing down), the 6D pose of the UR10 tool tip.
@@ -13,7 +14,9 @@ Three parts, one workload: the ET-DMP plan of letter G on the task plane of conf
 1. **Compute per cycle** of ``TrajectoryController.step`` (reference sampling, forward
    kinematics + Jacobian, damped least squares with every limit, state machine) and of its IK
    core alone (``DifferentialIK.kinematics`` + ``solve``), over whole closed-loop runs on a
-   kinematic plant at 125 Hz; p50 and p99 of ``time.perf_counter_ns``.
+   kinematic plant at 125 Hz; p50 and p99 of ``time.perf_counter_ns``. Both ways, side by
+   side: with the numba kernels (the default) and with the numpy code only
+   (``TrajectoryController(..., fast=False)``; ``--no-fast`` times only that one).
 2. **pin-pink** (Pinocchio-based QP differential IK) on the same task and plant: per step a
    ``Configuration`` (forward kinematics, Jacobians), a ``FrameTask`` on ``tool_tip`` whose target
    is the reference one period ahead (gain 1: feed-forward plus deadbeat feedback, the best pink
@@ -68,13 +71,17 @@ def start_configuration(ur10, path):
     return q
 
 
-def bench_ours(ur10, path, q0, delay, repeats):
-    """Return timings (ns) of whole steps and of the IK core, and the tracking errors (m)."""
+def bench_ours(ur10, path, q0, delay, repeats, fast=None):
+    """
+    Return timings (ns) of whole steps and of the IK core, and the tracking errors (m).
+
+    ``fast``: the controller's numba kernels (True), its numpy code (False), its default (None).
+    """
     steps, core, errors = [], [], None
     for r in range(repeats):
         # The plant's delay is known here: start the delay estimate on it.
         controller = TrajectoryController(ur10, ControllerConfig(
-            rate=RATE, actuation_delay=delay / RATE))
+            rate=RATE, actuation_delay=delay / RATE), fast=fast)
         ik = controller.ik
         original_step = controller._step
         original_kin, original_solve = ik.kinematics, ik.solve
@@ -307,6 +314,8 @@ def main(argv=None):
     parser.add_argument('--quick', action='store_true', help='fewer repetitions (noisier)')
     parser.add_argument('--no-ros', action='store_true', help='skip the ROS loop timing')
     parser.add_argument('--json', type=Path, help='also write the figures to this file')
+    parser.add_argument('--no-fast', action='store_true',
+                        help="time only the controller's numpy path (default: numba and numpy)")
     args = parser.parse_args(argv)
     repeats = 3 if args.quick else 8
 
@@ -320,13 +329,17 @@ def main(argv=None):
     print('Task: ET-DMP letter G, 0.2 m, 2 s, 6D tool-tip pose, kinematic plant at 125 Hz.\n')
     rows = []
     for delay in (0, 1):
-        steps, core, errors = bench_ours(ur10, path, q0, delay, repeats)
-        ours = {'step': percentiles(steps), 'core': percentiles(core),
-                'rms_mm': float(np.sqrt(np.mean(errors ** 2)) * 1e3),
-                'max_mm': float(errors.max() * 1e3)}
-        rows.append(('etdmp_ros TrajectoryController.step', delay, ours['step'], ours))
-        rows.append(('etdmp_ros IK core (FK + Jacobian + solve)', delay, ours['core'], None))
-        results[f'ours_delay{delay}'] = ours
+        for fast in ((False,) if args.no_fast else (True, False)):
+            steps, core, errors = bench_ours(ur10, path, q0, delay, repeats, fast)
+            ours = {'step': percentiles(steps), 'core': percentiles(core),
+                    'rms_mm': float(np.sqrt(np.mean(errors ** 2)) * 1e3),
+                    'max_mm': float(errors.max() * 1e3)}
+            kind = 'numba' if fast else 'numpy'
+            rows.append((f'etdmp_ros TrajectoryController.step ({kind})', delay, ours['step'],
+                         ours))
+            rows.append((f'etdmp_ros IK core (FK + Jacobian + solve, {kind})', delay,
+                         ours['core'], None))
+            results[f'ours_{kind}_delay{delay}'] = ours
         try:
             import pink  # noqa: F401
         except ImportError:
@@ -347,18 +360,21 @@ def main(argv=None):
     for name, delay, (p50, p99), track in rows:
         t = (f'{track["rms_mm"]:.4f} | {track["max_mm"]:.4f}' if track else ' | ')
         print(f'| {name} | {delay} period | {p50:.1f} | {p99:.1f} | {t} |')
-    ours = results['ours_delay1']
-    print(f'\nTarget p99 compute <= 200 us: step {ours["step"][1]:.0f} us, IK core '
-          f'{ours["core"][1]:.0f} us.')
-    for solver in ('daqp', 'quadprog'):
-        key = f'pink_{solver}_delay1'
-        if key in results:
-            ratio = results[key]['step'][0] / ours['step'][0]
-            core = results[key]['step'][0] / ours['core'][0]
-            print(f'pink ({solver}) / ours per step (p50): {ratio:.1f}x for the whole step, '
-                  f'{core:.1f}x for the IK core (target >= 3x); tracking RMS '
-                  f'{results[key]["rms_mm"]:.3f} vs {ours["rms_mm"]:.4f} mm (plant one period '
-                  'late).')
+    for kind in ('numba', 'numpy'):
+        ours = results.get(f'ours_{kind}_delay1')
+        if ours is None:
+            continue
+        print(f'\n{kind}: target p99 compute <= 200 us: step {ours["step"][1]:.0f} us, IK core '
+              f'{ours["core"][1]:.0f} us.')
+        for solver in ('daqp', 'quadprog'):
+            key = f'pink_{solver}_delay1'
+            if key in results:
+                ratio = results[key]['step'][0] / ours['step'][0]
+                core = results[key]['step'][0] / ours['core'][0]
+                print(f'pink ({solver}) / ours ({kind}) per step (p50): {ratio:.1f}x for the '
+                      f'whole step, {core:.1f}x for the IK core (target >= 3x); tracking RMS '
+                      f'{results[key]["rms_mm"]:.3f} vs {ours["rms_mm"]:.4f} mm (plant one '
+                      'period late).')
 
     if not args.no_ros:
         print('\n| through ROS (ur10_sim + controller) | command period p50 / p99 / max (ms) | '
