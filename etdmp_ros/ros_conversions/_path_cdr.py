@@ -1,5 +1,5 @@
 r"""
-nav_msgs/Path to and from its serialized CDR bytes with numpy (no message objects).
+nav_msgs/Path from its serialized CDR bytes with numpy (no message objects).
 
 rclpy turns a received 1000-pose Path into 7000 Python objects in about 15 ms, holding the
 interpreter lock all along: long enough to stall a 125 Hz control loop in another thread for two
@@ -16,8 +16,6 @@ relative to the start of the payload: Path = Header (int32 sec, uint32 nanosec, 
 import struct
 
 import numpy as np
-
-from ._geometry import checked_positions, orientation_tuple, pose_stamps
 
 _NS = 1_000_000_000
 
@@ -62,44 +60,6 @@ def path_from_cdr(data):
         return (frame_id,) + _loop(data, offset, count, order)
     except struct.error as exc:
         raise ValueError(f'truncated serialized Path: {exc}') from None
-
-
-def serialize_path(positions, t=None, stamp=0, frame_id='base_link', orientation=None):
-    """
-    Return the CDR bytes of the Path :func:`path_from_numpy` would build (same arguments).
-
-    Little-endian plain CDR with the 4-byte encapsulation header, as ``serialize_message``
-    produces; pass the bytes to ``Publisher.publish`` of a nav_msgs/Path publisher.
-    """
-    positions = checked_positions(positions)
-    n = len(positions)
-    stamps = pose_stamps(n, t, stamp)
-    q = np.array(orientation_tuple(orientation))
-    frame = frame_id.encode('utf-8') + b'\0'
-    size = len(frame)
-    sec, nanosec = divmod(int(stamp), _NS)
-    prefix = (np.array([sec], dtype='<i4').tobytes() +
-              np.array([nanosec, size], dtype='<u4').tobytes() + frame)
-    prefix += b'\0' * (-len(prefix) % 4) + np.uint32(n).astype('<u4').tobytes()
-    # The first pose starts wherever the path header ends; every later pose starts 8-aligned
-    # (each pose ends with float64s), so all but the first share one layout.
-    parts = [b'\0\x01\0\0', prefix]
-    secs, nanosecs = np.divmod(stamps, _NS)
-    offset = len(prefix)
-    for rows in (slice(0, 1), slice(1, n)):
-        count = len(range(n)[rows])
-        if count == 0:
-            continue
-        records = np.zeros(count, dtype=_record_dtype(offset, size, '<'))
-        records['sec'] = secs[rows]
-        records['nanosec'] = nanosecs[rows]
-        records['length'] = size
-        records['frame'] = frame[:-1]
-        records['pose'][:, :3] = positions[rows]
-        records['pose'][:, 3:] = q
-        parts.append(records.tobytes())
-        offset += records.nbytes
-    return b''.join(parts)
 
 
 def _record_dtype(start, size, order):

@@ -16,8 +16,8 @@ One client process calls them in interleaved rounds (so background load hits eve
 and reports p50/p90/p99 over ``--calls`` calls each. Then 4 client processes call dmp_server
 together at 20 requests/s in total for ``--sustain`` seconds; every answer must be a non-empty
 plan. Finally the request's pieces are timed in-process to say where the time goes: rollout
-(planning), building the response Path, the raw /etdmp/path bytes, and what rclpy and DDS cost
-(serializing the response, deserializing it in the client: measured the same way).
+(planning), building the response Path, serializing it for /etdmp/path, and what rclpy and DDS
+cost (serializing the response, deserializing it in the client: measured the same way).
 
 Targets (issue 4): p50 <= 1.5x the floor and <= 25 ms; sustained 20 req/s from 4 clients with
 no failure.
@@ -225,9 +225,8 @@ def _breakdown():
     """Time the parts of one request in this process (no DDS), medians in ms."""
     from etdmp_ros.dmp import builtin_demo, learn
     from etdmp_ros.planning import plan_path, PlanSettings
-    from etdmp_ros.ros_conversions import path_from_numpy, serialize_path
+    from etdmp_ros.ros_conversions import path_from_numpy
     from etdmp_ros.task_plane import TaskPlane
-    from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Path
     from rclpy.serialization import deserialize_message, serialize_message
 
@@ -241,26 +240,10 @@ def _breakdown():
             lambda: plan_path(skill, START, GOAL, obstacles, settings, plane))
     plan = plan_path(skill, START, GOAL, (), PlanSettings(duration=DURATION), plane)
     args = (plan.positions, plan.t, time.time_ns(), 'base_link', plan.orientation)
-    rows['response Path, fast builder (path_from_numpy)'] = _median_ms(
-        lambda: path_from_numpy(*args))
-
-    def ordinary():
-        path = Path()
-        path.header.frame_id = 'base_link'
-        for p, t in zip(plan.positions, plan.t):
-            pose = PoseStamped()
-            pose.header.frame_id = 'base_link'
-            pose.header.stamp.sec = int(t)
-            pose.header.stamp.nanosec = int((t % 1.0) * 1e9)
-            pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (
-                float(p[0]), float(p[1]), float(p[2]))
-            pose.pose.orientation.x, pose.pose.orientation.w = -0.7071, 0.7071
-            path.poses.append(pose)
-        return path
-    rows['  (for comparison: PoseStamped() + attributes)'] = _median_ms(ordinary, 50)
-    rows['/etdmp/path bytes (serialize_path, published raw)'] = _median_ms(
-        lambda: serialize_path(*args))
+    rows['response Path (path_from_numpy)'] = _median_ms(lambda: path_from_numpy(*args))
     message = path_from_numpy(*args)
+    rows['/etdmp/path: the Path serialized at publish'] = _median_ms(
+        lambda: serialize_message(message))
     rows['rclpy: serialize the response (in send_response)'] = _median_ms(
         lambda: serialize_message(message))
     data = serialize_message(message)
@@ -383,11 +366,11 @@ def _run(args, tmp, env):
     for part, ms in breakdown.items():
         print(f'| {part} | {ms:.3f} |')
     ours = (breakdown['plan_path (rollout + checks), 0 obstacles'] +
-            breakdown['response Path, fast builder (path_from_numpy)'] +
-            breakdown['/etdmp/path bytes (serialize_path, published raw)'])
+            breakdown['response Path (path_from_numpy)'] +
+            breakdown['/etdmp/path: the Path serialized at publish'])
     transport = (breakdown['rclpy: serialize the response (in send_response)'] +
                  breakdown['rclpy: deserialize it in the client'])
-    print(f"\ndmp_server's own work per request (0 obstacles: plan + response + path bytes): "
+    print(f"\ndmp_server's own work per request (0 obstacles: plan + response + publish): "
           f'{ours:.2f} ms. In the floor, rclpy alone converts the 501-pose response twice '
           f'({transport:.2f} ms: serialize in the server, deserialize in the client); the rest '
           'of a round trip is DDS and the executors (MultiThreadedExecutor vs rclpy.spin: '
