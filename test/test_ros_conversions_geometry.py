@@ -1,7 +1,6 @@
 """Geometry conversions: the Path builder and its bytes agree with rclpy's own messages."""
 
-from etdmp_ros.ros_conversions import _geometry
-from etdmp_ros.ros_conversions import (FAST_BUILD, ns_to_stamp, path_from_numpy, path_to_numpy,
+from etdmp_ros.ros_conversions import (ns_to_stamp, path_from_numpy, path_to_numpy,
                                        points_from_numpy, pose_array_from_numpy,
                                        pose_array_to_numpy, serialize_path, stamp_to_ns)
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
@@ -32,14 +31,9 @@ def reference_path(positions, t, stamp, frame_id, q):
 
 
 def test_path_builder_equals_the_ordinary_build():
-    assert FAST_BUILD                              # points_from_numpy fills Point slots
     built = path_from_numpy(X, T, STAMP, 'base_link', Q)
     assert built == reference_path(X, T, STAMP, 'base_link', Q)
     assert serialize_message(built) is not None
-
-
-def test_builders_without_slot_access_give_the_same_messages(monkeypatch):
-    monkeypatch.setattr(_geometry, 'FAST_BUILD', False)
     assert path_from_numpy(X[:7], T[:7], STAMP, 'map', Q) == \
         reference_path(X[:7], T[:7], STAMP, 'map', Q)
     assert points_from_numpy(X[:3]) == [Point(x=a, y=b, z=c) for a, b, c in X[:3].tolist()]

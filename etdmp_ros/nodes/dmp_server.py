@@ -37,8 +37,7 @@ from etdmp_ros.nodes._spin import run
 from etdmp_ros.planning import place_demo, plan_path, PlanSettings, Workspace
 from etdmp_ros.robot import UR10Model
 from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_numpy, path_to_numpy,
-                                       point_to_numpy, points_from_numpy, pose_array_to_numpy,
-                                       serialize_path)
+                                       point_to_numpy, points_from_numpy, pose_array_to_numpy)
 from etdmp_ros.skill_library import (BASE_FRAMES, check_skill_name, default_skills_dir,
                                      RECORDED_DIMS, recorded_path_demo, save_skill_demo,
                                      SkillLibrary)
@@ -426,8 +425,7 @@ class DmpServer(Node):
         response.plan = path_from_numpy(plan.positions, plan.t, stamp, 'base_link',
                                         plan.orientation)
         if settings.execute:
-            self._path_pub.publish(serialize_path(plan.positions, plan.t, stamp, 'base_link',
-                                                  plan.orientation))
+            self._path_pub.publish(response.plan)
             if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
                 self._request_markers((settings, skill, plan, response.plan.header))
         self.get_logger().debug(f'/generalize: {settings.skill} ({plan.method}), '

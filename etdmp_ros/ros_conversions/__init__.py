@@ -5,7 +5,7 @@ Importing this package imports rclpy message modules; the ROS-free core never do
 """
 
 from ._cdr import header_stamp_ns  # noqa: F401
-from ._geometry import (FAST_BUILD, ns_to_stamp, path_from_numpy, path_to_numpy,  # noqa: F401
+from ._geometry import (ns_to_stamp, path_from_numpy, path_to_numpy,  # noqa: F401
                         point_to_numpy, points_from_numpy, pose_array_from_numpy,
                         pose_array_to_numpy, serialize_path, stamp_to_ns)
 from ._image import (camera_info_msg, ENCODINGS, image_from_cdr, image_from_msg,  # noqa: F401

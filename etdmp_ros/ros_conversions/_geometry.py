@@ -21,18 +21,7 @@ import numpy as np
 from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
 
-_NEW = object.__new__
 _NS = 1_000_000_000
-
-
-def _has_slots(cls, *names):
-    return all(f'_{name}' in cls.__slots__ for name in names + ('check_fields',))
-
-
-#: True when the message classes have the slots that the fast builders fill directly.
-FAST_BUILD = (_has_slots(Time, 'sec', 'nanosec') and _has_slots(Header, 'stamp', 'frame_id') and
-              _has_slots(Point, 'x', 'y', 'z') and _has_slots(Pose, 'position', 'orientation')
-              and _has_slots(PoseStamped, 'header', 'pose'))
 
 
 def stamp_to_ns(stamp):
@@ -70,16 +59,8 @@ def pose_array_from_numpy(points, frame_id='base_link', stamp=None):
 
 def points_from_numpy(points):
     """Return a list of geometry_msgs/Point for points (n, 3) (e.g. a Marker's points)."""
-    rows = np.asarray(points, dtype=float).reshape(-1, 3).tolist()
-    if not FAST_BUILD:
-        return [Point(x=x, y=y, z=z) for x, y, z in rows]
-    out = []
-    append = out.append
-    for x, y, z in rows:
-        p = _NEW(Point)
-        p._x, p._y, p._z, p._check_fields = x, y, z, False
-        append(p)
-    return out
+    return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(points, dtype=float).reshape(-1, 3)
+            .tolist()]
 
 
 def path_to_numpy(msg):

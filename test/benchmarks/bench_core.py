@@ -375,8 +375,8 @@ def _table(rows):
 
 def _print_sanity(sanity):
     print('\nReproduction sanity (every rollout that was timed; final_dist = |x(tau) - g|, '
-          'nrmse = conventional nRMSE against the demo, docs/design.md; clearance = min distance to '
-          'an obstacle):')
+          'nrmse = conventional nRMSE against the demo, docs/design.md; clearance = min distance '
+          'to an obstacle):')
     for case, per_lib in sanity.items():
         print(f'- {case}')
         for lib, values in per_lib.items():
