@@ -9,8 +9,12 @@ PIP_VERSION := 26.3
 STAMP       := $(VENV)/.installed
 PYTEST_ARGS ?= -q test
 LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
+# Upstream ROS 2 Jazzy CLI wheels and message sources (ros2 run/launch/service/topic/param, tf2_msgs):
+# installed into .venv for the tests when the folder exists (tools/ros_tools.py).
+ROS_TOOLS   ?= ../shared/ros
+ROS_STAMP   := $(VENV)/.ros-tools
 
-.PHONY: venv test test-fast demo reproduce docs config bench clean distclean help
+.PHONY: venv ros-tools test test-fast demo reproduce docs config bench clean distclean help
 .DEFAULT_GOAL := help
 
 help:
@@ -23,6 +27,7 @@ help:
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
 	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
+	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
 	@echo "make clean      remove build outputs and caches; make distclean also removes .venv*/"
 
 venv: $(STAMP)
@@ -42,7 +47,12 @@ $(STAMP): requirements.txt setup.py setup.cfg | $(VENV_PY)
 	$(VENV_PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
 	@touch $@
 
-test: $(STAMP)
+# The ros2 CLI and launch for the tests (skipped, with the reason, when $(ROS_TOOLS) is absent).
+ros-tools: $(STAMP)
+	@test -f $(ROS_STAMP) -a $(ROS_STAMP) -nt requirements-ros.txt -a $(ROS_STAMP) -nt tools/ros_tools.py \
+	  || $(VENV_PY) tools/ros_tools.py --from "$(ROS_TOOLS)" --stamp $(ROS_STAMP)
+
+test: $(STAMP) ros-tools
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
 
 # The suites are markers (test/conftest.py SUITES): unit, nodes, system.
