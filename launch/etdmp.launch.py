@@ -8,12 +8,22 @@ system's overrides (use_sim_time for the nodes that follow /clock), exactly as
 
     ros2 launch etdmp_ros etdmp.launch.py
     ros2 launch etdmp_ros etdmp.launch.py skill:=W method:=dmp
+    ros2 launch etdmp_ros etdmp.launch.py namespace:=robot2     # a second robot, /robot2/...
+
+Every topic and service name of the nodes is relative, so ``namespace`` moves all of them
+(``/robot2/joint_states``, ``/robot2/generalize``, ...). Two things follow the namespace here
+that would not by themselves: a node's section of its parameter file is keyed by its bare name,
+which rcl matches in the root namespace only, so each node also gets that section's values as
+launch parameters (the same values, so nothing changes in the root namespace); and rclpy's sim
+time listens to the absolute ``/clock``, so ``/clock`` is remapped to the relative ``clock``
+(``/robot2/clock``: each robot's simulation drives its own dmp_server; in the root namespace it
+stays ``/clock``).
 """
 
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from etdmp_ros import system
+from etdmp_ros import config_files, system
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
@@ -27,10 +37,14 @@ def generate_launch_description():
         DeclareLaunchArgument('skill', default_value='G',
                               description='skill the DMP server generalizes'),
         DeclareLaunchArgument('method', default_value='etdmp', description='etdmp or dmp'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='namespace of every node, topic and service'),
     ]
     nodes = []
     for spec in system.NODES:
-        parameters = [str(f) for f in system.parameter_files(spec.name, config)]
+        files = system.parameter_files(spec.name, config)
+        parameters = [str(f) for f in files]
+        parameters.append(config_files.read_parameter_file(files[-1], spec.name))
         overrides = system.wiring_overrides(spec.name)
         if overrides:
             parameters.append(overrides)
@@ -38,5 +52,7 @@ def generate_launch_description():
             parameters.append({'skill': LaunchConfiguration('skill'),
                                'method': LaunchConfiguration('method')})
         nodes.append(Node(package='etdmp_ros', executable=spec.executable, name=spec.name,
-                          output='screen', emulate_tty=True, parameters=parameters))
+                          namespace=LaunchConfiguration('namespace'), output='screen',
+                          emulate_tty=True, parameters=parameters,
+                          ros_arguments=['-r', '/clock:=clock']))
     return LaunchDescription(arguments + nodes)

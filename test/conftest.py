@@ -38,7 +38,8 @@ SUITES = {
              'test_ros_conversions_image', 'test_ros_conversions_sim', 'test_sim',
              'test_skill_library', 'test_system', 'test_vision'),
     'nodes': ('test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
-              'test_install_layout', 'test_perception_node', 'test_ur10_sim_node'),
+              'test_install_layout', 'test_namespaces', 'test_perception_node',
+              'test_ur10_sim_node'),
     'system': ('test_end_to_end',),
 }
 _SUITE_OF = {module: suite for suite, modules in SUITES.items() for module in modules}

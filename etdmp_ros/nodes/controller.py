@@ -52,13 +52,13 @@ from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool
 
 NODE_NAME = 'controller'
-JOINT_STATES_TOPIC = '/joint_states'
-PATH_TOPIC = '/etdmp/path'
-COMMAND_TOPIC = '/forward_velocity_controller/commands'
-TOOL_POSE_TOPIC = '/etdmp/tool_pose'
-STATUS_TOPIC = '/etdmp/controller/status'
-ERROR_TOPIC = '/etdmp/controller/tracking_error'
-REFERENCE_TOPIC = '/etdmp/controller/reference'
+JOINT_STATES_TOPIC = 'joint_states'
+PATH_TOPIC = 'etdmp/path'
+COMMAND_TOPIC = 'forward_velocity_controller/commands'
+TOOL_POSE_TOPIC = 'etdmp/tool_pose'
+STATUS_TOPIC = 'etdmp/controller/status'
+ERROR_TOPIC = 'etdmp/controller/tracking_error'
+REFERENCE_TOPIC = 'etdmp/controller/reference'
 FRAMES = ('', 'base_link')
 #: Zero commands sent on exit, a few ms apart (a lost one would leave the arm moving).
 EXIT_ZEROS = 3

@@ -186,17 +186,17 @@ class DmpServer(Node):
         self._inputs = inputs
         self._tool_subscriptions = {}  # tool_position_source -> subscription (made on first use)
         self._subscribe_tool_source(settings.tool_position_source)
-        self.create_subscription(PointStamped, '/etdmp/goal', self._on_goal, 10,
+        self.create_subscription(PointStamped, 'etdmp/goal', self._on_goal, 10,
                                  callback_group=inputs)
-        self.create_subscription(PoseArray, '/etdmp/obstacles', self._on_obstacles, 10,
+        self.create_subscription(PoseArray, 'etdmp/obstacles', self._on_obstacles, 10,
                                  callback_group=inputs)
-        self.create_subscription(Path, '/etdmp/demonstrations', self._on_demonstration, 10,
+        self.create_subscription(Path, 'etdmp/demonstrations', self._on_demonstration, 10,
                                  callback_group=MutuallyExclusiveCallbackGroup())
-        self._path_pub = self.create_publisher(Path, '/etdmp/path', _LATCHED)
-        self._marker_pub = self.create_publisher(MarkerArray, '/etdmp/markers', _LATCHED)
+        self._path_pub = self.create_publisher(Path, 'etdmp/path', _LATCHED)
+        self._marker_pub = self.create_publisher(MarkerArray, 'etdmp/markers', _LATCHED)
         self._pending_markers = None
         self._marker_thread = None   # builds markers after a call, off the service's path
-        self.create_service(GetPlan, '/generalize', self._on_generalize,
+        self.create_service(GetPlan, 'generalize', self._on_generalize,
                             callback_group=ReentrantCallbackGroup())
         log.info(f'serving /generalize with skill {settings.skill!r} '
                  f'({settings.plan.method}); skills: {", ".join(self._library.names())}')
@@ -234,10 +234,10 @@ class DmpServer(Node):
         if source in self._tool_subscriptions:
             return
         if source == 'joint_states':
-            sub = self.create_subscription(JointState, '/joint_states', self._on_joint_state,
+            sub = self.create_subscription(JointState, 'joint_states', self._on_joint_state,
                                            qos_profile_sensor_data, callback_group=self._inputs)
         else:
-            sub = self.create_subscription(PoseStamped, '/etdmp/tool_pose', self._on_tool_pose,
+            sub = self.create_subscription(PoseStamped, 'etdmp/tool_pose', self._on_tool_pose,
                                            qos_profile_sensor_data, callback_group=self._inputs)
         self._tool_subscriptions[source] = sub
 

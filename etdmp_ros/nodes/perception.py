@@ -44,12 +44,12 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 
 NODE_NAME = 'perception'
-COLOR_TOPIC = '/camera/camera/color/image_raw'
-DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
-INFO_TOPIC = '/camera/camera/color/camera_info'
-GOAL_TOPIC = '/etdmp/goal'
-OBSTACLES_TOPIC = '/etdmp/obstacles'
-DEBUG_IMAGE_TOPIC = '/etdmp/detections/image'
+COLOR_TOPIC = 'camera/camera/color/image_raw'
+DEPTH_TOPIC = 'camera/camera/aligned_depth_to_color/image_raw'
+INFO_TOPIC = 'camera/camera/color/camera_info'
+GOAL_TOPIC = 'etdmp/goal'
+OBSTACLES_TOPIC = 'etdmp/obstacles'
+DEBUG_IMAGE_TOPIC = 'etdmp/detections/image'
 BASE_FRAME = 'base_link'
 COLOR_ENCODINGS = ('rgb8', 'bgr8')
 DEPTH_ENCODINGS = ('16UC1', 'mono16')

@@ -51,16 +51,16 @@ import yaml
 
 NODE_NAME = 'ur10_sim'
 OPTICAL_FRAME = 'camera_color_optical_frame'
-COMMAND_TOPIC = '/forward_velocity_controller/commands'
-COLOR_TOPIC = '/camera/camera/color/image_raw'
-COLOR_INFO_TOPIC = '/camera/camera/color/camera_info'
-DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
-DEPTH_INFO_TOPIC = '/camera/camera/aligned_depth_to_color/camera_info'
+COMMAND_TOPIC = 'forward_velocity_controller/commands'
+COLOR_TOPIC = 'camera/camera/color/image_raw'
+COLOR_INFO_TOPIC = 'camera/camera/color/camera_info'
+DEPTH_TOPIC = 'camera/camera/aligned_depth_to_color/image_raw'
+DEPTH_INFO_TOPIC = 'camera/camera/aligned_depth_to_color/camera_info'
 CAMERA_TOPICS = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR_INFO_TOPIC,
                  'depth_info': DEPTH_INFO_TOPIC}
-GOAL_TOPIC = '/ur10_sim/ground_truth/goal'
-OBSTACLES_TOPIC = '/ur10_sim/ground_truth/obstacles'
-TOOL_TIP_TOPIC = '/ur10_sim/ground_truth/tool_tip'
+GOAL_TOPIC = '~/ground_truth/goal'
+OBSTACLES_TOPIC = '~/ground_truth/obstacles'
+TOOL_TIP_TOPIC = '~/ground_truth/tool_tip'
 DESCRIPTION = system.node(NODE_NAME)
 # Fell this far behind real time (overload, debugger): restart pacing instead of bursting.
 MAX_LAG = 0.25
@@ -125,7 +125,9 @@ class UR10SimNode(Node):
         reliable = QoSProfile(depth=10)
         # A second of history: a slow reader must never block the simulation's publish().
         state = rate_qos(1.0 / self.tick_period)
-        self._joint_pub = self.create_publisher(JointState, '/joint_states', state)
+        self._joint_pub = self.create_publisher(JointState, 'joint_states', state)
+        # Absolute, unlike every other name: rclpy's sim time listens to /clock. A second
+        # robot's simulation remaps it to its own (-r /clock:=clock, as the launch file does).
         self._clock_pub = self.create_publisher(Clock, '/clock', state)
         self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, reliable)
         self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, reliable)
