@@ -13,14 +13,15 @@ it stamps plans with the ROS clock; the others stamp with their inputs' stamps).
    parameters ``method: dmp``, ``execute: false``, set through its SetParameters service), then
    for the real plan (``method: etdmp``, ``execute: true``), both with empty frame ids: from the
    tool's current position to the perceived goal (stir: to an explicit goal in the bottle);
-3. records (:mod:`etdmp_ros.recording`) the true pen tip (``/ur10_sim/ground_truth/tool_tip``),
-   the joint-velocity commands (``/forward_velocity_controller/commands``), the controller's
-   status and reference, and the camera images until the controller is idle again (the
-   controller's own tracking error comes from the summary it logs);
-4. stops the nodes with SIGINT (Ctrl-C), measures (:mod:`etdmp_ros.metrics`, which defines the
-   numbers) and writes ``plot.png``, ``camera_start.png``, ``camera_middle.png``,
-   ``camera_end.png``, ``animation.gif`` (:mod:`etdmp_ros.pictures`), ``metrics.json`` and
-   ``recording.npz`` to the output folder, node logs to ``<out>/logs/``.
+3. records (:mod:`etdmp_ros.recording`) every topic of the system, as ``ros2 bag record``
+   would, until the controller is idle again; it follows the controller's status and keeps
+   the camera frames for the pictures;
+4. stops the nodes with SIGINT (Ctrl-C), writes the recording, ``demo.mcap`` (rosbag2 MCAP,
+   camera images as CompressedImage; ``metadata.yaml`` beside it), measures from it
+   (:mod:`etdmp_ros.metrics`, which defines the numbers; the controller's own tracking error
+   comes from the summary it logs) and writes ``plot.png``, ``camera_start.png``,
+   ``camera_middle.png``, ``camera_end.png``, ``animation.gif`` (:mod:`etdmp_ros.pictures`),
+   ``metrics.json`` and ``recording.npz`` to the output folder, node logs to ``<out>/logs/``.
 
 The goal, obstacles and start of each skill: :mod:`etdmp_ros.scenario`.
 """
@@ -40,7 +41,8 @@ from etdmp_ros.metrics import (compute_metrics, format_nrmse, MeasurementError, 
 from etdmp_ros.pictures import plot_run, write_pictures
 from etdmp_ros.processes import (DISCOVERY_VARIABLES, isolated_environment, module_argv,
                                  NodeExited, SystemProcesses)
-from etdmp_ros.recording import Recorder, RecorderError, save_recording
+from etdmp_ros.recording import (read_streams, Recorder, RecorderError, save_recording,
+                                 write_bag)
 from etdmp_ros.robot import CameraIntrinsics
 from etdmp_ros.scenario import Scenario, ScenarioError, SKILLS
 import numpy as np
@@ -49,6 +51,8 @@ STARTUP_TIMEOUT = 150.0
 STATUS_FAILURES = ('unreachable', 'halted-singularity', 'halted-joint-limit', 'stale-input')
 #: Errors of the parts that end the demo (reported as a DemoError with their message).
 PART_ERRORS = (NodeExited, RecorderError, ScenarioError, MeasurementError)
+#: The recording of the whole run in the output folder (with rosbag2's metadata.yaml beside it).
+BAG_NAME = 'demo.mcap'
 
 
 class DemoError(RuntimeError):
@@ -268,6 +272,14 @@ def _add_system_figures(metrics, live, codes, monitor, rec, nodes):
         metrics['system'].get('controller', {}).get('tracking_max_mm'))
 
 
+def _write_bag(path, recorder):
+    """Write the recording (rosbag2 MCAP); return its figures for metrics.json."""
+    started = time.monotonic()
+    counts = write_bag(path, recorder)
+    return {'file': path.name, 'bytes': path.stat().st_size,
+            'write_s': time.monotonic() - started, 'message_counts': counts}
+
+
 def _write_outputs(out, run, metrics, extra, recorder, rec, options):
     """Write the pictures and the recording; return the paths written (metrics.json apart)."""
     intrinsics = recorder.camera_info or CameraIntrinsics.from_fovy(640, 480, 42.5)
@@ -313,16 +325,19 @@ def _run_demo(options, env):
     finally:
         monitor.stop()
         codes = nodes.stop(interrupted=sys.exc_info()[0] is KeyboardInterrupt)
-        rec = recorder.arrays()
-        status = recorder.state(live.n_status)
         recorder.close()
-    progress(f'nodes stopped (exit codes {codes}); measuring and drawing')
+    progress(f'nodes stopped (exit codes {codes}); writing {out / BAG_NAME}, measuring from it')
+    bag_figures = _write_bag(out / BAG_NAME, recorder)
+    rec = read_streams(out / BAG_NAME)
+    status = rec['status'][live.n_status:]
     run, metrics, extra = _measure(scenario, options, live, rec, status, out)
     _add_system_figures(metrics, live, codes, monitor, rec, nodes)
+    metrics['recording'] = bag_figures
     written = _write_outputs(out, run, metrics, extra, recorder, rec, options)
     metrics['wall_time_s'] = time.monotonic() - wall
     (out / 'metrics.json').write_text(json.dumps(metrics, indent=2) + '\n')
-    written += [out / 'metrics.json', out / 'recording.npz']
+    written += [out / 'metrics.json', out / 'recording.npz', out / BAG_NAME,
+                out / 'metadata.yaml']
     if live.failure:
         raise DemoError(f'the controller stopped: {live.failure} (files written to {out})')
     return metrics, written

@@ -68,8 +68,9 @@ class Run:
     """
     Everything the demo measured in one run (inputs of :func:`compute_metrics`).
 
-    ``scene``: the run's :class:`etdmp_ros.scenario.Scenario`; ``rec``: the recorded streams
-    (:meth:`etdmp_ros.recording.Recorder.arrays`); times are simulated ns.
+    ``scene``: the run's :class:`etdmp_ros.scenario.Scenario`; ``rec``: the recorded streams,
+    read back from the run's MCAP recording (:func:`etdmp_ros.recording.read_streams`); times
+    are simulated ns.
     """
 
     scene: object
@@ -78,7 +79,7 @@ class Run:
     goal: np.ndarray                  # the goal as requested (perceived or explicit)
     plan: tuple                       # (t, positions, quaternions) executed
     other: tuple                      # (method, t, positions) or (method, None, reason)
-    rec: dict                         # Recorder.arrays()
+    rec: dict                         # recording.read_streams(the run's demo.mcap)
     status: list                      # (sim ns, text) after the call
     call_ns: int
     plan_stamp_ns: int

@@ -1,18 +1,30 @@
 """
-Recording a closed-loop run: a node in the caller's process that listens to the system.
+Recording a closed-loop run: a node in the caller's process that records the whole system.
 
-:class:`Recorder` subscribes to the simulation's ground truth, perception's output, the
-controller's commands, status and reference and the camera; it calls ``/generalize`` and sets
-dmp_server's parameters as a user would (``ros2 service call``, ``ros2 param set``).
-:meth:`Recorder.arrays` returns the streams as numpy arrays (the input of
-:mod:`etdmp_ros.metrics`), :func:`save_recording` writes them with the plans to an ``.npz``.
+:class:`Recorder` subscribes to every topic of the system, discovered from the ROS graph as the
+nodes start (``ros2 bag record --all`` does the same), and keeps each message as the
+serialized bytes its raw subscription hands over, stamped with the time it arrived; a few
+topics it also reads at once to drive the demo (the pen tip, perception's output, the
+controller's status, the camera frames kept for the pictures). It calls ``/generalize`` and
+sets dmp_server's parameters as a user would (``ros2 service call``, ``ros2 param set``).
+
+After the run :func:`write_bag` writes it all to a rosbag2-compatible MCAP file
+(:mod:`etdmp_ros.bag`), the camera images as sensor_msgs/CompressedImage on
+``<topic>/compressed`` as image_transport names them (compressed then, not while the system
+runs); :func:`read_streams` reads back from that file the streams that
+:mod:`etdmp_ros.metrics` measures, and :func:`save_recording` writes them with the plans to an
+``.npz``.
 """
 
+from concurrent.futures import ThreadPoolExecutor
+import heapq
 import threading
 import time
 
+from etdmp_ros import bag
 from etdmp_ros.nodes.background import BackgroundNode
-from etdmp_ros.ros_conversions import (header_stamp_ns, image_from_cdr,
+from etdmp_ros.ros_conversions import (compress_image_cdr, COMPRESSED_IMAGE_TYPE,
+                                       COMPRESSED_SUFFIX, header_stamp_ns, image_from_cdr,
                                        intrinsics_from_camera_info, path_to_numpy,
                                        point_to_numpy, pose_array_to_numpy, stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
@@ -20,8 +32,9 @@ from nav_msgs.srv import GetPlan
 import numpy as np
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
+from rosidl_runtime_py.utilities import get_message
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Float64MultiArray, String
 
@@ -31,6 +44,27 @@ LATCHED = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STREAM = QoSProfile(depth=1000)
 # Reliable, as perception subscribes: a lost fragment is resent instead of the frame lost.
 IMAGES = QoSProfile(depth=2)
+#: How often the graph is looked at for new topics (s; ros2 bag record: 0.1 s).
+DISCOVERY_PERIOD = 0.2
+IMAGE_TYPE = 'sensor_msgs/msg/Image'
+TIP_TOPIC = '/ur10_sim/ground_truth/tool_tip'
+COMMAND_TOPIC = '/forward_velocity_controller/commands'
+REFERENCE_TOPIC = '/etdmp/controller/reference'
+STATUS_TOPIC = '/etdmp/controller/status'
+COLOR_TOPIC = '/camera/camera/color/image_raw'
+DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
+#: The streams :func:`read_streams` returns for the metrics.
+MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC)
+
+
+class Stream:
+    """One recorded topic: its type, its publishers' QoS, (receipt ns, CDR bytes) in order."""
+
+    def __init__(self, type_name, qos_profiles=()):
+        """Start an empty stream of ``type_name`` (``pkg/msg/Name``)."""
+        self.type_name = type_name
+        self.qos_profiles = list(qos_profiles)
+        self.messages = []
 
 
 class RecorderError(RuntimeError):
@@ -39,14 +73,17 @@ class RecorderError(RuntimeError):
 
 class Recorder(BackgroundNode):
     """
-    rclpy in this process (own context, spinning in a thread): records what the demo measures.
+    rclpy in this process (own context, spinning in a thread): records the whole system.
 
-    Times are simulated (ns), from message stamps; unstamped messages (commands, status) get
-    the stamp of the latest pen-tip sample received before them. The streams at the control
-    rate (pen tip, commands, reference) are kept as the serialized bytes their raw
-    subscriptions hand over and decoded in :meth:`arrays`, after
-    the run: deserializing each on arrival cost this process a tenth of a core.
+    ``streams``: {topic: :class:`Stream`}, every topic that some other node publishes, found in
+    the graph every :data:`DISCOVERY_PERIOD` (the demo's own topics subscribed from the start),
+    subscribed raw with the QoS its publishers offer (reliable and transient local only if all
+    are). A message's receipt time is the wall clock (ns since the epoch, as ``ros2 bag
+    record`` stamps it), kept strictly increasing so that the order of arrival can be read
+    back from the file. Deserializing messages on arrival cost this process a tenth of a
+    core: only the few the demo acts on are read at once.
 
+    ``sim_ns``: the latest pen-tip stamp (simulated ns); ``status``: (sim ns at receipt, text).
     Camera frames: :meth:`request_snapshot` keeps the first frame (colour and depth) at or
     after a stamp; with ``animation``, every :data:`FRAME_EVERY`-th frame after
     ``keep_frames_after`` is kept at half size in ``frames``.
@@ -58,9 +95,7 @@ class Recorder(BackgroundNode):
         self.lock = threading.Lock()
         self.animation = animation
         self.sim_ns = 0
-        self.tip = []                 # (stamp ns, serialized PointStamped)
-        self.reference = []           # serialized PoseStamped
-        self.commands = []            # (sim ns at receipt, monotonic s, serialized command)
+        self.streams = {}             # topic -> Stream
         self.status = []              # (sim ns at receipt, text)
         self.goal_truth = self.obstacles_truth = None
         self.goal_seen = self.obstacles_seen = None
@@ -74,69 +109,107 @@ class Recorder(BackgroundNode):
         self._recent_depth = {}       # stamp ns -> serialized depth image not yet wanted
         self._frame_count = 0
         self.keep_frames_after = None
+        self._wall0, self._mono0 = time.time_ns(), time.monotonic_ns()
+        self._last_receipt = 0
         self._subscribe()
         self.generalize = self.node.create_client(GetPlan, '/generalize')
         self.server_parameters = self.node.create_client(SetParameters,
                                                          '/dmp_server/set_parameters')
+        self.node.create_timer(DISCOVERY_PERIOD, self._discover)
         self.start()
 
+    @property
+    def tip(self):
+        """Return the pen-tip messages received so far, [(receipt ns, CDR bytes)]."""
+        return self.streams[TIP_TOPIC].messages
+
     def _subscribe(self):
-        n = self.node
-        n.create_subscription(PointStamped, '/ur10_sim/ground_truth/tool_tip', self._on_tip,
-                              STREAM, raw=True)
-        n.create_subscription(PointStamped, '/ur10_sim/ground_truth/goal', self._on_goal_truth,
-                              10)
-        n.create_subscription(PoseArray, '/ur10_sim/ground_truth/obstacles',
-                              self._on_obstacles_truth, 10)
-        n.create_subscription(PointStamped, '/etdmp/goal', self._on_goal_seen, 10)
-        n.create_subscription(PoseArray, '/etdmp/obstacles', self._on_obstacles_seen, 10)
-        n.create_subscription(Float64MultiArray, '/forward_velocity_controller/commands',
-                              self._on_command, STREAM, raw=True)
-        n.create_subscription(String, '/etdmp/controller/status', self._on_status, LATCHED)
-        n.create_subscription(PoseStamped, '/etdmp/controller/reference', self._on_reference,
-                              STREAM, raw=True)
-        n.create_subscription(CameraInfo, '/camera/camera/color/camera_info',
-                              self._on_camera_info, 10)
-        n.create_subscription(Image, '/camera/camera/color/image_raw', self._on_color, IMAGES,
-                              raw=True)
-        n.create_subscription(Image, '/camera/camera/aligned_depth_to_color/image_raw',
-                              self._on_depth, IMAGES, raw=True)
+        """Subscribe the topics the demo acts on (before their publishers exist)."""
+        for topic, msg_type, qos, handler in (
+                (TIP_TOPIC, PointStamped, STREAM, self._on_tip),
+                ('/ur10_sim/ground_truth/goal', PointStamped, 10, self._on_goal_truth),
+                ('/ur10_sim/ground_truth/obstacles', PoseArray, 10, self._on_obstacles_truth),
+                ('/etdmp/goal', PointStamped, 10, self._on_goal_seen),
+                ('/etdmp/obstacles', PoseArray, 10, self._on_obstacles_seen),
+                (COMMAND_TOPIC, Float64MultiArray, STREAM, None),
+                (STATUS_TOPIC, String, LATCHED, self._on_status),
+                (REFERENCE_TOPIC, PoseStamped, STREAM, None),
+                ('/camera/camera/color/camera_info', CameraInfo, 10, self._on_camera_info),
+                (COLOR_TOPIC, Image, IMAGES, self._on_color),
+                (DEPTH_TOPIC, Image, IMAGES, self._on_depth)):
+            self._record(topic, msg_type, qos, handler)
+
+    def _record(self, topic, msg_type, qos, handler=None):
+        module, name = msg_type.__module__.split('.')[0], msg_type.__name__
+        stream = self.streams[topic] = Stream(f'{module}/msg/{name}')
+        messages, lock = stream.messages, self.lock
+
+        def on_message(raw):
+            with lock:
+                now = self._wall0 + time.monotonic_ns() - self._mono0
+                now = self._last_receipt = max(now, self._last_receipt + 1)
+                messages.append((now, raw))
+            if handler is not None:
+                handler(raw)
+
+        self.node.create_subscription(msg_type, topic, on_message, qos, raw=True)
+
+    def _discover(self):
+        """Subscribe every new topic that another node publishes (as ros2 bag record -a)."""
+        me = (self.node.get_name(), self.node.get_namespace())
+        for topic, types in self.node.get_topic_names_and_types():
+            stream = self.streams.get(topic)
+            if (stream is not None and stream.qos_profiles) or '/_' in topic or not types:
+                continue            # known, hidden, or a service's event topic
+            publishers = [p for p in self.node.get_publishers_info_by_topic(topic)
+                          if (p.node_name, p.node_namespace) != me]
+            if not publishers:
+                continue
+            qos = [p.qos_profile for p in publishers]
+            reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in qos)
+            latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in qos)
+            if stream is None:
+                subscription = QoSProfile(
+                    depth=IMAGES.depth if types[0] == IMAGE_TYPE else STREAM.depth,
+                    reliability=(ReliabilityPolicy.RELIABLE if reliable
+                                 else ReliabilityPolicy.BEST_EFFORT),
+                    durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
+                                else DurabilityPolicy.VOLATILE))
+                self._record(topic, get_message(types[0]), subscription)
+                stream = self.streams[topic]
+            stream.qos_profiles = [
+                bag.qos_profile(q.reliability == ReliabilityPolicy.RELIABLE,
+                                q.durability == DurabilityPolicy.TRANSIENT_LOCAL, q.depth)
+                for q in qos]
 
     # -- callbacks
     def _on_tip(self, raw):
         stamp = header_stamp_ns(raw)
         with self.lock:
             self.sim_ns = max(self.sim_ns, stamp)
-            self.tip.append((stamp, raw))
 
-    def _on_goal_truth(self, msg):
-        self.goal_truth = point_to_numpy(msg.point)
+    def _on_goal_truth(self, raw):
+        self.goal_truth = point_to_numpy(deserialize_message(raw, PointStamped).point)
 
-    def _on_obstacles_truth(self, msg):
-        self.obstacles_truth = pose_array_to_numpy(msg)
+    def _on_obstacles_truth(self, raw):
+        self.obstacles_truth = pose_array_to_numpy(deserialize_message(raw, PoseArray))
 
-    def _on_goal_seen(self, msg):
+    def _on_goal_seen(self, raw):
+        msg = deserialize_message(raw, PointStamped)
         self.goal_seen = point_to_numpy(msg.point)
         self.goal_seen_stamp = stamp_to_ns(msg.header.stamp)
 
-    def _on_obstacles_seen(self, msg):
-        self.obstacles_seen = pose_array_to_numpy(msg)
+    def _on_obstacles_seen(self, raw):
+        self.obstacles_seen = pose_array_to_numpy(deserialize_message(raw, PoseArray))
 
-    def _on_command(self, raw):
+    def _on_status(self, raw):
+        text = deserialize_message(raw, String).data
         with self.lock:
-            self.commands.append((self.sim_ns, time.monotonic(), raw))
+            self.status.append((self.sim_ns, text))
 
-    def _on_status(self, msg):
-        with self.lock:
-            self.status.append((self.sim_ns, msg.data))
-
-    def _on_reference(self, raw):
-        with self.lock:
-            self.reference.append(raw)
-
-    def _on_camera_info(self, msg):
+    def _on_camera_info(self, raw):
         if self.camera_info is None:
-            self.camera_info = intrinsics_from_camera_info(msg)
+            self.camera_info = intrinsics_from_camera_info(deserialize_message(raw, CameraInfo))
 
     def _on_color(self, raw):
         # Decoding a 0.9 MB image costs time: only the frames kept are read. The depth
@@ -243,38 +316,78 @@ class Recorder(BackgroundNode):
             raw = self.tip[-1][1]
         return point_to_numpy(deserialize_message(raw, PointStamped).point)
 
-    def arrays(self):
-        """Return the recorded streams as numpy arrays, decoding the serialized ones."""
-        with self.lock:
-            tip, reference = list(self.tip), list(self.reference)
-            commands = list(self.commands)
 
-        tip = _points([raw for _, raw in tip], PointStamped)
-        reference = _points(reference, PoseStamped)
-        qd = np.array([deserialize_message(raw, Float64MultiArray).data for _, _, raw in commands],
-                      dtype=float).reshape(-1, 6)
-        return {'tip': tip[np.argsort(tip[:, 0], kind='stable')],
-                'reference': reference[np.argsort(reference[:, 0], kind='stable')],
-                'command_time': np.array([c[0] for c in commands], dtype=float),
-                'command_wall_time': np.array([c[1] for c in commands], dtype=float),
-                'commands': qd}
+def write_bag(path, recorder, workers=2):
+    """
+    Write everything ``recorder`` received to a rosbag2-compatible MCAP file at ``path``.
+
+    Messages as received, in order of arrival (log time = receipt time); images
+    (sensor_msgs/Image) as CompressedImage on ``<topic>/compressed`` (JPEG colour, PNG depth),
+    compressed here on ``workers`` threads. Also writes ``metadata.yaml`` beside it
+    (:class:`etdmp_ros.bag.BagWriter`). Return {topic: message count}.
+    """
+    with recorder.lock:
+        streams = {topic: (s.type_name, s.qos_profiles, list(s.messages))
+                   for topic, s in recorder.streams.items()}
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for topic in [t for t, (type_name, _, _) in streams.items() if type_name == IMAGE_TYPE]:
+            _, profiles, messages = streams.pop(topic)
+            data = pool.map(compress_image_cdr, [raw for _, raw in messages])
+            streams[topic + COMPRESSED_SUFFIX] = (
+                COMPRESSED_IMAGE_TYPE, profiles,
+                [(ns, cdr) for (ns, _), cdr in zip(messages, data)])
+    with bag.BagWriter(path) as writer:
+        for topic in sorted(streams):
+            writer.add_topic(topic, streams[topic][0], streams[topic][1])
+        merged = heapq.merge(*([(ns, topic, raw) for ns, raw in messages]
+                               for topic, (_, _, messages) in streams.items()),
+                             key=lambda m: m[0])
+        for ns, topic, raw in merged:
+            writer.write(topic, ns, raw)
+    return {topic: len(messages) for topic, (_, _, messages) in streams.items()}
 
 
-def _points(messages, msg_type):
-    """Return (n, 4) stamps (ns) and positions of serialized PointStamped or PoseStamped."""
-    out = np.empty((len(messages), 4))
-    for i, raw in enumerate(messages):
-        msg = deserialize_message(raw, msg_type)
-        p = msg.point if msg_type is PointStamped else msg.pose.position
-        out[i] = stamp_to_ns(msg.header.stamp), p.x, p.y, p.z
-    return out
+def read_streams(path):
+    """
+    Return the streams that :mod:`etdmp_ros.metrics` measures, from a :func:`write_bag` file.
+
+    ``tip``, ``reference``: (n, 4) header stamps (ns) and positions, sorted by stamp;
+    ``commands`` (n, 6) and ``command_time``: the simulated time when each arrived (the stamp
+    of the latest pen tip received before it), ``command_wall_time``: its receipt time (s);
+    ``status``: [(simulated ns at receipt, text)].
+    """
+    tip, reference, commands, command_time, wall, status = [], [], [], [], [], []
+    sim_ns = 0
+    for topic, _, log_ns, data in bag.read_messages(path, MEASURED_TOPICS):
+        if topic == TIP_TOPIC:
+            msg = deserialize_message(data, PointStamped)
+            stamp = stamp_to_ns(msg.header.stamp)
+            sim_ns = max(sim_ns, stamp)
+            tip.append((stamp, msg.point.x, msg.point.y, msg.point.z))
+        elif topic == REFERENCE_TOPIC:
+            msg = deserialize_message(data, PoseStamped)
+            p = msg.pose.position
+            reference.append((stamp_to_ns(msg.header.stamp), p.x, p.y, p.z))
+        elif topic == COMMAND_TOPIC:
+            commands.append(deserialize_message(data, Float64MultiArray).data)
+            command_time.append(sim_ns)
+            wall.append(log_ns * 1e-9)
+        else:
+            status.append((sim_ns, deserialize_message(data, String).data))
+    tip, reference = np.array(tip).reshape(-1, 4), np.array(reference).reshape(-1, 4)
+    return {'tip': tip[np.argsort(tip[:, 0], kind='stable')],
+            'reference': reference[np.argsort(reference[:, 0], kind='stable')],
+            'command_time': np.array(command_time, dtype=float),
+            'command_wall_time': np.array(wall, dtype=float),
+            'commands': np.array(commands, dtype=float).reshape(-1, 6),
+            'status': status}
 
 
 def save_recording(path, rec, plan, other, tracking_start):
     """
     Write the recorded streams and the plans to ``path`` (``.npz``).
 
-    ``rec``: :meth:`Recorder.arrays`; ``plan``: (t, positions, ...) executed; ``other``:
+    ``rec``: :func:`read_streams`; ``plan``: (t, positions, ...) executed; ``other``:
     (method, t, positions), t None when that plan was refused; ``tracking_start``: simulated s.
     """
     _, other_t, other_x = other

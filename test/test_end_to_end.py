@@ -15,14 +15,21 @@ keeps the demonstration's shape (nRMSE at most twice the plan's), and the DMP ba
 same start is clearly worse. One run per skill and load (~15 s each) serves all the checks.
 """
 
+from collections import defaultdict
 import json
+from pathlib import Path
+import re
 
 from conftest import busy_core
+import cv2
 from etdmp_ros import demo, system
 from etdmp_ros.config_files import read_parameter_file
 from etdmp_ros.processes import installed_command
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
+import yaml
 
 SKILLS = ('G', 'stir')
 #: Each skill idle, and next to a process busy-looping on one of the two cores (another user
@@ -32,6 +39,9 @@ CASES = [(skill, load) for load in ('idle', 'busy') for skill in SKILLS]
 #: tracking error of ~0.1 mm on a 0.2 m movement are of this order. ET-DMP's stirring plan
 #: (no obstacle near it) is an exact copy of the demonstration: nRMSE 1.5e-4.
 NRMSE_FLOOR = 1e-3
+README = Path(__file__).resolve().parents[1] / 'README.md'
+#: The recording of a G or stir demo must stay this small (bytes).
+BAG_LIMIT = 30e6
 
 
 @pytest.fixture(scope='module', params=CASES, ids=[f'{s}-{load}' for s, load in CASES])
@@ -116,7 +126,7 @@ def test_dmp_baseline_from_the_same_start_is_worse(run):
 def test_outputs_and_clean_shutdown(run):
     m, out = run
     for name in ('plot.png', 'camera_start.png', 'camera_middle.png', 'camera_end.png',
-                 'metrics.json', 'recording.npz'):
+                 'metrics.json', 'recording.npz', demo.BAG_NAME, 'metadata.yaml'):
         assert (out / name).stat().st_size > 1000, name
     saved = json.loads((out / 'metrics.json').read_text())
     for key in ('skill', 'method', 'nrmse_plan', 'nrmse_trace', 'nrmse_dmp_baseline',
@@ -126,3 +136,97 @@ def test_outputs_and_clean_shutdown(run):
     # SIGINT stops every node cleanly.
     codes = m['node_exit_codes']
     assert [codes[n] for n in ('ur10_sim', 'perception', 'dmp_server', 'controller')] == [0] * 4
+
+
+def readme_topics():
+    """
+    Return {topic: (package or None, type name)} of the README's topic table (not services).
+
+    A row may list several topics (the later ones relative to the first one's namespace) with
+    as many types, or one for all; rows of topics that only a user publishes (``you → ...``)
+    are left out.
+    """
+    topics, lines = {}, README.read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith('| topic / service |'))
+    for line in lines[first + 2:]:
+        if not line.startswith('|'):
+            break
+        cells = [c.strip() for c in line.strip().strip('|').split('|')]
+        names = re.findall(r'`(/[^`]*)`', cells[0])
+        types = re.findall(r'(?<![\w/])(?:(\w+)/)?(?:(msg|srv)/)?([A-Z]\w*)\b', cells[1])
+        if any(kind == 'srv' for _, kind, _ in types) or cells[2].startswith('you'):
+            continue
+        types = types * len(names) if len(types) == 1 else types    # one type for them all
+        assert len(names) == len(types), line
+        namespace = names[0].rsplit('/', 1)[0]
+        for i, (name, (package, _, type_name)) in enumerate(zip(names, types)):
+            topics[name if i == 0 else namespace + name] = (package or None, type_name)
+    return topics
+
+
+def test_the_recording_holds_the_run_as_the_readme_lists_it(run):
+    m, out = run
+    path = out / demo.BAG_NAME
+    assert 0 < path.stat().st_size <= BAG_LIMIT
+    wanted = ('/forward_velocity_controller/commands', '/etdmp/path',
+              '/camera/camera/color/image_raw/compressed',
+              '/camera/camera/aligned_depth_to_color/image_raw/compressed')
+    decoded = defaultdict(list)
+    with open(path, 'rb') as stream:        # read back with mcap-ros2-support, not our code
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == 'ros2'
+        summary = reader.get_summary()
+        for _, channel, _, msg in reader.iter_decoded_messages(topics=list(wanted)):
+            decoded[channel.topic].append(msg)
+    types = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    counts = {c.topic: summary.statistics.channel_message_counts.get(c.id, 0)
+              for c in summary.channels.values()}
+    assert all(s.encoding == 'ros2msg' for s in summary.schemas.values())
+    assert all(c.message_encoding == 'cdr' for c in summary.channels.values())
+
+    # Every topic of the README's table, with its type; images as image_transport's
+    # compressed topic; /tf and /robot_description when the system publishes them.
+    for topic, (package, type_name) in readme_topics().items():
+        if type_name == 'Image':
+            topic, package, type_name = topic + '/compressed', 'sensor_msgs', 'CompressedImage'
+        assert topic in types, f'{topic} not recorded (recorded: {sorted(types)})'
+        pkg, _, name = types[topic].split('/')
+        assert name == type_name and package in (None, pkg), (topic, types[topic])
+        assert counts[topic] > 0, topic
+    for topic, type_name in (('/tf', 'tf2_msgs/msg/TFMessage'),
+                             ('/robot_description', 'std_msgs/msg/String'),
+                             ('/clock', 'rosgraph_msgs/msg/Clock'),
+                             ('/rosout', 'rcl_interfaces/msg/Log')):
+        assert types.get(topic, type_name) == type_name
+    assert '/camera/camera/color/image_raw' not in types      # raw frames: compressed only
+
+    # Counts: as the demo reported them and as rosbag2's metadata.yaml lists them.
+    assert counts == m['recording']['message_counts']
+    metadata = yaml.safe_load((out / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert metadata['relative_file_paths'] == [demo.BAG_NAME]
+    assert {t['topic_metadata']['name']: t['message_count']
+            for t in metadata['topics_with_message_count']} == counts
+    assert counts['/ur10_sim/ground_truth/tool_tip'] >= 0.95 * 125 * m['duration_s']
+    colour = counts['/camera/camera/color/image_raw/compressed']
+    assert abs(colour - counts['/camera/camera/aligned_depth_to_color/image_raw/compressed']) <= 3
+    # The camera publishes camera_info with every frame: no more than a few frames lost.
+    assert colour >= 0.95 * counts['/camera/camera/color/camera_info'] - 3
+
+    # The commands in the bag are the commands the demo measured; the plan is the executed one.
+    recording = np.load(out / 'recording.npz')
+    commands = np.array([msg.data for msg in decoded['/forward_velocity_controller/commands']])
+    assert len(commands) == m['commands_received'] == counts[
+        '/forward_velocity_controller/commands']
+    np.testing.assert_array_equal(commands, recording['commands'])
+    (path_msg,) = decoded['/etdmp/path']
+    np.testing.assert_allclose([[p.pose.position.x, p.pose.position.y, p.pose.position.z]
+                                for p in path_msg.poses], recording['plan_x'], atol=1e-12)
+    # The images decode: JPEG colour, 16-bit PNG depth in mm.
+    frame = decoded['/camera/camera/color/image_raw/compressed'][-1]
+    assert 'jpeg' in frame.format
+    assert cv2.imdecode(np.frombuffer(bytes(frame.data), np.uint8),
+                        cv2.IMREAD_UNCHANGED).shape == (480, 640, 3)
+    depth = decoded['/camera/camera/aligned_depth_to_color/image_raw/compressed'][-1]
+    assert depth.format.startswith('16UC1; png')
+    depth = cv2.imdecode(np.frombuffer(bytes(depth.data), np.uint8), cv2.IMREAD_UNCHANGED)
+    assert depth.dtype == np.uint16 and depth.shape == (480, 640) and depth.max() > 500

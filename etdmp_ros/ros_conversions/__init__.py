@@ -5,6 +5,8 @@ Importing this package imports rclpy message modules; the ROS-free core never do
 """
 
 from ._cdr import header_stamp_ns  # noqa: F401
+from ._compressed import (compress_image_cdr, compressed_image_cdr,  # noqa: F401
+                          compressed_image_from_cdr, COMPRESSED_IMAGE_TYPE, COMPRESSED_SUFFIX)
 from ._geometry import (ns_to_stamp, path_from_numpy, path_to_numpy,  # noqa: F401
                         point_to_numpy, points_from_numpy, pose_array_from_numpy,
                         pose_array_to_numpy, serialize_path, stamp_to_ns)
