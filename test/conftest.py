@@ -35,11 +35,12 @@ SUITES = {
              'test_dmp_obstacles', 'test_dmp_similarity', 'test_dmp_skill', 'test_flake8',
              'test_ik', 'test_metrics', 'test_paper_reproduction', 'test_pep257', 'test_planning',
              'test_readme', 'test_robot_model', 'test_ros_conversions_geometry',
-             'test_ros_conversions_image', 'test_ros_conversions_sim', 'test_sim',
+             'test_ros_conversions_image', 'test_ros_conversions_sim',
+             'test_ros_conversions_tf', 'test_sim',
              'test_skill_library', 'test_system', 'test_vision'),
     'nodes': ('test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
               'test_install_layout', 'test_namespaces', 'test_perception_node',
-              'test_ur10_sim_node'),
+              'test_ur10_sim_node', 'test_ur10_sim_tf'),
     'system': ('test_end_to_end',),
 }
 _SUITE_OF = {module: suite for suite, modules in SUITES.items() for module in modules}

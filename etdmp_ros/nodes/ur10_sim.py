@@ -9,7 +9,13 @@ velocities in rad/s, UR order). Publishes, stamped with the simulated time:
 - ``/camera/camera/color/image_raw`` (rgb8), ``/camera/camera/aligned_depth_to_color/image_raw``
   (16UC1, mm) and their ``camera_info`` at ``camera_rate``, frame ``camera_color_optical_frame``;
 - ``/ur10_sim/ground_truth/goal`` and ``.../obstacles`` (base_link) with each camera frame,
-  stamped like it (what the camera saw), or at 10 Hz when the camera is off.
+  stamped like it (what the camera saw), or at 10 Hz when the camera is off;
+- as a UR driver, robot_state_publisher and realsense-ros would: ``/robot_description``
+  (std_msgs/String, transient local: the UR10 URDF the simulation is built from, with the tool
+  tip link ``tool_tip``), ``/tf`` (the six joint transforms, base_link ... wrist_3_link, at
+  ``control_rate``) and ``/tf_static`` (the URDF's fixed joints: tool0, tool_tip, ...; and
+  base_link -> camera_link -> camera_color_frame -> camera_color_optical_frame at
+  ``camera.pose``). Without tf2_msgs (it is not on PyPI) one warning, and no /tf or /tf_static.
 
 Threads and processes. The simulation thread runs one control period per tick: apply the
 latest command (and scene changes), step the physics, publish the state, then sleep to keep
@@ -34,19 +40,20 @@ from etdmp_ros.nodes._parameters import declare
 from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_command,
                                          encode as camera_snapshot)
 from etdmp_ros.nodes._spin import rate_qos, run
-from etdmp_ros.robot import (MAX_OBSTACLES, parse_goal_position, parse_obstacle_positions,
-                             SceneConfig, UR10Sim)
+from etdmp_ros.robot import (camera_transforms, FrameTree, MAX_OBSTACLES, parse_goal_position,
+                             parse_obstacle_positions, robot_description, SceneConfig, UR10Sim)
 from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, pose_array_from_numpy,
                                        velocity_command_array)
+from etdmp_ros.ros_conversions._tf import MovingTransforms, tf_available, tf_message
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 import yaml
 
 NODE_NAME = 'ur10_sim'
@@ -61,6 +68,11 @@ CAMERA_TOPICS = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR
 GOAL_TOPIC = '~/ground_truth/goal'
 OBSTACLES_TOPIC = '~/ground_truth/obstacles'
 TOOL_TIP_TOPIC = '~/ground_truth/tool_tip'
+DESCRIPTION_TOPIC = 'robot_description'
+TF_TOPIC = 'tf'
+TF_STATIC_TOPIC = 'tf_static'
+#: QoS of /robot_description and /tf_static, as robot_state_publisher and tf2_ros use them.
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 DESCRIPTION = system.node(NODE_NAME)
 # Fell this far behind real time (overload, debugger): restart pacing instead of bursting.
 MAX_LAG = 0.25
@@ -118,9 +130,10 @@ class UR10SimNode(Node):
         self._next_camera_time = 0.0
         self._next_truth_time = 0.0
         self._camera = None   # the camera process, once started
+        # CPU seconds per part; publish_tf (the /tf messages) is a part of publish_state.
         self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
-                      'publish_state': 0.0, 'ticks': 0, 'frames': 0, 'frames_dropped': 0,
-                      'max_tick_gap': 0.0, 'late_ticks': 0}
+                      'publish_state': 0.0, 'publish_tf': 0.0, 'ticks': 0, 'frames': 0,
+                      'frames_dropped': 0, 'max_tick_gap': 0.0, 'late_ticks': 0}
 
         reliable = QoSProfile(depth=10)
         # A second of history: a slow reader must never block the simulation's publish().
@@ -133,6 +146,8 @@ class UR10SimNode(Node):
         self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, reliable)
         self._tool_pub = self.create_publisher(PointStamped, TOOL_TIP_TOPIC, state)
         self._camera_publishers = None   # made by frame(), for run_for(): images in-process
+        self._tf_pub = None
+        self._publish_description()
         self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, reliable)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -312,11 +327,35 @@ class UR10SimNode(Node):
         self._camera_publishers.publish(self.sim, state, stamp, self.stats)
         self.stats['frames'] += 1
 
+    def _publish_description(self):
+        """Publish /robot_description and /tf_static once (latched); set up /tf."""
+        urdf = robot_description(self.sim.scene.tool_offset)
+        self._description_pub = self.create_publisher(String, DESCRIPTION_TOPIC, LATCHED)
+        self._description_pub.publish(String(data=urdf))
+        if not tf_available():
+            self.get_logger().warning('tf2_msgs is not installed: no /tf or /tf_static (the '
+                                      'topics and /robot_description are unchanged otherwise)')
+            return
+        from tf2_msgs.msg import TFMessage
+        frames = FrameTree(urdf)
+        static = frames.fixed + camera_transforms(self.sim.camera_pose)
+        self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED)
+        self._tf_static_pub.publish(tf_message(static, ns_to_stamp(round(self.sim.time * 1e9))))
+        self._frames = frames
+        self._moving = MovingTransforms(frames.parents, frames.children, frames.translations)
+        # tf2_ros's QoS for /tf: reliable, 100 deep.
+        self._tf_pub = self.create_publisher(TFMessage, TF_TOPIC, QoSProfile(depth=100))
+
     def _publish_state(self, stamp):
         sim = self.sim
         self._joint_pub.publish(joint_state_msg(sim.q, sim.qd, stamp=stamp))
         self._clock_pub.publish(Clock(clock=stamp))
         self._tool_pub.publish(_point_stamped(sim.tool_tip_position, stamp))
+        if self._tf_pub is not None:
+            c0 = time.process_time()
+            self._tf_pub.publish(self._moving.update(self._frames.moving(sim.q), stamp.sec,
+                                                     stamp.nanosec))
+            self.stats['publish_tf'] += time.process_time() - c0
 
     def _publish_ground_truth(self, stamp):
         sim = self.sim

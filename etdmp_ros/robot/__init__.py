@@ -11,6 +11,8 @@ import importlib
 
 from ._camera import CameraIntrinsics, CameraPose, matrix_to_quaternion, quaternion_to_matrix
 from ._controller import Command, ControllerConfig, DelayEstimator, STATUSES, TrajectoryController
+from ._description import (camera_transforms, chain_pose, FrameTree, robot_description,
+                           Transform)
 from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, IKResult
 from ._scene import (parse_goal_position, parse_obstacle_positions, PEN_TIP_RADIUS,
                      SCENE_PARAMETERS, SceneConfig)
@@ -40,11 +42,12 @@ def __getattr__(name):
 
 __all__ = [
     'CameraIntrinsics', 'CameraPose', 'Command', 'ControllerConfig',
-    'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'IKResult',
+    'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'FrameTree', 'IKResult',
     'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_TIP_RADIUS',
     'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES', 'SceneConfig', 'TrajectoryController',
-    'TrajectoryError', 'UR10Model', 'matrix_to_quaternion', 'parse_goal_position',
+    'Transform', 'TrajectoryError', 'UR10Model', 'camera_transforms', 'chain_pose',
+    'matrix_to_quaternion', 'parse_goal_position',
     'parse_obstacle_positions', 'quaternion_to_matrix', 'quaternions_to_rotations',
-    'robot_data_dir', 'trajectory_from_path', 'ur10_urdf_path',
+    'robot_data_dir', 'robot_description', 'trajectory_from_path', 'ur10_urdf_path',
     *_LAZY_NAMES,
 ]
