@@ -1,6 +1,8 @@
 """
-Install the ROS 2 command-line tools into this venv: ros2 (run, launch, service, topic, param,
-node), launch / launch_ros, and the message packages tf2_msgs and composition_interfaces.
+Install the ROS 2 command-line tools, launch and two message packages into this venv.
+
+That is: ros2 (run, launch, service, topic, param, node), launch / launch_ros, and the message
+packages tf2_msgs and composition_interfaces.
 
 A ROS 2 Jazzy apt install has all of this already. Without one, the upstream Jazzy parts come
 from a folder (default ``../shared/ros`` beside the repository; see its README.md): pure-Python
@@ -27,8 +29,9 @@ PREFIX = Path(sys.prefix)
 #: The message packages built from source, in dependency order.
 MESSAGE_PACKAGES = ('composition_interfaces', 'tf2_msgs')
 #: Where the PyPI message wheels were built: their CMake exports name these include folders.
-BUILD_MACHINE_INCLUDES = ('/opt/python/cp311-cp311/include/python3.11',
-                          '/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include')
+_BUILD_PYTHON = '/opt/python/cp311-cp311'
+BUILD_MACHINE_INCLUDES = (f'{_BUILD_PYTHON}/include/python3.11',
+                          f'{_BUILD_PYTHON}/lib/python3.11/site-packages/numpy/_core/include')
 
 
 def run(argv, **kwargs):
