@@ -10,7 +10,7 @@ this process and, for camera 15/30 Hz x control 125/500 Hz:
 
 1. runs it UNPACED (real_time_factor 0) for ``--seconds`` of simulated time: the maximum
    real-time factor (simulated s / wall s) and the CPU it needs per simulated second, split into
-   physics, render (+ depth conversion) and publish (state: joint states, clock, ground truth;
+   physics, render (+ depth conversion) and publish (state: joint states, clock, /tf, ground truth;
    images: Image + CameraInfo messages). CPU is process CPU (``time.process_time``), so
    llvmpipe's render threads and the DDS transport threads are counted;
 2. runs it PACED at real_time_factor 1 in its simulation thread, as ``ros2 run`` does: the
@@ -222,8 +222,8 @@ def main():
     print('Unpaced (as fast as possible); CPU in ms per simulated second '
           '(1000 = one core busy at real time):\n')
     print('| camera Hz | control Hz | max RTF | CPU/sim s | physics | render | publish images'
-          ' | publish state |')
-    print('|---|---|---|---|---|---|---|---|')
+          ' | publish state | of which /tf |')
+    print('|---|---|---|---|---|---|---|---|---|')
     results = {}
     for camera_rate in (15, 30):
         for control_rate in (125, 500):
@@ -232,7 +232,8 @@ def main():
             results[camera_rate, control_rate] = rtf, cpu
             print(f'| {camera_rate} | {control_rate} | {rtf:.1f} | {cpu * 1e3:.0f} | '
                   f'{parts["physics"] * 1e3:.0f} | {parts["render"] * 1e3:.0f} | '
-                  f'{parts["publish_images"] * 1e3:.0f} | {parts["publish_state"] * 1e3:.0f} |')
+                  f'{parts["publish_images"] * 1e3:.0f} | {parts["publish_state"] * 1e3:.0f} | '
+                  f'{parts["publish_tf"] * 1e3:.0f} |')
     print('\nPaced at real-time factor 1 (the node as it runs):\n')
     print('| camera Hz | control Hz | achieved RTF | CPU (cores) | subscriber received (Hz), '
           'its CPU (cores) |')
