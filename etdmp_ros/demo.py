@@ -277,7 +277,8 @@ def _write_bag(path, recorder):
     started = time.monotonic()
     counts = write_bag(path, recorder)
     return {'file': path.name, 'bytes': path.stat().st_size,
-            'write_s': time.monotonic() - started, 'message_counts': counts}
+            'write_s': time.monotonic() - started, 'message_counts': counts,
+            'not_recorded': dict(recorder.unrecorded)}
 
 
 def _write_outputs(out, run, metrics, extra, recorder, rec, options):
@@ -374,6 +375,13 @@ def summary(metrics, written):
         lines.append(f'  while moving: {system["moving_commands_per_s"]:.0f} commands/s, '
                      f'real-time factor {system["real_time_factor"]:.3f}, CPU '
                      f'{system["cpu_cores_total"]:.2f} cores ({cpu})')
+    recording = m.get('recording')
+    if recording:
+        counts = recording['message_counts']
+        lines.append(f'  recording: {recording["file"]}, {recording["bytes"] / 1e6:.1f} MB, '
+                     f'{len(counts)} topics, {sum(counts.values())} messages (written in '
+                     f'{recording["write_s"]:.1f} s); Foxglove opens it, ros2 bag play plays '
+                     'its folder')
     lines.append('files: ' + ', '.join(str(p) for p in written))
     return '\n'.join(lines)
 

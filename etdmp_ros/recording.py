@@ -96,6 +96,7 @@ class Recorder(BackgroundNode):
         self.animation = animation
         self.sim_ns = 0
         self.streams = {}             # topic -> Stream
+        self.unrecorded = {}          # topic -> why not
         self.status = []              # (sim ns at receipt, text)
         self.goal_truth = self.obstacles_truth = None
         self.goal_seen = self.obstacles_seen = None
@@ -159,7 +160,8 @@ class Recorder(BackgroundNode):
         me = (self.node.get_name(), self.node.get_namespace())
         for topic, types in self.node.get_topic_names_and_types():
             stream = self.streams.get(topic)
-            if (stream is not None and stream.qos_profiles) or '/_' in topic or not types:
+            if (stream is not None and stream.qos_profiles) or topic in self.unrecorded \
+                    or '/_' in topic or not types:
                 continue            # known, hidden, or a service's event topic
             publishers = [p for p in self.node.get_publishers_info_by_topic(topic)
                           if (p.node_name, p.node_namespace) != me]
@@ -169,13 +171,18 @@ class Recorder(BackgroundNode):
             reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in qos)
             latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in qos)
             if stream is None:
+                try:
+                    msg_type = get_message(types[0])
+                except (AttributeError, ModuleNotFoundError, ValueError):
+                    self.unrecorded[topic] = f'{types[0]} is not installed here'
+                    continue
                 subscription = QoSProfile(
                     depth=IMAGES.depth if types[0] == IMAGE_TYPE else STREAM.depth,
                     reliability=(ReliabilityPolicy.RELIABLE if reliable
                                  else ReliabilityPolicy.BEST_EFFORT),
                     durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
                                 else DurabilityPolicy.VOLATILE))
-                self._record(topic, get_message(types[0]), subscription)
+                self._record(topic, msg_type, subscription)
                 stream = self.streams[topic]
             stream.qos_profiles = [
                 bag.qos_profile(q.reliability == ReliabilityPolicy.RELIABLE,
@@ -324,7 +331,8 @@ def write_bag(path, recorder, workers=2):
     Messages as received, in order of arrival (log time = receipt time); images
     (sensor_msgs/Image) as CompressedImage on ``<topic>/compressed`` (JPEG colour, PNG depth),
     compressed here on ``workers`` threads. Also writes ``metadata.yaml`` beside it
-    (:class:`etdmp_ros.bag.BagWriter`). Return {topic: message count}.
+    (:class:`etdmp_ros.bag.BagWriter`). Return {topic: message count}; a topic whose message
+    definition is not installed here is left out, with the reason in ``recorder.unrecorded``.
     """
     with recorder.lock:
         streams = {topic: (s.type_name, s.qos_profiles, list(s.messages))
@@ -338,7 +346,11 @@ def write_bag(path, recorder, workers=2):
                 [(ns, cdr) for (ns, _), cdr in zip(messages, data)])
     with bag.BagWriter(path) as writer:
         for topic in sorted(streams):
-            writer.add_topic(topic, streams[topic][0], streams[topic][1])
+            try:
+                writer.add_topic(topic, streams[topic][0], streams[topic][1])
+            except bag.BagError as err:     # its .msg file is not installed here: left out
+                recorder.unrecorded[topic] = str(err)
+                streams.pop(topic)
         merged = heapq.merge(*([(ns, topic, raw) for ns, raw in messages]
                                for topic, (_, _, messages) in streams.items()),
                              key=lambda m: m[0])
