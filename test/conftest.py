@@ -41,7 +41,7 @@ SUITES = {
              'test_skill_library', 'test_system', 'test_vision'),
     'nodes': ('test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
               'test_install_layout', 'test_namespaces', 'test_perception_node',
-              'test_ur10_sim_node', 'test_ur10_sim_tf'),
+              'test_ros2_cli', 'test_ur10_sim_node', 'test_ur10_sim_tf'),
     'system': ('test_end_to_end',),
 }
 _SUITE_OF = {module: suite for suite, modules in SUITES.items() for module in modules}
@@ -114,6 +114,31 @@ def isolate_dds(patch):
 def ros_env(monkeypatch):
     """Isolate DDS for this test (see isolate_dds); return the env."""
     return isolate_dds(monkeypatch)
+
+
+@pytest.fixture(scope='module')
+def ros2(request):
+    """
+    Give the real ``ros2`` CLI on the colcon install (:class:`ros2_cli.Ros2`), own DDS domain.
+
+    Skips the module when the CLI is not installed; stops the ``ros2 daemon`` of every domain it
+    gave out (``ros2.fresh()`` makes another runner on a new domain) after the module.
+    """
+    import ros2_cli
+    if ros2_cli.missing():
+        pytest.skip(ros2_cli.missing())
+    install = request.getfixturevalue('colcon_install')
+    home = request.getfixturevalue('tmp_path_factory').mktemp('ros2')
+    runners = []
+
+    def fresh():
+        domain = next(_DOMAIN_IDS) % 101 + 1
+        runners.append(ros2_cli.Ros2(install, domain, home / str(len(runners))))
+        runners[-1].fresh = fresh
+        return runners[-1]
+    yield fresh()
+    for runner in runners:
+        runner.stop_daemon()
 
 
 @pytest.fixture(scope='module')

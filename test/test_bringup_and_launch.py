@@ -1,22 +1,17 @@
 """
-The whole system in one process (bringup) and the launch file (for installs with ros2launch).
+The whole system in one process (bringup).
 
 bringup is started from the install layout, as `ros2 run etdmp_ros bringup` would; the test then
 does what a user does: waits for the perceived goal, calls /generalize with empty frame ids and
 checks that the controller moves the robot, and that Ctrl-C leaves a zero velocity command.
-The launch file cannot run here (no ros2launch in this environment): it is executed against
-minimal stand-ins of `launch` / `launch_ros` that record what it asks for.
+The launch file runs for real, with `ros2 launch`, in test_ros2_cli.py.
 """
 
-import importlib.util
-from pathlib import Path
 import signal
 import subprocess
-import sys
 import time
-import types
 
-from conftest import REPO, sourced
+from conftest import sourced
 from etdmp_ros import system
 from etdmp_ros.nodes.background import BackgroundNode
 from geometry_msgs.msg import PointStamped
@@ -90,51 +85,3 @@ def test_bringup_runs_the_system_in_one_process(colcon_install, ros_env, tmp_pat
     assert 'Traceback' not in text, text
     assert listener.commands and np.all(listener.commands[-1] == 0.0), (
         'the last velocity command after Ctrl-C is not zero')
-
-
-def _stand_ins(recorded):
-    """Minimal `launch`, `launch_ros` and `ament_index_python` modules that record calls."""
-    def module(name, **attrs):
-        mod = types.ModuleType(name)
-        mod.__dict__.update(attrs)
-        return mod
-
-    class Recorder:
-        """Stand-in for an action: remembers its arguments."""
-
-        def __init__(self, *args, **kwargs):
-            self.args, self.kwargs = args, kwargs
-            recorded.append(self)
-
-    return {
-        'launch': module('launch', LaunchDescription=lambda entities: list(entities)),
-        'launch.actions': module('launch.actions', DeclareLaunchArgument=Recorder),
-        'launch.substitutions': module('launch.substitutions', LaunchConfiguration=str),
-        'launch_ros': module('launch_ros'),
-        'launch_ros.actions': module('launch_ros.actions', Node=Recorder),
-        'ament_index_python': module('ament_index_python'),
-        'ament_index_python.packages': module(
-            'ament_index_python.packages', get_package_share_directory=lambda pkg: str(REPO)),
-    }
-
-
-def test_launch_file_starts_every_node_with_its_parameter_files(monkeypatch):
-    recorded = []
-    for name, mod in _stand_ins(recorded).items():
-        monkeypatch.setitem(sys.modules, name, mod)
-    path = REPO / 'launch' / 'etdmp.launch.py'
-    spec = importlib.util.spec_from_file_location('etdmp_launch', path)
-    launch = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(launch)
-    entities = launch.generate_launch_description()
-    nodes = [r for r in recorded if 'executable' in r.kwargs]
-    assert [n.kwargs['executable'] for n in nodes] == list(NODES)
-    for node in nodes:
-        assert node.kwargs['package'] == 'etdmp_ros'
-        files = [p for p in node.kwargs['parameters'] if isinstance(p, str)]
-        assert [Path(f).name for f in files] == ['scene.yaml', f'{node.kwargs["executable"]}.yaml']
-        assert all(Path(f).is_file() for f in files)
-        overrides = {k: v for p in node.kwargs['parameters'] if isinstance(p, dict)
-                     for k, v in p.items()}
-        assert overrides.get('use_sim_time', False) == (node.kwargs['executable'] == 'dmp_server')
-    assert len(entities) == len(recorded)
