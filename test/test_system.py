@@ -152,3 +152,33 @@ def test_each_node_declares_exactly_its_description(context, spec, monkeypatch, 
         if hasattr(node, 'stop'):
             node.stop()
         node.destroy_node()
+
+
+#: A node program whose start-up gets SIGINT inside a C callback (as numba's compiler calls
+#: back while the controller warms up): Python prints the KeyboardInterrupt and drops it there.
+_STARTUP_SIGNAL = """
+import ctypes, os, signal, sys, time
+from etdmp_ros.nodes import _spin
+from rclpy.node import Node
+
+def make(nodes):
+    nodes.append(Node('startup_signal'))
+    @ctypes.CFUNCTYPE(None)
+    def callback():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)   # the signal is handled here, inside the callback
+    callback()
+
+sys.exit(_spin.run(make, 'startup_signal', ['startup_signal']))
+"""
+
+
+def test_a_signal_during_start_up_is_not_lost(ros_env):
+    import subprocess
+    import sys
+    try:
+        done = subprocess.run([sys.executable, '-c', _STARTUP_SIGNAL], env=ros_env, timeout=20,
+                              capture_output=True, text=True)
+    except subprocess.TimeoutExpired:
+        pytest.fail('the program kept running after a SIGINT during its start-up')
+    assert done.returncode == 0, done.stderr

@@ -78,15 +78,15 @@ def init(args=None):
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
 
 
-def spin_until_signal(nodes):
+def spin_until_signal(nodes, stop=None):
     """
     Spin ``nodes`` on one executor (:func:`make_executor`) until SIGINT or SIGTERM.
 
-    Also returns when rclpy shuts down. On return, further SIGINT/SIGTERM are ignored, so a
-    second Ctrl-C cannot interrupt the caller's clean-up (stopping the simulation, sending zero
-    velocity, destroying the nodes).
+    Also returns when rclpy shuts down, or at once if ``stop`` (a threading.Event) is already
+    set. On return, further SIGINT/SIGTERM are ignored, so a second Ctrl-C cannot interrupt the
+    caller's clean-up (stopping the simulation, sending zero velocity, destroying the nodes).
     """
-    stop = threading.Event()
+    stop = threading.Event() if stop is None else stop
 
     def request_stop(signum, frame):
         stop.set()
@@ -187,10 +187,16 @@ def run(make_nodes, name, args=None, startup_errors=()):
     init(args)
     nodes = []
     code = 0
+    # A signal during start-up is remembered, not raised: a KeyboardInterrupt raised inside a
+    # library callback (numba compiling the controller's kernels calls back from C) is printed
+    # and dropped there, and the program would go on running. Spinning then ends at once.
+    stop = threading.Event()
+    for signum in SIGNALS:
+        signal.signal(signum, lambda signum, frame: stop.set())
     try:
         make_nodes(nodes)
         freeze_heap()
-        spin_until_signal(nodes)
+        spin_until_signal(nodes, stop)
     except KeyboardInterrupt:   # Ctrl-C before our handler was installed (during start-up)
         pass
     except (ValueError, ParameterException, *startup_errors) as exc:
