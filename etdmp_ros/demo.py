@@ -281,6 +281,15 @@ def _write_bag(path, recorder):
             'not_recorded': dict(recorder.unrecorded)}
 
 
+def _keep_recording_of_failed_run(path, recorder, progress):
+    """Write what was recorded of a run that did not finish (what happened is in it)."""
+    try:
+        write_bag(path, recorder)
+        progress(f'the run did not finish; what was recorded is in {path}')
+    except Exception as err:    # noqa: B902 - the run's own error is the one to report
+        progress(f'the run did not finish, and its recording could not be written: {err}')
+
+
 def _write_outputs(out, run, metrics, extra, recorder, rec, options):
     """Write the pictures and the recording; return the paths written (metrics.json apart)."""
     intrinsics = recorder.camera_info or CameraIntrinsics.from_fovy(640, 480, 42.5)
@@ -321,12 +330,16 @@ def _run_demo(options, env):
                           'demo': os.getpid()},
                          lambda: recorder.sim_ns * 1e-9 if recorder.sim_ns else None).start()
     live = _Live()
+    finished = False
     try:
         _drive(options, scenario, recorder, nodes, live, progress)
+        finished = True
     finally:
         monitor.stop()
         codes = nodes.stop(interrupted=sys.exc_info()[0] is KeyboardInterrupt)
         recorder.close()
+        if not finished:
+            _keep_recording_of_failed_run(out / BAG_NAME, recorder, progress)
     progress(f'nodes stopped (exit codes {codes}); writing {out / BAG_NAME}, measuring from it')
     bag_figures = _write_bag(out / BAG_NAME, recorder)
     rec = read_streams(out / BAG_NAME)
