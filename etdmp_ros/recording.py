@@ -53,6 +53,11 @@ REFERENCE_TOPIC = '/etdmp/controller/reference'
 STATUS_TOPIC = '/etdmp/controller/status'
 COLOR_TOPIC = '/camera/camera/color/image_raw'
 DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
+#: Topics left out of the recording, with the reason (metrics.json ``recording.not_recorded``).
+NOT_RECORDED = {
+    '/etdmp/detections/image': 'a view of the recorded camera images that perception draws '
+                               'only while someone subscribes (recording it costs the drawing)',
+}
 #: The streams :func:`read_streams` returns for the metrics.
 MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC)
 
@@ -163,6 +168,9 @@ class Recorder(BackgroundNode):
             if (stream is not None and stream.qos_profiles) or topic in self.unrecorded \
                     or '/_' in topic or not types:
                 continue            # known, hidden, or a service's event topic
+            if topic in NOT_RECORDED:
+                self.unrecorded[topic] = NOT_RECORDED[topic]
+                continue
             publishers = [p for p in self.node.get_publishers_info_by_topic(topic)
                           if (p.node_name, p.node_namespace) != me]
             if not publishers:
