@@ -25,7 +25,7 @@ from etdmp_ros import bag
 from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.ros_conversions import (compress_image_cdr, COMPRESSED_IMAGE_TYPE,
                                        COMPRESSED_SUFFIX, header_stamp_ns, image_from_cdr,
-                                       intrinsics_from_camera_info, path_to_numpy,
+                                       intrinsics_from_camera_info, message_class, path_to_numpy,
                                        point_to_numpy, pose_array_to_numpy, stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.srv import GetPlan
@@ -34,7 +34,6 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from rosidl_runtime_py.utilities import get_message
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Float64MultiArray, String
 
@@ -180,7 +179,7 @@ class Recorder(BackgroundNode):
             latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in qos)
             if stream is None:
                 try:
-                    msg_type = get_message(types[0])
+                    msg_type = message_class(types[0])
                 except (AttributeError, ModuleNotFoundError, ValueError):
                     self.unrecorded[topic] = f'{types[0]} is not installed here'
                     continue

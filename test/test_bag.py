@@ -11,14 +11,14 @@ from etdmp_ros import bag
 from etdmp_ros.recording import (COMMAND_TOPIC, read_streams, REFERENCE_TOPIC, STATUS_TOPIC,
                                  TIP_TOPIC)
 from etdmp_ros.ros_conversions import (compress_image_cdr, compressed_image_cdr,
-                                       compressed_image_from_cdr, image_msg, ns_to_stamp)
+                                       compressed_image_from_cdr, image_msg, message_class,
+                                       ns_to_stamp)
 from geometry_msgs.msg import PointStamped, PoseStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
-from rosidl_runtime_py.utilities import get_message
 from sensor_msgs.msg import CompressedImage, JointState
 from std_msgs.msg import Float64MultiArray, String
 import yaml
@@ -57,7 +57,7 @@ def test_a_bag_of_every_type_reads_back_with_mcap_ros2(tmp_path):
         for i, type_name in enumerate(TYPES):     # mcap-ros2 decodes each with its definition
             writer.add_topic('/' + type_name.replace('/msg/', '_'), type_name)
             writer.write('/' + type_name.replace('/msg/', '_'), 100 + i,
-                         serialize_message(get_message(type_name)()))
+                         serialize_message(message_class(type_name)()))
         writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState',
                          [bag.qos_profile(reliable=True, transient_local=True, depth=1)])
         writer.write('/joint_states', 20, serialize_message(joint))

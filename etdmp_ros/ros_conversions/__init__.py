@@ -4,7 +4,7 @@ numpy <-> ROS message helpers, written once for every node (no cv_bridge or tf2 
 Importing this package imports rclpy message modules; the ROS-free core never does.
 """
 
-from ._cdr import header_stamp_ns  # noqa: F401
+from ._cdr import header_stamp_ns, message_class  # noqa: F401
 from ._compressed import (compress_image_cdr, compressed_image_cdr,  # noqa: F401
                           compressed_image_from_cdr, COMPRESSED_IMAGE_TYPE, COMPRESSED_SUFFIX)
 from ._geometry import (ns_to_stamp, path_from_numpy, path_to_numpy,  # noqa: F401

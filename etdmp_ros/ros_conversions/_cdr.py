@@ -13,7 +13,24 @@ writes it: each primitive aligned to its size relative to the start of the paylo
 encapsulation header); the image reader (:func:`image_from_cdr`) is built on it.
 """
 
+import importlib
 import struct
+
+
+def message_class(type_name):
+    """
+    Return the Python class of a ROS message type name (``pkg/msg/Name`` or ``pkg/Name``).
+
+    What the graph reports (``get_topic_names_and_types``); ValueError naming the type when its
+    package is not installed here or has no such message.
+    """
+    package, *middle, name = type_name.split('/')
+    if middle not in ([], ['msg']) or not package or not name:
+        raise ValueError(f'not a message type name: {type_name!r}')
+    try:
+        return getattr(importlib.import_module(f'{package}.msg'), name)
+    except (ImportError, AttributeError):
+        raise ValueError(f'{type_name} is not installed here') from None
 
 
 def header_stamp_ns(data):
