@@ -12,7 +12,7 @@ from etdmp_ros.recording import (COMMAND_TOPIC, read_streams, REFERENCE_TOPIC, S
                                  TIP_TOPIC)
 from etdmp_ros.ros_conversions import (compress_image_cdr, compressed_image_cdr,
                                        compressed_image_from_cdr, image_msg, message_class,
-                                       ns_to_stamp)
+                                       ns_to_stamp, tf_available)
 from geometry_msgs.msg import PointStamped, PoseStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -23,12 +23,14 @@ from sensor_msgs.msg import CompressedImage, JointState
 from std_msgs.msg import Float64MultiArray, String
 import yaml
 
-#: Types the system publishes, nested ones among them.
+#: Types the system publishes, nested ones among them (TFMessage when tf2_msgs is installed:
+#: it is not on PyPI, make ros-tools builds it).
 TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage', 'sensor_msgs/msg/JointState',
-         'sensor_msgs/msg/CameraInfo', 'tf2_msgs/msg/TFMessage', 'nav_msgs/msg/Path',
+         'sensor_msgs/msg/CameraInfo', 'nav_msgs/msg/Path',
          'visualization_msgs/msg/MarkerArray', 'rcl_interfaces/msg/Log',
          'rcl_interfaces/msg/ParameterEvent', 'rosgraph_msgs/msg/Clock',
-         'geometry_msgs/msg/PoseArray', 'std_msgs/msg/Float64MultiArray', 'std_msgs/msg/String')
+         'geometry_msgs/msg/PoseArray', 'std_msgs/msg/Float64MultiArray',
+         'std_msgs/msg/String') + (('tf2_msgs/msg/TFMessage',) if tf_available() else ())
 
 
 def test_message_definitions_are_embedded_the_rosbag2_way():

@@ -7,8 +7,7 @@ Kinematics against Pinocchio; the message bytes against the plain message rclpy 
 from etdmp_ros import system
 from etdmp_ros.robot import (camera_transforms, chain_pose, FrameTree, JOINT_NAMES,
                              robot_description, UR10Model)
-from etdmp_ros.ros_conversions import ns_to_stamp
-from etdmp_ros.ros_conversions._tf import MovingTransforms, tf_available, tf_message
+from etdmp_ros.ros_conversions import MovingTransforms, ns_to_stamp, tf_available, tf_message
 import numpy as np
 import pinocchio as pin
 import pytest

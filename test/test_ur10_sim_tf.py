@@ -17,8 +17,7 @@ from etdmp_ros.config_files import read_parameter_file
 from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.robot import (chain_pose, JOINT_NAMES, quaternion_to_matrix, Transform,
                              UR10Model)
-from etdmp_ros.ros_conversions import stamp_to_ns
-from etdmp_ros.ros_conversions._tf import tf_available
+from etdmp_ros.ros_conversions import stamp_to_ns, tf_available
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import pinocchio as pin

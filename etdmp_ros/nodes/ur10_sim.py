@@ -42,9 +42,9 @@ from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_com
 from etdmp_ros.nodes._spin import rate_qos, run
 from etdmp_ros.robot import (camera_transforms, FrameTree, MAX_OBSTACLES, parse_goal_position,
                              parse_obstacle_positions, robot_description, SceneConfig, UR10Sim)
-from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, pose_array_from_numpy,
+from etdmp_ros.ros_conversions import (joint_state_msg, MovingTransforms, ns_to_stamp,
+                                       pose_array_from_numpy, tf_available, tf_message,
                                        velocity_command_array)
-from etdmp_ros.ros_conversions._tf import MovingTransforms, tf_available, tf_message
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult

@@ -15,3 +15,4 @@ from ._image import (camera_info_msg, ENCODINGS, image_from_cdr, image_from_msg,
 from ._joint_state import (joint_state_arrays, joint_state_msg,  # noqa: F401
                            velocity_command_array, velocity_command_msg)
 from ._path_cdr import path_from_cdr  # noqa: F401
+from ._tf import MovingTransforms, tf_available, tf_message  # noqa: F401
