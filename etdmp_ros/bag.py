@@ -8,7 +8,8 @@ type's message definition embedded as rosbag2 embeds it (:func:`message_definiti
 its publishers' QoS profiles in the channel's ``offered_qos_profiles`` (so that ``ros2 bag
 play`` offers latched topics latched again) and the serialized messages as they were received.
 :class:`BagWriter` also writes rosbag2's ``metadata.yaml`` beside the file, which makes its
-folder a bag (``ros2 bag play <folder>``); Foxglove opens the ``.mcap`` itself.
+folder a bag (``ros2 bag play <folder>``); the ``.mcap`` alone is what Foxglove reads (neither
+tool is installed here: checked with mcap-ros2-support and the ``rosbags`` library).
 
 Times: a message's log time is when the recorder received it (ns since the epoch, as
 ``ros2 bag record`` stamps it); its publish time is the same.

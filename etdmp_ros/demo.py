@@ -393,8 +393,8 @@ def summary(metrics, written):
         counts = recording['message_counts']
         lines.append(f'  recording: {recording["file"]}, {recording["bytes"] / 1e6:.1f} MB, '
                      f'{len(counts)} topics, {sum(counts.values())} messages (written in '
-                     f'{recording["write_s"]:.1f} s); Foxglove opens it, ros2 bag play plays '
-                     'its folder')
+                     f'{recording["write_s"]:.1f} s): a rosbag2 MCAP for Foxglove or '
+                     '`ros2 bag play` of its folder')
     lines.append('files: ' + ', '.join(str(p) for p in written))
     return '\n'.join(lines)
 
