@@ -257,17 +257,20 @@ def readme_nodes(text=None):
     return nodes
 
 
-def readme_topics(text=None):
+def readme_topics(text=None, published_only=False):
     """
     Return ``({topic: type}, {service: type})`` of the README's topic table, types as ROS names.
 
     A cell like ``/a/b/c``, ``/d`` names ``/a/b/c`` and ``/a/b/d`` (a one-part name after the
     first replaces its last part); types ``pkg/Name`` become ``pkg/msg/Name`` (``pkg/srv/Name``
-    stays); one type for several names applies to each.
+    stays); one type for several names applies to each. ``published_only``: leave out the rows
+    of topics that only a user publishes (``you → ...``).
     """
     text = README.read_text() if text is None else text
     topics, services = {}, {}
     for row in _table(TOPIC_TABLE, text):
+        if published_only and row[2].startswith('you'):
+            continue
         cells = re.findall(r'`([^`]+)`', row[0])
         names = [cells[0]]
         for cell in cells[1:]:

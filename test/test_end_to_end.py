@@ -17,8 +17,6 @@ same start is clearly worse. One run per skill and load (~15 s each) serves all 
 
 from collections import defaultdict
 import json
-from pathlib import Path
-import re
 
 from conftest import busy_core
 import cv2
@@ -31,6 +29,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
+from ros2_cli import readme_topics
 import yaml
 
 SKILLS = ('G', 'stir')
@@ -41,7 +40,6 @@ CASES = [(skill, load) for load in ('idle', 'busy') for skill in SKILLS]
 #: tracking error of ~0.1 mm on a 0.2 m movement are of this order. ET-DMP's stirring plan
 #: (no obstacle near it) is an exact copy of the demonstration: nRMSE 1.5e-4.
 NRMSE_FLOOR = 1e-3
-README = Path(__file__).resolve().parents[1] / 'README.md'
 #: The recording of a G or stir demo must stay this small (bytes).
 BAG_LIMIT = 30e6
 
@@ -140,32 +138,6 @@ def test_outputs_and_clean_shutdown(run):
     assert [codes[n] for n in ('ur10_sim', 'perception', 'dmp_server', 'controller')] == [0] * 4
 
 
-def readme_topics():
-    """
-    Return {topic: (package or None, type name)} of the README's topic table (not services).
-
-    A row may list several topics (the later ones relative to the first one's namespace) with
-    as many types, or one for all; rows of topics that only a user publishes (``you → ...``)
-    are left out.
-    """
-    topics, lines = {}, README.read_text().splitlines()
-    first = next(i for i, line in enumerate(lines) if line.startswith('| topic / service |'))
-    for line in lines[first + 2:]:
-        if not line.startswith('|'):
-            break
-        cells = [c.strip() for c in line.strip().strip('|').split('|')]
-        names = re.findall(r'`(/[^`]*)`', cells[0])
-        types = re.findall(r'(?<![\w/])(?:(\w+)/)?(?:(msg|srv)/)?([A-Z]\w*)\b', cells[1])
-        if any(kind == 'srv' for _, kind, _ in types) or cells[2].startswith('you'):
-            continue
-        types = types * len(names) if len(types) == 1 else types    # one type for them all
-        assert len(names) == len(types), line
-        namespace = names[0].rsplit('/', 1)[0]
-        for i, (name, (package, _, type_name)) in enumerate(zip(names, types)):
-            topics[name if i == 0 else namespace + name] = (package or None, type_name)
-    return topics
-
-
 def test_the_recording_holds_the_run_as_the_readme_lists_it(run):
     m, out = run
     path = out / demo.BAG_NAME
@@ -188,18 +160,17 @@ def test_the_recording_holds_the_run_as_the_readme_lists_it(run):
 
     # Every topic of the README's table, with its type; images as image_transport's
     # compressed topic; /tf and /robot_description when the system publishes them.
-    for topic, (package, type_name) in readme_topics().items():
+    for topic, type_name in readme_topics(published_only=True)[0].items():
         if topic in NOT_RECORDED:   # left out on purpose, and said so
             assert topic not in types and topic in m['recording']['not_recorded'], topic
             continue
-        if type_name == 'TFMessage' and not tf_available():   # tf2_msgs: make ros-tools
+        if type_name == 'tf2_msgs/msg/TFMessage' and not tf_available():   # make ros-tools
             assert topic not in types, topic
             continue
-        if type_name == 'Image':
-            topic, package, type_name = topic + '/compressed', 'sensor_msgs', 'CompressedImage'
+        if type_name == 'sensor_msgs/msg/Image':
+            topic, type_name = topic + '/compressed', 'sensor_msgs/msg/CompressedImage'
         assert topic in types, f'{topic} not recorded (recorded: {sorted(types)})'
-        pkg, _, name = types[topic].split('/')
-        assert name == type_name and package in (None, pkg), (topic, types[topic])
+        assert types[topic] == type_name, (topic, types[topic])
         assert counts[topic] > 0, topic
     for topic, type_name in (('/tf', 'tf2_msgs/msg/TFMessage'),
                              ('/robot_description', 'std_msgs/msg/String'),
