@@ -88,14 +88,18 @@ def installed_command(install):
 class NodeProcess:
     """One node in its own process, its output (stdout and stderr) in ``log_path``."""
 
-    def __init__(self, argv, log_path, env):
-        """Start ``argv`` with ``env`` (unbuffered, uncoloured output; MUJOCO_GL egl default)."""
+    def __init__(self, argv, log_path, env, new_session=False):
+        """
+        Start ``argv`` with ``env`` (unbuffered, uncoloured output; MUJOCO_GL egl default).
+
+        ``new_session``: in a process group of its own, as a command in a terminal of its own.
+        """
         env = dict(env, PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0')
         env.setdefault('MUJOCO_GL', 'egl')
         self.log_path = Path(log_path)
         self._log = open(self.log_path, 'w')
         self.process = subprocess.Popen(argv, env=env, stdout=self._log,
-                                        stderr=subprocess.STDOUT)
+                                        stderr=subprocess.STDOUT, start_new_session=new_session)
 
     @property
     def pid(self):

@@ -19,7 +19,7 @@ import subprocess
 import sys
 import time
 
-from etdmp_ros.processes import isolated_environment, sourced
+from etdmp_ros.processes import isolated_environment, NodeProcess, sourced
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -88,7 +88,7 @@ class Ros2:
         return self.run('ros2 daemon stop', timeout=30, check=False)
 
 
-class Background:
+class Background(NodeProcess):
     """
     A command running as in a terminal of its own: its own process group, output in a log.
 
@@ -99,19 +99,7 @@ class Background:
 
     def __init__(self, argv, log_path, env):
         """Start ``argv`` with ``env`` in a new session."""
-        self.log_path = Path(log_path)
-        self._log = open(self.log_path, 'w')
-        self.process = subprocess.Popen(argv, env=env, stdout=self._log,
-                                        stderr=subprocess.STDOUT, start_new_session=True)
-
-    @property
-    def returncode(self):
-        """Return the exit code, None while it runs."""
-        return self.process.poll()
-
-    def log(self):
-        """Return the output so far."""
-        return self.log_path.read_text(errors='replace')
+        super().__init__(argv, log_path, env, new_session=True)
 
     def _signal(self, number, group=True):
         try:
