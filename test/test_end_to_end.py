@@ -171,7 +171,10 @@ def test_the_recording_holds_the_run_as_the_readme_lists_it(run):
             topic, type_name = topic + '/compressed', 'sensor_msgs/msg/CompressedImage'
         assert topic in types, f'{topic} not recorded (recorded: {sorted(types)})'
         assert types[topic] == type_name, (topic, types[topic])
-        assert counts[topic] > 0, topic
+        # dmp_server builds markers only for a viewer matched when the plan is made (docs/
+        # dmp_server.md; building them always costs ~4 ms per back-to-back /generalize call):
+        # the recorder, subscribing as it discovers topics, may not be matched yet.
+        assert counts[topic] > 0 or topic == '/etdmp/markers', topic
     for topic, type_name in (('/tf', 'tf2_msgs/msg/TFMessage'),
                              ('/robot_description', 'std_msgs/msg/String'),
                              ('/clock', 'rosgraph_msgs/msg/Clock'),
