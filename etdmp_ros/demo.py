@@ -5,8 +5,9 @@ The closed-loop demo (``make demo``): see, plan, write, measure.
 starts the four nodes as separate processes, exactly as ``ros2 run`` starts them
 (:mod:`etdmp_ros.processes`; ``ur10_sim``, ``perception``, ``dmp_server``, ``controller``;
 parameters: config/scene.yaml, then the node's own file, then a small overrides file), on a DDS
-domain of its own with localhost-only discovery, dmp_server on simulated time (``use_sim_time``:
-it stamps plans with the ROS clock; the others stamp with their inputs' stamps). Then it
+domain of its own with localhost-only discovery, dmp_server and the controller on simulated time
+(``use_sim_time``: plans are stamped with the ROS clock, joint states judged stale on the
+simulation's time; the others stamp with their inputs' stamps). Then it
 
 1. waits until the camera has shown the goal marker and the obstacles to ``perception``;
 2. asks ``/generalize`` for the plain-DMP baseline without executing it (``dmp_server``

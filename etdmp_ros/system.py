@@ -360,8 +360,13 @@ CONTROLLER = (
       'periods, from how the joints moved after each command; it also absorbs the lag of the '
       'joint velocity servos); actuation_delay is then only the starting value. ur10_sim: '
       'about 0.2 periods at 125 Hz, 0.7 at 500 Hz.', dynamic=True),
-    P('joint_state_timeout', 0.1, 'Time without joint states before the command is forced to '
-      'zero (status stale-input).', unit='s', value_range=(0.001, 10.0), dynamic=True),
+    P('joint_state_timeout', 0.1, "Time of the robot's clock without joint states before the "
+      'command is forced to zero and the path dropped (status stale-input): simulated time '
+      'under use_sim_time (a stalled simulation stops it too), else the wall clock.', unit='s',
+      value_range=(0.001, 10.0), dynamic=True),
+    P('simulation_stall_timeout', 1.0, 'Under use_sim_time: wall-clock time without joint '
+      'states while the simulation clock stopped with them, after which the simulation counts '
+      'as gone (stale-input).', unit='s', value_range=(0.01, 60.0), dynamic=True),
     P('thread_priority', 50, 'SCHED_FIFO priority (1-99) of the thread that runs the control '
       'steps; 0 = normal scheduling. Needs CAP_SYS_NICE or an rtprio limit, else a warning and '
       'normal scheduling.', value_range=(0, 99),
@@ -433,8 +438,10 @@ class NodeSpec:
     """
     One node of the system: what it is, how it starts, which parameters it declares.
 
-    ``sim_time``: the node follows the simulation's /clock (``use_sim_time``): the nodes that
-    stamp with the ROS clock. The others stamp with their inputs' stamps and need no clock.
+    ``sim_time``: the node follows the simulation's /clock (``use_sim_time``): dmp_server,
+    which stamps plans with the ROS clock, and the controller, which judges its joint states
+    stale on the simulation's time (a stalled simulation is late, not lost). The others stamp
+    with their inputs' stamps and need no clock.
     """
 
     name: str
@@ -486,7 +493,8 @@ NODES = (
              DMP_SERVER_SCENE, DMP_SERVER, 'etdmp_ros.nodes.dmp_server:DmpServer',
              sim_time=True),
     NodeSpec('controller', 'follows /etdmp/path with the UR10 tool tip (closed-loop IK)',
-             CONTROLLER_SCENE, CONTROLLER, 'etdmp_ros.nodes.controller:ControllerNode'),
+             CONTROLLER_SCENE, CONTROLLER, 'etdmp_ros.nodes.controller:ControllerNode',
+             sim_time=True),
 )
 NODE_NAMES = tuple(n.name for n in NODES)
 SCENE_FILE = 'scene.yaml'

@@ -18,6 +18,7 @@ from conftest import isolate_dds, NodeProcess
 from controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
 from etdmp_ros.nodes._spin import normal_scheduling, set_realtime_priority
 from etdmp_ros.nodes.background import BackgroundNode
+from etdmp_ros.nodes.controller import InputWatch
 from etdmp_ros.robot import matrix_to_quaternion, PoseTrajectory, UR10Model
 from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, path_from_cdr, serialize_path,
                                        stamp_to_ns)
@@ -160,9 +161,12 @@ class Rig:
         if sim:
             self.processes.append(NodeProcess(install, env, tmp, 'ur10_sim',
                                               {'camera_rate': 0.0, 'control_rate': rate}))
-        # A faster approach than the default 0.1 m/s keeps the test short.
+        # A faster approach than the default 0.1 m/s keeps the test short. On the simulation's
+        # clock as the system runs it; without the simulation this process is a robot on the
+        # wall clock (a real driver's).
         self.controller = NodeProcess(install, env, tmp, 'controller',
-                                      {'control_rate': rate, 'approach_speed': 0.25})
+                                      {'control_rate': rate, 'approach_speed': 0.25,
+                                       'use_sim_time': sim})
         self.processes.append(self.controller)
         self.client = Client(self.domain)
         self.ur10 = UR10Model(TOOL_OFFSET)
@@ -279,6 +283,70 @@ def test_path_bytes_are_read_like_rclpy_reads_them():
     np.testing.assert_array_equal(stamps, 123 + np.round(t * 1e9).astype(np.int64))
     with pytest.raises(ValueError):
         path_from_cdr(data[:100])
+
+
+def test_input_counts_as_lost_on_the_robots_time():
+    ms = 1_000_000
+    watch = InputWatch(timeout=0.1, stall_timeout=1.0)
+    assert watch.lost(0, 0, True) == 'never received'
+    # Simulated: the clock going on without joint states is lost input...
+    watch.received(5000 * ms, 0, True)
+    assert watch.lost(5099 * ms, 99 * ms, True) == ''
+    assert 'none for 0.101 s of simulated time' in watch.lost(5101 * ms, 101 * ms, True)
+    # ... a stalled simulation (clock stopped too, 0.9 s of wall time) is not ...
+    assert watch.lost(5000 * ms, 900 * ms, True) == ''
+    # ... until it has been silent for stall_timeout of wall time.
+    assert 'simulation_stall_timeout' in watch.lost(5000 * ms, 1001 * ms, True)
+    # A real robot: its time is the wall clock.
+    watch.received(7 * ms, 7 * ms, False)
+    assert watch.lost(106 * ms, 106 * ms, False) == ''
+    assert 'of wall-clock time' in watch.lost(108 * ms, 108 * ms, False)
+    # use_sim_time switched on: a fresh start on the new clock, not a jump of 1.8e9 s.
+    assert watch.lost(20 * ms, 110 * ms, True) == ''
+
+
+def test_a_stalled_simulation_is_late_input_not_lost_input(rig):
+    """
+    Freeze the simulation (SIGSTOP) for 0.3 s mid-letter: no stale-input, the letter goes on.
+
+    What a loaded machine does to it for ~0.1 s (a process not scheduled): its clock stops with its
+    joint states, so the arm did not move and the controller must wait, not drop the path. Then
+    a freeze longer than simulation_stall_timeout (1 s): the simulation counts as gone.
+    """
+    path = g_plan()[0]
+    c = rig.client
+    sim = rig.processes[0]
+    with c.lock:
+        start, n_status = time.monotonic(), len(c.status)
+    c.publish_path(path)
+    c.wait_for(lambda: c.state() == 'tracking', 30.0, 'tracking', rig.processes)
+    time.sleep(1.0)
+    os.kill(sim.pid, signal.SIGSTOP)
+    time.sleep(0.3)
+    os.kill(sim.pid, signal.SIGCONT)
+    c.wait_for(lambda: c.state() == 'idle', 30.0, 'the end of the letter', rig.processes)
+    joints, refs, commands, _ = rig.records(start)
+    with c.lock:
+        status = [s for _, s in c.status[n_status:]]
+    assert not any(s.startswith('stale-input') for s in status), status
+    assert status[-1] == 'idle', status
+    errors = rig.tracking_errors(path, joints, refs)
+    assert errors.max() <= 3e-3, errors.max()
+    rig.assert_commands_within_limits(commands, joints)
+    np.testing.assert_allclose(rig.ur10.frame_pose(c.latest_q())[0], path.positions[-1],
+                               atol=0.5e-3)
+
+    c.publish_path(path)
+    c.wait_for(lambda: c.state() == 'tracking', 30.0, 'tracking', rig.processes)
+    os.kill(sim.pid, signal.SIGSTOP)
+    try:
+        c.wait_for(lambda: c.state().startswith('stale-input'), 3.0, 'stale input',
+                   rig.processes)
+    finally:
+        os.kill(sim.pid, signal.SIGCONT)
+    assert 'simulation_stall_timeout' in c.status[-1][1], c.status[-1]
+    c.wait_for(lambda: c.state() == 'idle', 10.0, 'idle after the simulation is back',
+               rig.processes)
 
 
 def test_letter_g_at_500_hz(colcon_install, tmp_path):

@@ -29,9 +29,6 @@ PKG = 'etdmp_ros'
 STARTUP = 90.0
 #: Control rate of both robots (sim and controller): six processes share the machine.
 RATE = 125.0
-#: Joint-state and command timeouts (s) of both robots, 5x the shipped 0.1 s: this test is about
-#: names, and on a loaded machine six processes may miss 0.1 s (the path is then dropped).
-TIMEOUT = 0.5
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: The arm that was not called may not move more than this (rad): it holds still in gravity.
 STILL = 1e-4
@@ -112,10 +109,9 @@ def robots(colcon_install, module_ros_env, tmp_path_factory):
     for ns in ROBOTS:
         processes += [
             start_node(colcon_install, module_ros_env, tmp, 'ur10_sim', ns,
-                       {'camera_rate': 0.0, 'control_rate': RATE, 'watchdog_timeout': TIMEOUT}),
+                       {'camera_rate': 0.0, 'control_rate': RATE}),
             start_node(colcon_install, module_ros_env, tmp, 'controller', ns,
-                       {'control_rate': RATE, 'approach_speed': 0.25,
-                        'joint_state_timeout': TIMEOUT}),
+                       {'control_rate': RATE, 'approach_speed': 0.25}),
             start_node(colcon_install, module_ros_env, tmp, 'dmp_server', ns)]
     client = Client(module_ros_env['ROS_DOMAIN_ID'])
     try:

@@ -55,7 +55,7 @@ def test_wiring_scene_first_then_the_node_then_sim_time():
         assert all(f.is_file() for f in files)
         assert system.wiring_overrides(spec.name) == (
             {'use_sim_time': True} if spec.sim_time else {})
-    assert [n.name for n in system.NODES if n.sim_time] == ['dmp_server']
+    assert [n.name for n in system.NODES if n.sim_time] == ['dmp_server', 'controller']
     assert system.NODE_NAMES[0] == 'ur10_sim'   # started first: the others wait for it
     with pytest.raises(KeyError, match='nodes: ur10_sim'):
         system.node('planner')

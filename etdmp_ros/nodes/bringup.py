@@ -5,7 +5,7 @@ bringup: ur10_sim, perception, dmp_server and controller in ONE process (no ros2
 ``ros2 launch etdmp_ros etdmp.launch.py`` runs in four processes, as the system description
 (:mod:`etdmp_ros.system`) says: config/scene.yaml, then each node's config/<node>.yaml (every
 file is keyed by node name, so all of them can be given to the one process), then the system's
-overrides (``use_sim_time`` for dmp_server, which stamps plans with the ROS clock), then the
+overrides (``use_sim_time`` for dmp_server and the controller, which follow /clock), then the
 arguments given here (e.g. ``--ros-args --params-file my.yaml``). One executor spins them
 (the simulation steps in its own threads); on Ctrl-C the controller sends zero velocity before
 anything shuts down (``_spin.run``).

@@ -14,10 +14,13 @@ transient local, on change: ``<state>`` or ``<state>: <reason>``, the states of
 
 Timing. A control step runs when a joint state arrives, at most ``control_rate`` times per
 second (in step with the robot, as a ros2_control controller is), on the joint state's stamp
-(simulated time from ur10_sim; the receipt time if the stamp is zero). A wall-clock watchdog at
-``control_rate`` publishes zeros while joint states are older than ``joint_state_timeout`` and
-while paused; idle, halted or refused, the controller keeps sending explicit zeros, because the
-real ``forward_velocity_controller`` applies the last command forever. Path: pose ``k`` is
+(simulated time from ur10_sim; the receipt time if the stamp is zero). A watchdog at
+``control_rate`` (wall clock) publishes zeros while paused and once no joint state has arrived
+for ``joint_state_timeout`` of the robot's time (:class:`InputWatch`): the node's clock, under
+``use_sim_time`` the simulation's, so a simulation that stalls stops that time too and is not
+mistaken for lost input; one silent for ``simulation_stall_timeout`` of wall time is gone.
+Idle, halted or refused, the controller keeps sending explicit zeros, because the real
+``forward_velocity_controller`` applies the last command forever. Path: pose ``k`` is
 timed at its stamp minus the first pose's stamp (the header stamp is ignored); a path whose
 stamps are all equal is timed by its length (``untimed_path_speed``); all-zero orientations
 mean "keep the tool's current orientation"; an empty path stops the arm (idle). Frames:
@@ -121,6 +124,49 @@ class TrackingSummary:
                 + (f' at t = {self._max_gap_at:.3f} s)' if self._max_gap_at is not None else ')'))
 
 
+class InputWatch:
+    """
+    When the joint states count as lost: no new one for ``timeout`` of the robot's time.
+
+    The robot's time is the time in which it moves. A real robot's is the wall clock (steady
+    here: the system clock may jump). A simulated robot's is the simulation's /clock
+    (``use_sim_time``): when the simulation stalls (its process not scheduled on a busy
+    machine), its time and its joint states stop together and the arm does not move, so nothing
+    is stale; the clock going on without joint states is. A simulation whose clock and joint
+    states both stop for ``stall_timeout`` of wall time counts as gone. Receipt times are used,
+    never the messages' stamps, which a wrong publisher can set to anything.
+    """
+
+    def __init__(self, timeout, stall_timeout):
+        """Timeouts in seconds (``stall_timeout`` applies only to simulated time)."""
+        self.timeout = timeout
+        self.stall_timeout = stall_timeout
+        self._robot = None      # robot time (ns) of the latest receipt
+        self._wall = None       # steady time (ns) of the latest receipt
+        self._simulated = False
+
+    def received(self, robot_ns, wall_ns, simulated):
+        """Note a joint state received at robot time ``robot_ns`` and steady time ``wall_ns``."""
+        self._robot, self._wall, self._simulated = robot_ns, wall_ns, simulated
+
+    def lost(self, robot_ns, wall_ns, simulated):
+        """Return why the joint states count as lost at these times ('' if they do not)."""
+        if self._wall is None:
+            return 'never received'
+        if simulated != self._simulated:        # use_sim_time switched: start afresh
+            self.received(robot_ns, wall_ns, simulated)
+            return ''
+        age = (robot_ns - self._robot) * 1e-9
+        if age > self.timeout:
+            clock = 'simulated' if simulated else 'wall-clock'
+            return f'none for {age:.3f} s of {clock} time'
+        silent = (wall_ns - self._wall) * 1e-9
+        if simulated and silent > self.stall_timeout:
+            return (f'none for {silent:.3f} s of wall-clock time, and the simulation clock '
+                    'stopped with them (simulation_stall_timeout)')
+        return ''
+
+
 class ControllerNode(Node):
     """The controller node: joint states and paths in, joint velocity commands out."""
 
@@ -129,7 +175,8 @@ class ControllerNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         params = self._declare_parameters()
         self.config = self._config(params)
-        self.timeout = params['joint_state_timeout']
+        self.watch = InputWatch(params['joint_state_timeout'],
+                                params['simulation_stall_timeout'])
         self.untimed_speed = (params['untimed_path_speed'], params['untimed_path_angular_speed'])
         self.check_paths = params['check_paths']
         self.model = UR10Model(tool_offset=params['tool_offset'])
@@ -140,6 +187,7 @@ class ControllerNode(Node):
         self._q = None                          # latest joint positions
         self._rotation = None                   # tool rotation at _q
         self._last_receipt = None               # time.monotonic() of the latest joint state
+        self._sim_clock = self.get_clock()      # the robot's time under use_sim_time
         self._last_step = None                  # stamp (s) of the latest control step
         self._stale = False
         self._status = None
@@ -227,7 +275,9 @@ class ControllerNode(Node):
             new = self._config(changes, base=self.config)
             for f in fields(ControllerConfig):
                 setattr(self.controller.config, f.name, getattr(new, f.name))
-            self.timeout = changes.get('joint_state_timeout', self.timeout)
+            self.watch.timeout = changes.get('joint_state_timeout', self.watch.timeout)
+            self.watch.stall_timeout = changes.get('simulation_stall_timeout',
+                                                   self.watch.stall_timeout)
             self.check_paths = changes.get('check_paths', self.check_paths)
             self.untimed_speed = (changes.get('untimed_path_speed', self.untimed_speed[0]),
                                   changes.get('untimed_path_angular_speed',
@@ -249,6 +299,7 @@ class ControllerNode(Node):
             if self.controller.status == 'tracking' and self._last_receipt is not None:
                 self._tracked.joint_state(receipt - self._last_receipt, t)
             self._last_receipt = receipt
+            self.watch.received(*self._input_times())
             self._q = q
             if self._last_step is not None and self._last_step - 1e-9 <= t \
                     < self._last_step + 0.75 * self.period and not self._stale:
@@ -273,15 +324,20 @@ class ControllerNode(Node):
                                    f'estimate {self.controller.delay * 1e3:.1f} ms')
             self._tracked = TrackingSummary(self.period)
 
+    def _input_times(self):
+        """Return (robot time, steady time, simulated) now, in ns (see :class:`InputWatch`)."""
+        wall = time.monotonic_ns()
+        if self._sim_clock.ros_time_is_active:
+            return self._sim_clock.now().nanoseconds, wall, True
+        return wall, wall, False
+
     def _watchdog(self):
         with self._lock:
-            now = time.monotonic()
-            if self._last_receipt is None or now - self._last_receipt > self.timeout:
+            lost = self.watch.lost(*self._input_times())
+            if lost:
                 if not self._stale:
                     self._stale = True
-                    age = ('never received' if self._last_receipt is None else
-                           f'none for {now - self._last_receipt:.3f} s')
-                    reason = f'joint states on {JOINT_STATES_TOPIC} are stale ({age})'
+                    reason = f'joint states on {JOINT_STATES_TOPIC} are stale ({lost})'
                     self.controller.input_lost(reason)
                     if self._last_receipt is not None:
                         self.get_logger().error(f'{reason}: zero velocity command')

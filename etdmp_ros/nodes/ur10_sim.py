@@ -74,8 +74,11 @@ TF_STATIC_TOPIC = 'tf_static'
 #: QoS of /robot_description and /tf_static, as robot_state_publisher and tf2_ros use them.
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 DESCRIPTION = system.node(NODE_NAME)
-# Fell this far behind real time (overload, debugger): restart pacing instead of bursting.
-MAX_LAG = 0.25
+#: Fell more than this many ticks behind real time (a stall: overload, a debugger): the
+#: simulation slips, i.e. its time stops with the stall, as a physics simulator's does under
+#: load, instead of bursting through the missed ticks on the command of before the stall (the
+#: controller could not answer those ticks). A late tick or two is caught up.
+MAX_LAG_TICKS = 2
 #: A wall-clock gap between two ticks longer than this many periods is a stall (warned).
 LATE_TICKS = 3
 #: Hz of the goal and obstacle ground truth when the camera is off.
@@ -241,7 +244,7 @@ class UR10SimNode(Node):
                 delay = wall_start + (self.sim.time - sim_start) / rtf - now
                 if delay > 0:
                     self._stop.wait(delay)
-                elif delay < -MAX_LAG:
+                elif delay < -MAX_LAG_TICKS * self.tick_period / rtf:
                     wall_start, sim_start = time.monotonic(), self.sim.time
         except Exception as exc:   # noqa: B902 - report why the simulation stopped, then exit
             if self._stop.is_set() or not self.context.ok():
