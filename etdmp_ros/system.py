@@ -429,6 +429,10 @@ CONTROLLER = (
     P('check_paths', True, 'Check every received path with position IK (reach, joint limits, '
       'singularities) before moving; a failing path is refused (status unreachable, with the '
       'reason).', dynamic=True),
+    P('max_path_poses', 20000, 'Longest path accepted; a longer one is ignored with an error '
+      'before it is read (timing and checking it would hold the interpreter long enough to '
+      'delay control steps). 20000 poses: 160 s at 125 Hz.', value_range=(2, 1000000),
+      dynamic=True),
 )
 
 

@@ -20,8 +20,8 @@ from etdmp_ros.nodes._spin import normal_scheduling, set_realtime_priority
 from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.nodes.controller import InputWatch
 from etdmp_ros.robot import matrix_to_quaternion, PoseTrajectory, UR10Model
-from etdmp_ros.ros_conversions import (joint_state_msg, ns_to_stamp, path_from_cdr, serialize_path,
-                                       stamp_to_ns)
+from etdmp_ros.ros_conversions import (joint_state_from_cdr, joint_state_msg, ns_to_stamp,
+                                       path_from_cdr, serialize_path, stamp_to_ns)
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
@@ -58,7 +58,7 @@ class Client(BackgroundNode):
         # Joint states and references: shallow queues keep this client current (a deep backlog
         # would still hold the end of a path when its records are read). Commands: a deep queue,
         # since the acceleration check needs every one (consecutive ones are a period apart).
-        n.create_subscription(JointState, '/joint_states', self._on_joints, 100)
+        n.create_subscription(JointState, '/joint_states', self._on_joints, 100, raw=True)
         n.create_subscription(PoseStamped, '/etdmp/controller/reference', self._on_reference,
                               100)
         n.create_subscription(Float64MultiArray, '/forward_velocity_controller/commands',
@@ -68,10 +68,15 @@ class Client(BackgroundNode):
         self.parameters = n.create_client(SetParameters, '/controller/set_parameters')
         self.start()
 
-    def _on_joints(self, msg):
+    def _on_joints(self, data):
+        # Read from the bytes, joint states of other joints skipped (a flood of them is cheap).
         now = time.monotonic()
+        try:
+            stamp, q, _ = joint_state_from_cdr(data)
+        except ValueError:
+            return
         with self.lock:
-            self.joints[stamp_to_ns(msg.header.stamp)] = (np.array(msg.position), now)
+            self.joints[stamp] = (q, now)
 
     def _on_reference(self, msg):
         p = msg.pose.position
@@ -303,6 +308,24 @@ def test_input_counts_as_lost_on_the_robots_time():
     assert 'of wall-clock time' in watch.lost(108 * ms, 108 * ms, False)
     # use_sim_time switched on: a fresh start on the new clock, not a jump of 1.8e9 s.
     assert watch.lost(20 * ms, 110 * ms, True) == ''
+
+
+def test_a_joint_state_stamp_must_advance_with_the_robots_clock():
+    ms = 1_000_000
+    watch = InputWatch(timeout=0.1, stall_timeout=1.0)
+    assert watch.implausible(123 * ms, 5000 * ms, True) == ''      # the first: nothing to compare
+    watch.received(5000 * ms, 0, True, stamp_ns=5000 * ms)
+    assert watch.implausible(5008 * ms, 5008 * ms, True) == ''
+    assert watch.implausible(5016 * ms, 5000 * ms, True) == ''      # /clock a tick behind
+    future = watch.implausible(105_008 * ms, 5008 * ms, True)
+    assert '+100.000 s off the robot clock' in future, future
+    assert '-5.000 s off' in watch.implausible(8 * ms, 5008 * ms, True)
+    # A restarted simulation: its clock went back with its stamps, which is plausible (the
+    # controller then drops the path: its time went back).
+    assert watch.implausible(8 * ms, 8 * ms, True) == ''
+    # A robot on its own, unsynchronized clock: only the advance counts.
+    watch.received(7 * ms, 7 * ms, False, stamp_ns=42_000 * ms)
+    assert watch.implausible(42_008 * ms, 15 * ms, False) == ''
 
 
 def test_a_stalled_simulation_is_late_input_not_lost_input(rig):

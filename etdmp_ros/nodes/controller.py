@@ -39,7 +39,7 @@ from etdmp_ros.nodes._parameters import declare
 from etdmp_ros.nodes._spin import normal_scheduling, rate_qos, run, set_realtime_priority
 from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, trajectory_from_path,
                              TrajectoryController, TrajectoryError, UR10Model)
-from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr, stamp_to_ns,
+from etdmp_ros.ros_conversions import (joint_state_from_cdr, ns_to_stamp, path_from_cdr,
                                        velocity_command_msg)
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
@@ -67,6 +67,13 @@ FRAMES = ('', 'base_link')
 EXIT_ZEROS = 3
 #: s a path received before the first joint state waits for one (e.g. a latched path).
 WAIT_FOR_JOINT_STATES = 5.0
+#: Joint states held for the control thread: a flood from another publisher, delivered in
+#: bursts when the machine is busy, must not push the robot's out before they are read (13 kHz
+#: of junk: a 10-deep queue lost the robot's for 0.1 s). Each step reads all that queued
+#: (microseconds each) and steps once, on the newest, so a backlog never means old steps.
+JOINT_STATE_DEPTH = 1000
+#: s between two warnings about ignored joint states (each says how many were ignored).
+IGNORED_LOG_PERIOD = 2.0
 
 DESCRIPTION = system.node(NODE_NAME)
 #: The controller's own parameters (the scene's are read-only).
@@ -143,11 +150,33 @@ class InputWatch:
         self.stall_timeout = stall_timeout
         self._robot = None      # robot time (ns) of the latest receipt
         self._wall = None       # steady time (ns) of the latest receipt
+        self._stamp = None      # stamp (ns) of the latest joint state accepted
         self._simulated = False
 
-    def received(self, robot_ns, wall_ns, simulated):
-        """Note a joint state received at robot time ``robot_ns`` and steady time ``wall_ns``."""
+    def received(self, robot_ns, wall_ns, simulated, stamp_ns=None):
+        """Note a joint state (stamped ``stamp_ns``) received at these robot and steady times."""
+        if simulated != self._simulated:
+            self._stamp = None
         self._robot, self._wall, self._simulated = robot_ns, wall_ns, simulated
+        if stamp_ns is not None:
+            self._stamp = stamp_ns
+
+    def implausible(self, stamp_ns, robot_ns, simulated):
+        """
+        Return why a joint state stamped ``stamp_ns`` cannot be the robot's ('' if it can).
+
+        Its stamp must have advanced from the last accepted one's as the robot's time did, to
+        within ``timeout``: a stamp far in the future would end the path at once (the
+        controller's time is the stamps'), one far in the past would read as a restart.
+        """
+        if self._stamp is None or simulated != self._simulated:
+            return ''
+        skew = ((stamp_ns - self._stamp) - (robot_ns - self._robot)) * 1e-9
+        if abs(skew) <= self.timeout:
+            return ''
+        return (f'its stamp is {skew:+.3f} s off the robot clock (advanced '
+                f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '
+                f'clock advanced {(robot_ns - self._robot) * 1e-9:.3f} s), not from the robot')
 
     def lost(self, robot_ns, wall_ns, simulated):
         """Return why the joint states count as lost at these times ('' if they do not)."""
@@ -179,6 +208,7 @@ class ControllerNode(Node):
                                 params['simulation_stall_timeout'])
         self.untimed_speed = (params['untimed_path_speed'], params['untimed_path_angular_speed'])
         self.check_paths = params['check_paths']
+        self.max_path_poses = params['max_path_poses']
         self.model = UR10Model(tool_offset=params['tool_offset'])
         self.controller = TrajectoryController(self.model, self.config)
         self.period = self.controller.period
@@ -190,6 +220,7 @@ class ControllerNode(Node):
         self._sim_clock = self.get_clock()      # the robot's time under use_sim_time
         self._last_step = None                  # stamp (s) of the latest control step
         self._stale = False
+        self._ignored, self._ignored_log_time = 0, -math.inf     # joint states ignored
         self._status = None
         self._path_generation = 0
         self._tracked = TrackingSummary(self.period)
@@ -203,9 +234,12 @@ class ControllerNode(Node):
         self._reference_pub = self.create_publisher(PoseStamped, REFERENCE_TOPIC, rate)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._status_pub = self.create_publisher(String, STATUS_TOPIC, latched)
-        # Depth 1: after a stall only the newest joint state matters (no backlog of old ones).
-        self.create_subscription(JointState, JOINT_STATES_TOPIC, self._on_joint_state,
-                                 QoSProfile(depth=1))
+        # Raw bytes, read with numpy (joint_state_from_cdr): a flood of joint states for other
+        # joints is refused in microseconds. A deep history, not depth 1: such a flood must
+        # not overwrite the robot's own before they are read.
+        self._joint_state_sub = self.create_subscription(
+            JointState, JOINT_STATES_TOPIC, self._on_joint_state,
+            QoSProfile(depth=JOINT_STATE_DEPTH), raw=True)
         self.create_subscription(Path, PATH_TOPIC, self._on_path, latched, raw=True)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_timer(self.period, self._watchdog,
@@ -279,27 +313,35 @@ class ControllerNode(Node):
             self.watch.stall_timeout = changes.get('simulation_stall_timeout',
                                                    self.watch.stall_timeout)
             self.check_paths = changes.get('check_paths', self.check_paths)
+            self.max_path_poses = changes.get('max_path_poses', self.max_path_poses)
             self.untimed_speed = (changes.get('untimed_path_speed', self.untimed_speed[0]),
                                   changes.get('untimed_path_angular_speed',
                                               self.untimed_speed[1]))
 
     # ------------------------------------------------------------------------------ control
-    def _on_joint_state(self, msg):
+    def _on_joint_state(self, data):
         receipt = time.monotonic()
-        try:
-            q, _ = joint_state_arrays(msg)
-        except ValueError as exc:
-            self.get_logger().warning(f'joint state ignored: {exc}', throttle_duration_sec=2.0)
-            return
-        stamp = stamp_to_ns(msg.header.stamp)
-        if stamp == 0:      # unstamped: measured when received
-            stamp = self.get_clock().now().nanoseconds
-        t = stamp * 1e-9
         with self._lock:
+            times = self._input_times()
+            newest = self._read_joint_state(data, times)
+            # The executor hands over one message per wait: take here what queued meanwhile (a
+            # flood from another publisher costs microseconds each, not an executor cycle) and
+            # step once, on the newest of the robot's.
+            handle = self._joint_state_sub.handle
+            with handle:
+                for _ in range(JOINT_STATE_DEPTH):
+                    taken = handle.take_message(JointState, True)
+                    if taken is None:
+                        break
+                    newest = self._read_joint_state(taken[0], times) or newest
+            if newest is None:
+                return
+            stamp, q = newest
+            t = stamp * 1e-9
             if self.controller.status == 'tracking' and self._last_receipt is not None:
                 self._tracked.joint_state(receipt - self._last_receipt, t)
             self._last_receipt = receipt
-            self.watch.received(*self._input_times())
+            self.watch.received(*times, stamp_ns=stamp)
             self._q = q
             if self._last_step is not None and self._last_step - 1e-9 <= t \
                     < self._last_step + 0.75 * self.period and not self._stale:
@@ -315,6 +357,30 @@ class ControllerNode(Node):
             self._publish_feedback(command, ns_to_stamp(stamp))
             self._publish_status()
 
+    def _read_joint_state(self, data, times):
+        """Return (stamp ns, q) of serialized joint state bytes, or None if they are not usable."""
+        try:
+            stamp, q, _ = joint_state_from_cdr(data)
+        except ValueError as exc:
+            self._ignore(str(exc))
+            return None
+        if stamp == 0:      # unstamped: measured when received
+            stamp = self.get_clock().now().nanoseconds
+        implausible = self.watch.implausible(stamp, times[0], times[2])
+        if implausible:
+            self._ignore(implausible)
+            return None
+        return stamp, q
+
+    def _ignore(self, reason):
+        """Count a joint state ignored; say why at most every IGNORED_LOG_PERIOD seconds."""
+        self._ignored += 1
+        now = time.monotonic()
+        if now >= self._ignored_log_time + IGNORED_LOG_PERIOD:
+            more = f' ({self._ignored} ignored since the last report)' if self._ignored > 1 else ''
+            self.get_logger().warning(f'joint state ignored: {reason}{more}')
+            self._ignored, self._ignored_log_time = 0, now
+
     def _summarize(self, command, t):
         """Accumulate a path's tracking figures; log them when its tracking ends."""
         if command.status == 'tracking':
@@ -328,7 +394,9 @@ class ControllerNode(Node):
         """Return (robot time, steady time, simulated) now, in ns (see :class:`InputWatch`)."""
         wall = time.monotonic_ns()
         if self._sim_clock.ros_time_is_active:
-            return self._sim_clock.now().nanoseconds, wall, True
+            robot = self._sim_clock.now().nanoseconds
+            if robot:                   # 0: no /clock received yet, the wall clock until then
+                return robot, wall, True
         return wall, wall, False
 
     def _watchdog(self):
@@ -376,7 +444,8 @@ class ControllerNode(Node):
     # ------------------------------------------------------------------------- path, pause
     def _on_path(self, data):
         try:
-            frame, pose_frames, stamps, positions, quaternions = path_from_cdr(data)
+            frame, pose_frames, stamps, positions, quaternions = path_from_cdr(
+                data, self.max_path_poses)
         except ValueError as exc:
             self.get_logger().error(f'path ignored: {exc}')
             return

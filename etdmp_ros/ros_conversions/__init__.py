@@ -12,7 +12,8 @@ from ._geometry import (ns_to_stamp, path_from_numpy, path_to_numpy,  # noqa: F4
                         pose_array_to_numpy, serialize_path, stamp_to_ns)
 from ._image import (camera_info_msg, ENCODINGS, image_from_cdr, image_from_msg,  # noqa: F401
                      image_msg, intrinsics_from_camera_info)
-from ._joint_state import (joint_state_arrays, joint_state_msg,  # noqa: F401
-                           velocity_command_array, velocity_command_msg)
+from ._joint_state import (joint_state_arrays, joint_state_from_cdr,  # noqa: F401
+                           joint_state_msg, MAX_JOINTS, velocity_command_array,
+                           velocity_command_msg)
 from ._path_cdr import path_from_cdr  # noqa: F401
 from ._tf import MovingTransforms, tf_available, tf_message  # noqa: F401

@@ -16,6 +16,8 @@ encapsulation header); the image reader (:func:`image_from_cdr`) is built on it.
 import importlib
 import struct
 
+import numpy as np
+
 
 def message_class(type_name):
     """
@@ -95,3 +97,21 @@ class CdrReader:
             raise ValueError(f'serialized sequence of {length} bytes is longer than the message')
         self.offset += length
         return memoryview(self.data)[start:start + length]
+
+    def float64_sequence(self, limit=None):
+        """
+        Return the next sequence<float64> as a numpy array (a copy, native byte order).
+
+        ``limit``: the most elements accepted (ValueError beyond it, before anything is read).
+        """
+        length = self.uint32()
+        if limit is not None and length > limit:
+            raise ValueError(f'serialized sequence of {length} numbers, more than {limit}')
+        if length:
+            self.offset += -self.offset % 8
+        start = 4 + self.offset
+        if start + 8 * length > len(self.data):
+            raise ValueError(f'serialized sequence of {length} numbers is longer than the message')
+        self.offset += 8 * length
+        return np.frombuffer(self.data, dtype=self.order + 'f8', count=length,
+                             offset=start).astype(float)

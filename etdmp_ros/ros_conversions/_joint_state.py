@@ -13,6 +13,11 @@ import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+from ._cdr import CdrReader
+
+#: Joints a JointState may name (a whole robot with its grippers and sensors: generous).
+MAX_JOINTS = 256
+
 
 def _doubles(values):
     data = array.array('d')
@@ -60,6 +65,41 @@ def joint_state_arrays(msg, names=JOINT_NAMES):
             (velocities is not None and not np.all(np.isfinite(velocities))):
         raise ValueError('joint state holds NaN or infinite values')
     return positions, velocities
+
+
+def joint_state_from_cdr(data, names=JOINT_NAMES):
+    """
+    Return ``(stamp_ns, positions, velocities)`` of ``names`` from a serialized JointState.
+
+    What :func:`joint_state_arrays` returns, read from the bytes (a ``raw=True`` subscription)
+    without building message objects: a few microseconds, so that a flood of joint states for
+    other joints costs little. Raises ValueError like it, and on malformed bytes or more than
+    :data:`MAX_JOINTS` joints.
+    """
+    reader = CdrReader(data)
+    sec, nanosec = reader.int32(), reader.uint32()
+    reader.string()                                     # frame_id
+    n = reader.uint32()
+    if n > MAX_JOINTS:
+        raise ValueError(f'joint state names {n} joints, more than {MAX_JOINTS}')
+    joint_names = [reader.string() for _ in range(n)]
+    index = {name: i for i, name in enumerate(joint_names)}
+    missing = [name for name in names if name not in index]
+    if missing:
+        shown = joint_names if n <= 12 else joint_names[:12] + ['...']
+        raise ValueError(f'joint state lacks joints {missing} (has {shown})')
+    position = reader.float64_sequence(MAX_JOINTS)
+    velocity = reader.float64_sequence(MAX_JOINTS)
+    if len(position) != n or len(velocity) not in (0, n):
+        raise ValueError(f'joint state has {n} names, {len(position)} positions and '
+                         f'{len(velocity)} velocities')
+    order = [index[name] for name in names]
+    positions = position[order]
+    velocities = velocity[order] if len(velocity) else None
+    if not np.all(np.isfinite(positions)) or \
+            (velocities is not None and not np.all(np.isfinite(velocities))):
+        raise ValueError('joint state holds NaN or infinite values')
+    return sec * 1_000_000_000 + nanosec, positions, velocities
 
 
 def velocity_command_msg(velocities):

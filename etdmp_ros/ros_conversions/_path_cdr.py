@@ -30,13 +30,14 @@ def _string(data, offset, order):
     return raw.decode('utf-8', errors='replace'), offset + 4 + length
 
 
-def path_from_cdr(data):
+def path_from_cdr(data, max_poses=None):
     """
     Return ``(frame_id, pose_frame_ids, stamps, positions, quaternions)`` of a serialized Path.
 
     ``stamps`` (n,): each pose's stamp in integer nanoseconds (int64: no rounding of wall-clock
     stamps); ``positions`` (n, 3); ``quaternions`` (n, 4) as (x, y, z, w); ``pose_frame_ids``:
-    the set of the poses' frame ids. Raises ValueError on bytes that are not a well-formed Path.
+    the set of the poses' frame ids. Raises ValueError on bytes that are not a well-formed Path,
+    and on one of more than ``max_poses`` poses before reading them.
     """
     data = memoryview(bytes(data)) if not isinstance(data, (bytes, bytearray)) else data
     if len(data) < 16 or data[0] != 0 or data[1] not in (0, 1):
@@ -50,6 +51,9 @@ def path_from_cdr(data):
         # Each pose takes at least 4 + 4 + 4 + 1 + 56 bytes: refuse absurd counts early.
         if count * 69 > len(data):
             raise ValueError(f'serialized Path claims {count} poses in {len(data)} bytes')
+        if max_poses is not None and count > max_poses:
+            raise ValueError(f'the path has {count} poses, more than max_path_poses '
+                             f'({max_poses})')
         if count == 0:
             return (frame_id, set(), np.zeros(0, dtype=np.int64), np.zeros((0, 3)),
                     np.zeros((0, 4)))
