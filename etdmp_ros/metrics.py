@@ -377,7 +377,8 @@ _STALL = re.compile(r'simulation loop stalled: (\d+) ms between two ticks at t =
 #: ur10_sim's log line when it stops.
 _SIM_STOPPED = re.compile(r'(\d+) more than \d+ periods after the previous one, largest '
                           r'wall-clock gap between two ([\d.]+) ms; camera frames published '
-                          r'(\d+), dropped (\d+)')
+                          r'(\d+), dropped (\d+); waited for a late command (\d+) times '
+                          r'\((\d+) ms\), (\d+) in vain')
 
 
 def _cpu_figures(monitor, call_ns, end_ns):
@@ -431,9 +432,11 @@ def _simulation_figures(log, call_ns, end_ns):
                                      if call_ns * 1e-9 <= float(t) <= (end_ns or 0) * 1e-9]}
     found = _SIM_STOPPED.findall(log)
     if found:
-        late, gap, frames, dropped = found[-1]
+        late, gap, frames, dropped, waits, waited, in_vain = found[-1]
         figures['simulation'] = {'late_ticks': int(late), 'largest_tick_gap_ms': float(gap),
-                                 'frames': int(frames), 'frames_dropped': int(dropped)}
+                                 'frames': int(frames), 'frames_dropped': int(dropped),
+                                 'command_waits': int(waits), 'command_wait_ms': int(waited),
+                                 'command_waits_in_vain': int(in_vain)}
         camera = _CAMERA_STOPPED.findall(log)
         if camera:   # snapshots the camera process skipped because it was still rendering
             figures['simulation']['frames_rendered'] = int(camera[-1][0])

@@ -189,6 +189,11 @@ UR10_SIM = (
     P('watchdog_timeout', 0.1, 'Simulated time without a command before braking to zero '
       'velocity; 0 disables it and the last command then applies forever, like the real '
       'forward_velocity_controller.', unit='s', value_range=(0.0, 60.0), dynamic=True),
+    P('command_wait', 0.016, "Wall-clock time a tick waits for the controller's command "
+      'answering the previous joint states, while a controller answers every tick: a '
+      'controller late for a moment (a busy machine) slows the simulation instead of the arm '
+      'moving on the old command unanswered; 0 = never wait.', unit='s',
+      value_range=(0.0, 1.0), dynamic=True),
     P('camera_rate', 30.0, 'Rate of the colour + aligned depth camera (RealSense D435-like); '
       '0 disables the camera.', unit='Hz', value_range=(0.0, 90.0)),
     P('image_width', 640, 'Camera image width.', unit='px', value_range=(16, 4096)),

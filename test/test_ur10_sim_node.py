@@ -8,6 +8,7 @@ the messages' stamps (simulated time), so a loaded machine slows the test, not b
 """
 
 import os
+import re
 import signal
 import threading
 import time
@@ -87,9 +88,11 @@ class Client(BackgroundNode):
             time.sleep(1.0 / rate)
 
     def set_parameter(self, name, value):
-        """Set one array parameter of /ur10_sim as `ros2 param set` would; return the result."""
+        """Set one parameter of /ur10_sim as `ros2 param set` would; return the result."""
         assert self.parameters.wait_for_service(timeout_sec=10)
-        if isinstance(value, str):          # what ros2 param set sends for "[0.6, 0.1, 0]"
+        if isinstance(value, float):
+            v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+        elif isinstance(value, str):        # what ros2 param set sends for "[0.6, 0.1, 0]"
             v = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
         elif len(value) == 0:               # ros2 param set's YAML parsing types [] as bool[]
             v = ParameterValue(type=ParameterType.PARAMETER_BOOL_ARRAY, bool_array_value=[])
@@ -197,6 +200,70 @@ def test_a_stalled_simulation_slips_instead_of_bursting(launch):
     ahead = (stamp - stamp[0]) - (wall - wall[0])
     assert ahead.max() < 2 / 125.0 + 0.01, ahead.max()
     assert len(after) > 0.5 * 0.5 * 125, len(after)
+
+
+class Responder(BackgroundNode):
+    """A controller stand-in: answers each joint state at once, but every 0.25 s 12 ms late."""
+
+    STALL, EVERY = 0.012, 0.25
+
+    def __init__(self):
+        super().__init__('ur10_sim_test_responder')
+        self.active, self.stalls, self._last_stall = True, 0, time.monotonic()
+        self.pub = self.node.create_publisher(Float64MultiArray,
+                                              '/forward_velocity_controller/commands', 10)
+        self.node.create_subscription(JointState, '/joint_states', self._answer, 1)
+        self.start()
+
+    def _answer(self, msg):
+        if not self.active:
+            return
+        if time.monotonic() > self._last_stall + self.EVERY:
+            time.sleep(self.STALL)       # not scheduled for a moment on a busy machine
+            self._last_stall = time.monotonic()
+            self.stalls += 1
+        self.pub.publish(Float64MultiArray(data=[0.0] * 6))
+
+
+def _waits(log):
+    """Return (waits, in vain) of the simulation's stop line."""
+    found = re.search(r'waited for a late command (\d+) times \(\d+ ms\), (\d+) in vain', log)
+    return tuple(int(v) for v in found.groups())
+
+
+def test_a_late_controller_is_waited_for_not_missed(launch):
+    """
+    A controller that answers every tick, but now and then 12 ms late (an 8 ms tick): waited for.
+
+    Each late answer holds the next tick back (its time waits too) instead of the arm moving on
+    the old command unanswered: the stop line counts a wait per stall, none in vain. With
+    command_wait 0 nothing waits; a controller that stops answering is waited for once, then
+    no more, and the simulation goes on in real time.
+    """
+    sim, client = launch({'camera_rate': 0.0})
+    responder = Responder()
+    try:
+        time.sleep(3.0)
+        assert client.set_parameter('command_wait', 0.0).successful
+        stalls = responder.stalls
+        time.sleep(1.0)
+        stalls_unwaited = responder.stalls - stalls
+        assert client.set_parameter('command_wait', 0.016).successful
+        time.sleep(1.0)
+        responder.active = False
+        t0, w0 = client.joint_state()[0], time.monotonic()
+        time.sleep(1.0)
+        rtf_unanswered = (client.joint_state()[0] - t0) / (time.monotonic() - w0)
+    finally:
+        stalls = responder.stalls
+        responder.close()
+    assert sim.stop() == 0
+    waits, in_vain = _waits(sim.log())
+    print(f'{stalls} stalls ({stalls_unwaited} with command_wait 0): {waits} waits, {in_vain} in '
+          f'vain; real-time factor unanswered {rtf_unanswered:.2f}')
+    assert stalls - stalls_unwaited - 2 <= waits <= stalls - stalls_unwaited + 2
+    assert in_vain <= 1
+    assert rtf_unanswered > 0.9
 
 
 def test_commands_watchdog_and_runtime_parameters(launch):

@@ -81,6 +81,9 @@ DESCRIPTION = system.node(NODE_NAME)
 MAX_LAG_TICKS = 2
 #: A wall-clock gap between two ticks longer than this many periods is a stall (warned).
 LATE_TICKS = 3
+#: Consecutive ticks answered by a command before a tick waits for its answer (command_wait):
+#: a controller that steps at a lower rate than the simulation, or none, is never waited for.
+ANSWERED_TICKS = 10
 #: Hz of the goal and obstacle ground truth when the camera is off.
 GROUND_TRUTH_RATE = 10.0
 
@@ -120,6 +123,9 @@ class UR10SimNode(Node):
                 f'of {self.sim.timestep} s: running at {1.0 / self.tick_period:.3f} Hz')
         self.camera_period = 1.0 / p['camera_rate'] if p['camera_rate'] > 0 else 0.0
         self.real_time_factor = p['real_time_factor']
+        self.command_wait = p['command_wait']
+        self._answered = threading.Event()   # a command arrived since the last joint states
+        self._answered_ticks = 0
 
         self._lock = threading.Lock()
         self._pending_command = None
@@ -136,7 +142,8 @@ class UR10SimNode(Node):
         # CPU seconds per part; publish_tf (the /tf messages) is a part of publish_state.
         self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
                       'publish_state': 0.0, 'publish_tf': 0.0, 'ticks': 0, 'frames': 0,
-                      'frames_dropped': 0, 'max_tick_gap': 0.0, 'late_ticks': 0}
+                      'frames_dropped': 0, 'max_tick_gap': 0.0, 'late_ticks': 0,
+                      'waits': 0, 'waits_expired': 0, 'wait_time': 0.0}
 
         reliable = QoSProfile(depth=10)
         # A second of history: a slow reader must never block the simulation's publish().
@@ -185,6 +192,8 @@ class UR10SimNode(Node):
                     self.real_time_factor = float(parameter.value)
                 elif parameter.name == 'watchdog_timeout':
                     self.sim.watchdog_timeout = float(parameter.value)
+                elif parameter.name == 'command_wait':
+                    self.command_wait = float(parameter.value)
 
     # ------------------------------------------------------------------------------ commands
     def _on_command(self, msg):
@@ -201,6 +210,7 @@ class UR10SimNode(Node):
                                       'clamped', throttle_duration_sec=1.0)
         with self._lock:
             self._pending_command = clamped
+        self._answered.set()
 
     # ---------------------------------------------------------------------------- simulation
     def start(self):
@@ -226,13 +236,16 @@ class UR10SimNode(Node):
                 f'stopped at {self.sim.time:.2f} s simulated; {stats["ticks"]} ticks, '
                 f'{stats["late_ticks"]} more than {LATE_TICKS} periods after the previous one, '
                 f'largest wall-clock gap between two {stats["max_tick_gap"] * 1e3:.1f} ms; camera '
-                f'frames published {stats["frames"]}, dropped {stats["frames_dropped"]}')
+                f'frames published {stats["frames"]}, dropped {stats["frames_dropped"]}; '
+                f'waited for a late command {stats["waits"]} times '
+                f'({stats["wait_time"] * 1e3:.0f} ms), {stats["waits_expired"]} in vain')
 
     def _run(self):
         try:
             wall_start, sim_start = time.monotonic(), self.sim.time
             last_tick = None
             while not self._stop.is_set():
+                self._wait_for_the_answer()
                 self.tick()
                 now = time.monotonic()
                 if last_tick is not None:
@@ -255,6 +268,26 @@ class UR10SimNode(Node):
         finally:
             if self._camera is None:
                 self.sim.close()   # rendered in this thread (the camera process has its own)
+
+    def _wait_for_the_answer(self):
+        """
+        Wait up to command_wait for the command answering the last joint states (soft lockstep).
+
+        Only while a controller has answered the last ANSWERED_TICKS ticks: then a tick without
+        its answer means the controller is late (not scheduled on a busy machine), and stepping
+        on would move the arm on the old command, unanswered. Waiting slows the simulation (its
+        time waits too); an answer that does not come in time is stepped without, and waiting
+        stops until the controller answers every tick again.
+        """
+        answered = self._answered.is_set()
+        if not answered and self.command_wait > 0 and self._answered_ticks >= ANSWERED_TICKS:
+            start = time.monotonic()
+            answered = self._answered.wait(self.command_wait)
+            self.stats['waits'] += 1
+            self.stats['wait_time'] += time.monotonic() - start
+            if not answered:
+                self.stats['waits_expired'] += 1
+        self._answered_ticks = self._answered_ticks + 1 if answered else 0
 
     def _note_gap(self, gap):
         """Keep the largest wall-clock gap between ticks; warn about one over LATE_TICKS."""
@@ -300,6 +333,7 @@ class UR10SimNode(Node):
                                       'braking to zero until the next one')
         self._watchdog_was_active = sim.watchdog_active
         stamp = ns_to_stamp(round(sim.time * 1e9))
+        self._answered.clear()      # the next command answers these joint states
         self._publish_state(stamp)
         c2 = time.process_time()
         stats['physics'] += c1 - c0

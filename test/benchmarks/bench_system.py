@@ -82,6 +82,8 @@ ROWS = (
      lambda v, rate: None if rate > 125 else v <= 0.5),
     ('frames_dropped', 'camera frames dropped', '', None),
     ('late_ticks', 'simulation ticks > 3 periods late (whole run)', '', None),
+    ('command_waits', 'ticks that waited for a late command (whole run)', '', None),
+    ('command_waits_in_vain', '... of which in vain (stepped on the old command)', '', None),
     ('stale_halts', 'stale-input halts', '0', lambda v, rate: v == 0),
 )
 
@@ -102,6 +104,8 @@ def figures(metrics):
         'tracking_max_mm': metrics.get('tracking_max_mm'),
         'frames_dropped': system.get('simulation', {}).get('frames_dropped'),
         'late_ticks': system.get('simulation', {}).get('late_ticks'),
+        'command_waits': system.get('simulation', {}).get('command_waits'),
+        'command_waits_in_vain': system.get('simulation', {}).get('command_waits_in_vain'),
         'stale_halts': int(str(metrics.get('controller_failure') or '').startswith('stale')),
         'joint_states_received': controller.get('joint_states_received'),
         'largest_joint_state_gap_ms': controller.get('largest_joint_state_gap_ms'),
