@@ -26,13 +26,16 @@ convention of ``load_demo`` for files without times.
 """
 
 from dataclasses import dataclass, field
+import itertools
 import os
 from pathlib import Path
 import re
 import threading
 
+from etdmp_ros import limits
 from etdmp_ros.dmp import (Demonstration, DemonstrationError, FORMULATIONS, learn, load_demo,
                            save_demo)
+from etdmp_ros.dmp._demos import check_file_size
 import numpy as np
 
 #: File types a demonstration can be read from.
@@ -46,6 +49,10 @@ BASE_FRAMES = ('', 'base_link')
 
 # Skill names become file names in the skills folder: keep them portable and path-free.
 _NAME = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,63}\Z')
+
+
+class SkillExistsError(ValueError):
+    """A skill would replace one that must not be replaced (e.g. a built-in one)."""
 
 
 class UnknownSkillError(ValueError):
@@ -147,15 +154,19 @@ def read_mcap_path(path, topic=None):
         raise DemonstrationError(f'{path}: reading .mcap files needs the Python package '
                                  'mcap-ros2-support (pip install mcap-ros2-support)') from None
     try:
+        check_file_size(path)
         with open(path, 'rb') as stream:
             reader = make_reader(stream, decoder_factories=[DecoderFactory()])
             topics = _mcap_topics(reader)
             chosen = _choose_topic(path, topics, topic)
             kind = topics[chosen]
             records = [(message.log_time, decoded) for _, _, message, decoded in
-                       reader.iter_decoded_messages(topics=[chosen])]
+                       itertools.islice(reader.iter_decoded_messages(topics=[chosen]),
+                                        limits.MAX_DEMO_SAMPLES + 1)]
     except DemonstrationError:
         raise
+    except MemoryError:
+        raise DemonstrationError(f'{path}: too large to read (out of memory)') from None
     except OSError as err:
         raise DemonstrationError(f'{path}: cannot read: {err.strerror or err}') from None
     except Exception as err:   # noqa: B902 - the mcap readers raise many types on corrupt files
@@ -163,6 +174,9 @@ def read_mcap_path(path, topic=None):
                                  f'({type(err).__name__}: {err})') from None
     if not records:
         raise DemonstrationError(f'{path}: topic {chosen!r} holds no messages')
+    if len(records) > limits.MAX_DEMO_SAMPLES and kind == POSE_STAMPED:
+        raise DemonstrationError(f'{path}: topic {chosen!r} holds more than MAX_DEMO_SAMPLES = '
+                                 f'{limits.MAX_DEMO_SAMPLES} messages; not learned')
     if kind == POSE_STAMPED:
         frames = {msg.header.frame_id for _, msg in records}
         positions = [_xyz(msg.pose.position) for _, msg in records]
@@ -171,6 +185,10 @@ def read_mcap_path(path, topic=None):
             stamps = np.array([log_time * 1e-9 for log_time, _ in records])
     else:
         last = records[-1][1]   # the most recent plan/path recorded on the topic
+        if len(last.poses) > limits.MAX_DEMO_SAMPLES:
+            raise DemonstrationError(f'{path}: the last Path on {chosen!r} has '
+                                     f'{len(last.poses)} poses, more than MAX_DEMO_SAMPLES = '
+                                     f'{limits.MAX_DEMO_SAMPLES}; not learned')
         frames = {last.header.frame_id} | {pose.header.frame_id for pose in last.poses}
         positions = [_xyz(pose.pose.position) for pose in last.poses]
         stamps = np.array([_stamp(pose.header.stamp) for pose in last.poses])
@@ -300,14 +318,25 @@ class SkillLibrary:
         with self._lock:
             return sorted(self._entries)
 
-    def add(self, name, demo, source):
+    def source(self, name):
+        """Return where skill ``name`` came from (its SkillEntry.source), or None if unknown."""
+        with self._lock:
+            entry = self._entries.get(name)
+            return None if entry is None else entry.source
+
+    def add(self, name, demo, source, protected=()):
         """
         Learn ``demo`` (a Demonstration) as skill ``name`` and return its SkillEntry.
 
-        Replaces a skill of the same name only if learning succeeds. Raises DemonstrationError
-        (or ValueError for a bad name) and leaves the library unchanged on failure.
+        Replaces a skill of the same name only if learning succeeds and the existing skill's
+        source is not in ``protected`` (then SkillExistsError). Raises DemonstrationError (or
+        ValueError for a bad name) and leaves the library unchanged on failure.
         """
         check_skill_name(name)
+        existing = self.source(name)
+        if existing is not None and existing in protected:
+            raise SkillExistsError(f'skill {name!r} exists already ({existing}) and is not '
+                                   'replaced')
         if not isinstance(demo, Demonstration):
             raise TypeError(f'expected a Demonstration, got {type(demo).__name__}')
         if demo.dim not in (2, 3):
@@ -365,4 +394,9 @@ class SkillLibrary:
                     added.append(self.add(path.stem, demo, str(path)))
                 except ValueError as err:   # DemonstrationError, or a stem that is no name
                     errors.append(str(err) if str(path) in str(err) else f'{path}: {err}')
+                except MemoryError:
+                    errors.append(f'{path}: too large to learn (out of memory)')
+                except Exception as err:   # noqa: B902 - one bad file never stops the others
+                    errors.append(f'{path}: not learned ({type(err).__name__}: '
+                                  f'{str(err)[:limits.MAX_REASON_CHARS]})')
         return added, errors

@@ -265,7 +265,7 @@ PERCEPTION = (
 
 # ------------------------------------------------------------------------------- dmp_server
 _RUNTIME = {'dynamic': True}
-DMP_SERVER_SCENE = (*_scene('tool_offset'),
+DMP_SERVER_SCENE = (*_scene('tool_offset', 'initial_joint_positions'),
                     *_scene('task_plane.origin', 'task_plane.x_axis', 'task_plane.y_axis',
                             **_RUNTIME))
 _DAY = (0.0, 86400.0)
@@ -287,7 +287,10 @@ DMP_SERVER = (
     P('skills_dir', '', 'Folder where taught skills are saved and loaded from at start-up; '
       'empty = $ROS_HOME/etdmp_ros/skills or ~/.ros/etdmp_ros/skills.'),
     P('teach_skill_name', 'taught', 'Name of the skill a Path on /etdmp/demonstrations becomes '
-      '(replacing a skill of that name).', **_RUNTIME),
+      '(replacing a taught skill of that name).', **_RUNTIME),
+    P('teach_overwrite', False, 'Let a taught skill replace a built-in skill or one from '
+      'demo_files of the same name (saved, so also at every later start); false = refused.',
+      **_RUNTIME),
     P('formulation', 'ijspeert', 'DMP formulation.', choices=FORMULATIONS, **_RUNTIME),
     P('n_basis', 100, 'Basis functions of the forcing term (paper Table 1).',
       value_range=(2, 1000),
@@ -345,6 +348,9 @@ DMP_SERVER = (
       'reach.', unit='m', value_range=(0.0, 1.0), **_RUNTIME),
     P('min_height', _REACH.min_height, 'Points below this z (table top z = 0) are out of '
       'reach.', unit='m', value_range=(-2.0, 2.0), **_RUNTIME),
+    P('check_timing', True, 'Refuse a plan whose joint velocities or accelerations (IK along '
+      "the plan from the current joints, or initial_joint_positions) exceed the controller's "
+      'UR10 limits; the reason gives the shortest feasible duration.', **_RUNTIME),
     P('execute', True, 'Publish each plan on /etdmp/path for the controller.',
       section='Outputs', **_RUNTIME),
     P('publish_markers', True, 'Publish /etdmp/markers (built only while someone subscribes).',

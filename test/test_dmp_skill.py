@@ -1,5 +1,6 @@
 """Learning and generalizing skills: DMP vs ET-DMP, formulations, batches, bad input."""
 
+from etdmp_ros import limits
 from etdmp_ros.dmp import (builtin_demo, DemonstrationError, GeneralizationError, learn, nrmse,
                            OBSTACLE_MARGIN, ObstacleGains)
 import numpy as np
@@ -412,3 +413,40 @@ def test_demo_that_starts_at_its_goal():
 def test_bad_demonstrations(positions, kwargs, message):
     with pytest.raises(DemonstrationError, match=message):
         learn(positions, **kwargs)
+
+
+_WAVE = np.column_stack([np.linspace(0.0, 8.0, 80), np.sin(np.linspace(0.0, 6.0, 80))])
+
+
+@pytest.mark.parametrize('positions, kwargs, message', [
+    # issue 13 item 9: stamps spanning 1.975e9 s (the plan would need 2e11 samples)
+    (_WAVE, {'t': np.linspace(0.0, 1.975e9, 80)}, 'MAX_DEMO_DURATION'),
+    # coordinates x 1e300: every later product overflowed ('start equals goal' at generalize)
+    (_WAVE * 1e300, {}, 'MAX_DEMO_COORDINATE'),
+    (_WAVE * 1e-9, {}, 'MIN_DEMO_EXTENT'),
+    (_WAVE, {'t': np.r_[0.0, 1e-9, np.linspace(0.1, 1.0, 78)]}, 'MIN_DEMO_SAMPLE_INTERVAL'),
+    (np.tile(_WAVE, (limits.MAX_DEMO_SAMPLES // 80 + 1, 1)), {}, 'MAX_DEMO_SAMPLES'),
+])
+def test_demonstrations_beyond_the_limits_are_refused(positions, kwargs, message):
+    with pytest.raises(DemonstrationError, match=message):
+        learn(positions, **kwargs)
+
+
+def test_limits_leave_usable_demonstrations_alone():
+    # At the limits themselves: 600 s, MAX_DEMO_SAMPLES samples, coordinates of MAX_COORDINATE.
+    n = limits.MAX_DEMO_SAMPLES
+    wave = np.column_stack([np.linspace(0.0, 8.0, n), np.sin(np.linspace(0.0, 6.0, n))])
+    skill = learn(wave, t=np.linspace(0.0, limits.MAX_DEMO_DURATION, n))
+    assert skill.tau == limits.MAX_DEMO_DURATION
+    big = learn(_WAVE / 8.0 * limits.MAX_DEMO_COORDINATE)
+    traj = big.generalize(big.start, big.goal + 1.0)
+    assert np.all(np.isfinite(traj.x))
+
+
+@pytest.mark.parametrize('tau, dt, n', [(0.005, 0.01, 1), (0.001, 0.01, 1)])
+def test_a_movement_of_fewer_than_two_samples_is_refused(tau, dt, n):
+    # issue 13 item 7: duration 0.005 gave a 1-pose "plan" at the start, as a success.
+    skill = learn(builtin_demo('G'))
+    with pytest.raises(GeneralizationError, match=f'would have {n} sample'):
+        skill.generalize(skill.start + 1.0, skill.goal, tau=tau, dt=dt)
+    assert len(skill.generalize(skill.start + 1.0, skill.goal, tau=0.02, dt=0.01).t) == 3

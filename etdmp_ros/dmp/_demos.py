@@ -10,6 +10,15 @@ Files hold one demonstration each:
 - ``.npy``: a numeric array (T, d) of positions (or (T,) for d = 1).
 - ``.npz``: arrays ``positions`` (T, d) and, optionally, ``t`` (T,).
 
+Sizes are bounded (:mod:`etdmp_ros.limits`): a file is refused before it is read when it is
+larger than ``MAX_DEMO_FILE_BYTES``; an ``.npy`` array (alone or in an ``.npz``) when its header
+claims more than ``MAX_DEMO_ARRAY_BYTES`` (read before anything is allocated); a CSV when it has
+more than ``MAX_DEMO_SAMPLES`` data rows (reading stops there). A demonstration has at most
+``MAX_DEMO_SAMPLES`` samples of at most ``MAX_DEMO_COORDINATES`` coordinates, each at most
+``MAX_DEMO_COORDINATE`` in absolute value, lasts at most ``MAX_DEMO_DURATION`` with samples at
+least ``MIN_DEMO_SAMPLE_INTERVAL`` apart. Every failure of reading (I/O, memory, a corrupt
+archive) is a :class:`DemonstrationError` naming the file.
+
 Without sample times the samples are taken as uniform over tau = 1 s (``t = linspace(0, 1, T)``),
 the convention of the pbdlib letters the paper uses. Files are never unpickled: object arrays
 are refused (a pickle can run arbitrary code).
@@ -25,11 +34,14 @@ from dataclasses import dataclass, field
 import functools
 from importlib import resources
 import io
+import itertools
 from pathlib import Path
+import zipfile
 
 import numpy as np
 
 from ._errors import DemonstrationError
+from .. import limits
 
 # Forcing-term fitting and finite-difference accelerations need a few samples per basis width;
 # fewer than this is almost certainly a truncated or mis-parsed file.
@@ -127,6 +139,7 @@ def load_demo(path, name=None):
         raise DemonstrationError(f'{path}: not a regular file')
     name = path.stem if name is None else name
     try:
+        check_file_size(path)
         if suffix == '.csv':
             try:
                 text = path.read_text(encoding='utf-8-sig')
@@ -135,8 +148,31 @@ def load_demo(path, name=None):
                                          f'byte {err.start})') from None
             return _parse_csv(text, str(path), name)
         return _load_numpy(path, suffix, name)
+    except DemonstrationError:
+        raise
     except OSError as err:
         raise DemonstrationError(f'{path}: cannot read: {err.strerror or err}') from None
+    except MemoryError:
+        raise DemonstrationError(f'{path}: too large to read (out of memory)') from None
+    except (EOFError, ValueError, zipfile.BadZipFile, csv.Error, OverflowError,
+            KeyError) as err:
+        raise DemonstrationError(f'{path}: unreadable {suffix} file ({type(err).__name__}: '
+                                 f'{_shorten(str(err))})') from None
+
+
+def check_file_size(path):
+    """Raise DemonstrationError if the file at ``path`` is larger than MAX_DEMO_FILE_BYTES."""
+    size = Path(path).stat().st_size
+    if size > limits.MAX_DEMO_FILE_BYTES:
+        raise DemonstrationError(f'{path}: {size} bytes, larger than the limit of '
+                                 f'{limits.MAX_DEMO_FILE_BYTES} bytes (MAX_DEMO_FILE_BYTES); '
+                                 'not read')
+    return size
+
+
+def _shorten(text, limit=None):
+    limit = limits.MAX_REASON_CHARS if limit is None else limit
+    return text if len(text) <= limit else text[:limit - 3] + '...'
 
 
 def save_demo(path, demo, precision=None):
@@ -231,8 +267,13 @@ def _is_number(text):
 
 
 def _parse_csv(text, source, name):
-    rows = [(number, cells) for number, cells in
-            enumerate(csv.reader(io.StringIO(text)), start=1) if any(c.strip() for c in cells)]
+    reader = enumerate(csv.reader(io.StringIO(text)), start=1)
+    read = list(itertools.islice(reader, limits.MAX_CSV_ROWS + 1))
+    rows = [(number, cells) for number, cells in read if any(c.strip() for c in cells)]
+    if len(read) > limits.MAX_CSV_ROWS or len(rows) > limits.MAX_DEMO_SAMPLES + 1:
+        raise DemonstrationError(f'{source}: more than {limits.MAX_DEMO_SAMPLES} samples (or '
+                                 f'{limits.MAX_CSV_ROWS} lines), the limit MAX_DEMO_SAMPLES; not '
+                                 'learned')
     if not rows:
         raise DemonstrationError(f'{source}: empty file; expected a header row such as '
                                  f'"t,x,y" followed by one sample per line')
@@ -258,6 +299,10 @@ def _parse_csv(text, source, name):
         raise DemonstrationError(f'{source}: header (line {header_line}) names no position '
                                  f'column, only the time column {header[time_cols[0]]!r}')
 
+    if len(header) > limits.MAX_DEMO_COORDINATES + 1:
+        raise DemonstrationError(f'{source}: header (line {header_line}) names {len(header)} '
+                                 f'columns; at most {limits.MAX_DEMO_COORDINATES} coordinates '
+                                 'and a time column (MAX_DEMO_COORDINATES)')
     data = rows[1:]
     values = np.empty((len(data), len(header)))
     for i, (line, cells) in enumerate(data):
@@ -273,7 +318,7 @@ def _parse_csv(text, source, name):
                 values[i, k] = float(cell)
             except ValueError:
                 raise DemonstrationError(f'{source}: line {line}, column {header[k]!r}: '
-                                         f'{cell!r} is not a number') from None
+                                         f'{_shorten(repr(cell), 40)} is not a number') from None
 
     if len(data) < MIN_SAMPLES:
         raise DemonstrationError(f'{source}: {len(data)} data rows; a demonstration needs at '
@@ -310,6 +355,9 @@ def _load_numpy(path, suffix, name):
         # Checked here because np.load takes any other content for a pickle.
         raise DemonstrationError(f'{path}: not a valid {suffix} file: neither a .npy array nor '
                                  f'an .npz archive')
+    if head.startswith(_NPY_MAGIC):
+        with open(path, 'rb') as f:
+            _check_npy_header(f, str(path))
     try:
         loaded = np.load(path, allow_pickle=False)
     except ValueError as err:
@@ -328,7 +376,11 @@ def _load_numpy(path, suffix, name):
         keys = sorted(loaded.files)
         if 'positions' not in keys:
             raise DemonstrationError(f'{path}: no array named "positions" (found: '
-                                     f'{", ".join(keys) or "nothing"})')
+                                     f'{_shorten(", ".join(keys), 80) or "nothing"})')
+        for key in ['positions', 't'] if 't' in keys else ['positions']:
+            member_name = f'{key}.npy' if f'{key}.npy' in loaded.zip.namelist() else key
+            with loaded.zip.open(member_name) as member:
+                _check_npy_header(member, f'{path}: array {key!r}')
         try:
             positions = loaded['positions']
             t = loaded['t'] if 't' in keys else None
@@ -337,6 +389,45 @@ def _load_numpy(path, suffix, name):
                 raise DemonstrationError(f'{path}: {_PICKLE_REFUSED}') from None
             raise DemonstrationError(f'{path}: unreadable array ({err})') from None
     return _from_arrays(positions, t, str(path), name)
+
+
+def _check_npy_header(stream, source):
+    """
+    Read the header of the .npy array at ``stream`` and refuse it before it is allocated.
+
+    Refuses object arrays (pickles), more than 2 dimensions, more than MAX_DEMO_SAMPLES rows or
+    MAX_DEMO_COORDINATES columns and more than MAX_DEMO_ARRAY_BYTES in all.
+    """
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(stream, max_header_size=10000)
+        else:
+            shape, _, dtype = np.lib.format.read_array_header_2_0(stream, max_header_size=10000)
+    except (ValueError, EOFError, OSError) as err:
+        raise DemonstrationError(f'{source}: not a valid .npy array '
+                                 f'({_shorten(str(err), 120)})') from None
+    if dtype.hasobject:
+        raise DemonstrationError(f'{source}: {_PICKLE_REFUSED}')
+    rows = shape[0] if shape else 1
+    columns = shape[1] if len(shape) > 1 else 1
+    size = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    problem = None
+    if len(shape) > 2:
+        problem = f'{len(shape)} dimensions (a demonstration is (T, d))'
+    elif rows > limits.MAX_DEMO_SAMPLES:
+        problem = f'{rows} samples, more than MAX_DEMO_SAMPLES = {limits.MAX_DEMO_SAMPLES}'
+    elif columns > limits.MAX_DEMO_COORDINATES:
+        problem = (f'{columns} coordinates, more than MAX_DEMO_COORDINATES = '
+                   f'{limits.MAX_DEMO_COORDINATES}')
+        if rows < columns:
+            problem += '; if the array is stored as (d, T), transpose it to (T, d)'
+
+    elif size > limits.MAX_DEMO_ARRAY_BYTES:
+        problem = f'{size} bytes, more than MAX_DEMO_ARRAY_BYTES = {limits.MAX_DEMO_ARRAY_BYTES}'
+    if problem:
+        raise DemonstrationError(f'{source}: its header claims shape '
+                                 f'{_shorten(str(shape), 80)}: {problem}; not loaded')
 
 
 def _from_arrays(positions, t, source, name):
@@ -405,3 +496,32 @@ def _validate(positions, t, where, locate):
         raise DemonstrationError(f'{where}: time does not increase at {locate(row)}: '
                                  f'{t[row]!r} after {t[row - 1]!r}; times must be strictly '
                                  f'increasing')
+    _check_limits(positions, t, where, locate)
+
+
+def _check_limits(positions, t, where, locate):
+    """Raise DemonstrationError unless the demonstration fits :mod:`etdmp_ros.limits`."""
+    n, dim = positions.shape
+    if n > limits.MAX_DEMO_SAMPLES:
+        raise DemonstrationError(f'{where}: {n} samples, more than the limit '
+                                 f'MAX_DEMO_SAMPLES = {limits.MAX_DEMO_SAMPLES}')
+    if dim > limits.MAX_DEMO_COORDINATES:
+        raise DemonstrationError(f'{where}: {dim} coordinates, more than the limit '
+                                 f'MAX_DEMO_COORDINATES = {limits.MAX_DEMO_COORDINATES}')
+    duration = float(t[-1] - t[0])
+    if duration > limits.MAX_DEMO_DURATION:
+        raise DemonstrationError(f'{where}: lasts {duration:.6g} s, longer than the limit '
+                                 f'MAX_DEMO_DURATION = {limits.MAX_DEMO_DURATION:g} s (check '
+                                 'the time stamps)')
+    steps = np.diff(t)
+    row = int(np.argmin(steps)) + 1
+    if steps[row - 1] < limits.MIN_DEMO_SAMPLE_INTERVAL:
+        raise DemonstrationError(f'{where}: samples {steps[row - 1]:.3g} s apart at '
+                                 f'{locate(row)}, closer than MIN_DEMO_SAMPLE_INTERVAL = '
+                                 f'{limits.MIN_DEMO_SAMPLE_INTERVAL:g} s')
+    big = np.argwhere(np.abs(positions) > limits.MAX_DEMO_COORDINATE)
+    if big.size:
+        row, col = big[0]
+        raise DemonstrationError(f'{where}: {locate(row, col)} is {positions[row, col]:.3g}, '
+                                 f'beyond the limit MAX_DEMO_COORDINATE = '
+                                 f'{limits.MAX_DEMO_COORDINATE:g} in absolute value')

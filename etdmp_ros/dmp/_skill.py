@@ -12,6 +12,7 @@ from ._forcing_term import ForcingTerm, phase
 from ._integrate import rollout
 from ._obstacles import ObstacleGains
 from ._transform import EPS, EuclideanTransform, transforms
+from .. import limits
 
 FORMULATIONS = ('ijspeert', 'hoffmann')
 METHODS = ('etdmp', 'dmp')
@@ -119,6 +120,9 @@ class Skill:
         self.size = float(np.max(np.linalg.norm(y - self.goal, axis=1)))
         if not self.size > 0.0:
             raise DemonstrationError('demonstration does not move')
+        if not self.size >= limits.MIN_DEMO_EXTENT:
+            raise DemonstrationError(f'demonstration hardly moves: its extent {self.size:.3g} is '
+                                     f'below MIN_DEMO_EXTENT = {limits.MIN_DEMO_EXTENT:g}')
         self.forcing = ForcingTerm(n_basis, alpha)
         # Paper Eq. 6 with v = tau dx/dt: the forcing the demonstration needed at each sample.
         xd = np.gradient(y, t, axis=0, edge_order=2)
@@ -129,7 +133,12 @@ class Skill:
             target = needed / self.size
         else:  # Hoffmann: tau dv = K(g - x) - D v - K (g - x0) s + K f(s)
             target = (needed / K + (self.goal - self.start) * s[:, None]) / self.size
-        self.forcing.fit(s, target, regularization)
+        with np.errstate(all='ignore'):   # an overflow is reported just below, not warned of
+            self.forcing.fit(s, target, regularization)
+            finite = np.all(np.isfinite(target)) and np.all(np.isfinite(self.forcing(s)))
+        if not finite:
+            raise DemonstrationError('learning this demonstration overflows (its coordinates or '
+                                     'accelerations are too large to be represented)')
         self._tables = OrderedDict()
 
     def __repr__(self):
@@ -234,6 +243,10 @@ class Skill:
         if not (np.isfinite(margin) and margin >= 0.0):
             raise GeneralizationError(f'margin must be >= 0, got {margin!r}')
         n_out = int(round(tau * (1.0 + margin) / dt)) + 1
+        if n_out < 2:
+            raise GeneralizationError(f'tau = {tau:g} s is shorter than the output period dt = '
+                                      f'{dt:g} s: the movement would have {n_out} sample; make '
+                                      'tau (the duration) at least twice dt')
         if n_out > MAX_SAMPLES:
             raise GeneralizationError(f'{n_out} samples requested (dt={dt:g}, tau={tau:g}); '
                                       f'at most {MAX_SAMPLES}')

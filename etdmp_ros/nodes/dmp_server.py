@@ -30,13 +30,14 @@ import pathlib
 import threading
 import time
 
-from etdmp_ros import system
+from etdmp_ros import limits, system
 from etdmp_ros.dmp import builtin_demo, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.nodes._parameters import declare, values as parameter_values
 from etdmp_ros.nodes._spin import run
 from etdmp_ros.planning import place_demo, plan_path, PlanSettings, Workspace
-from etdmp_ros.robot import UR10Model
-from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_numpy, path_to_numpy,
+from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
+from etdmp_ros.robot._timing import timing_violation
+from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_cdr, path_from_numpy,
                                        point_to_numpy, points_from_numpy, pose_array_to_numpy)
 from etdmp_ros.skill_library import (BASE_FRAMES, check_skill_name, default_skills_dir,
                                      RECORDED_DIMS, recorded_path_demo, save_skill_demo,
@@ -60,6 +61,32 @@ TOOL_SOURCES = DESCRIPTION.parameter('tool_position_source').choices
 _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _THROTTLE = 5.0   # s between repeated warnings about the same bad input
+_TAUGHT = 'taught on /etdmp/demonstrations'
+#: /generalize keeps up to MAX_QUEUED_REQUESTS requests waiting (rclpy's default: 10).
+_SERVICE_QOS = QoSProfile(depth=limits.MAX_QUEUED_REQUESTS,
+                          reliability=ReliabilityPolicy.RELIABLE)
+
+
+def _short(text):
+    """Return ``text`` cut to MAX_REASON_CHARS characters (a log line stays readable)."""
+    text = str(text)
+    if len(text) <= limits.MAX_REASON_CHARS:
+        return text
+    return text[:limits.MAX_REASON_CHARS - 3] + '...'
+
+
+def _bounded(point, what):
+    """Raise ValueError unless every coordinate of ``point`` is within MAX_REQUEST_COORDINATE."""
+    point = np.asarray(point, dtype=float)
+    if not np.all(np.isfinite(point)):
+        raise ValueError(f'{what} contains NaN or inf')
+    big = np.abs(point) > limits.MAX_REQUEST_COORDINATE
+    if np.any(big):
+        value = point[np.flatnonzero(big)[0]]
+        raise ValueError(f'{what} has a coordinate of {value:.3g} m, beyond '
+                         f'{limits.MAX_REQUEST_COORDINATE:g} m (MAX_REQUEST_COORDINATE): no '
+                         'place of the workcell')
+    return point
 
 
 def _choice(values, name, choices):
@@ -87,6 +114,9 @@ class Settings:
     plane_tolerance: float
     execute: bool
     publish_markers: bool
+    teach_overwrite: bool
+    check_timing: bool
+    initial_joints: np.ndarray
 
     @classmethod
     def from_values(cls, values):
@@ -122,7 +152,16 @@ class Settings:
             teach_skill_name=values['teach_skill_name'],
             recorded_dim=_choice(values, 'recorded_dim', RECORDED_DIMS),
             plane_tolerance=values['plane_tolerance'], execute=values['execute'],
-            publish_markers=values['publish_markers'])
+            publish_markers=values['publish_markers'], teach_overwrite=values['teach_overwrite'],
+            check_timing=values['check_timing'],
+            initial_joints=_joints(values['initial_joint_positions']))
+
+
+def _joints(values):
+    q = np.asarray(values, dtype=float)
+    if q.shape != (6,) or not np.all(np.isfinite(q)):
+        raise ValueError(f'initial_joint_positions must be 6 finite numbers, got {values!r}')
+    return q
 
 
 class InvalidConfiguration(Exception):
@@ -171,6 +210,7 @@ class DmpServer(Node):
         self._obstacles = _Latest()
         try:
             self._model = UR10Model(tool_offset=self.get_parameter('tool_offset').value)
+            self._timing_model = UR10Model(tool_offset=self._model.tool_offset)  # _core_lock
         except (OSError, ValueError) as err:   # no example-robot-data, or a bad tool_offset
             log.fatal(f'cannot load the UR10 model: {err}')
             raise InvalidConfiguration(str(err)) from None
@@ -190,13 +230,14 @@ class DmpServer(Node):
                                  callback_group=inputs)
         self.create_subscription(PoseArray, 'etdmp/obstacles', self._on_obstacles, 10,
                                  callback_group=inputs)
+        # Raw: the size is checked before the bytes are decoded (numpy, not message objects).
         self.create_subscription(Path, 'etdmp/demonstrations', self._on_demonstration, 10,
-                                 callback_group=MutuallyExclusiveCallbackGroup())
+                                 callback_group=MutuallyExclusiveCallbackGroup(), raw=True)
         self._path_pub = self.create_publisher(Path, 'etdmp/path', _LATCHED)
         self._marker_pub = self.create_publisher(MarkerArray, 'etdmp/markers', _LATCHED)
         self._pending_markers = None
         self._marker_thread = None   # builds markers after a call, off the service's path
-        self.create_service(GetPlan, 'generalize', self._on_generalize,
+        self.create_service(GetPlan, 'generalize', self._on_generalize, qos_profile=_SERVICE_QOS,
                             callback_group=ReentrantCallbackGroup())
         log.info(f'serving /generalize with skill {settings.skill!r} '
                  f'({settings.plan.method}); skills: {", ".join(self._library.names())}')
@@ -282,30 +323,71 @@ class DmpServer(Node):
         path_from_numpy(np.zeros((2, 3)), np.zeros(2))
         self.get_logger().info(f'warm-up took {(time.perf_counter() - started) * 1e3:.0f} ms')
 
-    def _on_demonstration(self, msg):
+    def _protected_sources(self, name, settings):
+        """Return the sources a taught skill ``name`` must not replace (teach_overwrite)."""
+        source = self._library.source(name)
+        if source is None or settings.teach_overwrite or source == _TAUGHT:
+            return ()
+        skills_dir = pathlib.Path(self._skills_dir).expanduser()
+        if source != 'built-in' and pathlib.Path(source).parent == skills_dir:
+            return ()   # taught before and saved: re-teaching replaces it
+        return (source,)
+
+    def _on_demonstration(self, data):
         settings = self._settings
         name = settings.teach_skill_name
         log = self.get_logger()
         try:
-            frames = {msg.header.frame_id} | {pose.header.frame_id for pose in msg.poses}
-            wrong = sorted(frames - set(BASE_FRAMES))
+            if len(data) > limits.MAX_TAUGHT_PATH_BYTES:
+                raise ValueError(f'the Path is {len(data)} bytes, more than '
+                                 f'MAX_TAUGHT_PATH_BYTES = {limits.MAX_TAUGHT_PATH_BYTES} (about '
+                                 f'{limits.MAX_DEMO_SAMPLES} poses, MAX_DEMO_SAMPLES); not '
+                                 'decoded')
+            frame, pose_frames, stamps, positions, _ = path_from_cdr(data)
+            wrong = sorted(({frame} | pose_frames) - set(BASE_FRAMES))
             if wrong:
-                raise ValueError(f'frame {wrong[0]!r} is not base_link (no TF here)')
-            t, positions, _ = path_to_numpy(msg)
-            demo = recorded_path_demo(name, positions, t, settings.plane, settings.recorded_dim,
-                                      settings.plane_tolerance)
-            entry = self._library.add(name, demo, 'taught on /etdmp/demonstrations')
-        except ValueError as err:
-            log.error(f'taught demonstration for skill {name!r} rejected: {err}; the skills '
-                      'already learned are kept')
+                raise ValueError(f'frame {_short(repr(wrong[0]))} is not base_link (no TF here)')
+            if len(stamps) > limits.MAX_DEMO_SAMPLES:
+                raise ValueError(f'{len(stamps)} poses, more than MAX_DEMO_SAMPLES = '
+                                 f'{limits.MAX_DEMO_SAMPLES}')
+            if len(positions):
+                _bounded(positions[np.argmax(np.abs(positions).max(axis=1))], 'a pose')
+            t = (stamps - stamps[0]) * 1e-9 if len(stamps) else None
+            with np.errstate(over='raise', invalid='raise', divide='raise'):
+                demo = recorded_path_demo(name, positions, t, settings.plane,
+                                          settings.recorded_dim, settings.plane_tolerance)
+                self._check_usable(demo, settings)
+                entry = self._library.add(name, demo, _TAUGHT,
+                                          protected=self._protected_sources(name, settings))
+        except (ValueError, ArithmeticError) as err:
+            hint = ''
+            if 'exists already' in str(err):
+                hint = ' (set teach_overwrite to true to replace it, or choose another ' \
+                    'teach_skill_name)'
+            log.error(f'taught demonstration for skill {name!r} rejected: {_short(err)}{hint}; '
+                      'the skills already learned are kept')
             return
         try:
             saved = f'saved to {save_skill_demo(self._skills_dir, entry.demo)}'
-        except OSError as err:
+        except (OSError, ValueError) as err:
             saved = f'NOT saved (it is lost on restart): {err}'
             log.error(f'taught skill {name!r} {saved}')
         log.info(f'learned skill {name!r} ({demo.dim}D, {demo.n_samples} samples) from '
                  f'/etdmp/demonstrations, {saved}')
+
+    @staticmethod
+    def _check_usable(demo, settings):
+        """
+        Raise ValueError if ``demo`` could not be generalized into a plan with these settings.
+
+        What the Demonstration and learning check already (sample count, duration, extent,
+        finite products: etdmp_ros.limits) is not repeated; here: a plan of the demonstration's
+        own duration must have at least 3 poses at output_period.
+        """
+        if settings.plan.duration == 0.0 and demo.duration < 2 * settings.plan.output_period:
+            raise ValueError(f'it lasts {demo.duration:.3g} s, less than two output periods '
+                             f'({settings.plan.output_period:g} s): a plan of its own duration '
+                             'would have fewer than 3 poses')
 
     # -- inputs -------------------------------------------------------------------------------
 
@@ -340,6 +422,16 @@ class DmpServer(Node):
             self.get_logger().warn('/etdmp/goal: NaN or inf goal ignored',
                                    throttle_duration_sec=_THROTTLE)
             return
+        try:
+            _bounded(p, '/etdmp/goal')
+        except ValueError as err:
+            self.get_logger().warn(f'{err}: ignored', throttle_duration_sec=_THROTTLE)
+            return
+        outside = self._settings.plan.workspace.violation(p)
+        if outside is not None:   # kept: a request using it fails with the reason
+            self.get_logger().warn(f'/etdmp/goal ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) is out of '
+                                   f"the UR10's reach: {outside[1]}; requests using it fail",
+                                   throttle_duration_sec=_THROTTLE)
         with self._state_lock:
             self._goal.update(p)
 
@@ -404,7 +496,46 @@ class DmpServer(Node):
             meaning = 'the tool position' if what == 'start' else 'the perceived goal'
             raise ValueError(f'{what}.header.frame_id {frame!r} is not base_link; only base_link '
                              f'is accepted (or an empty frame id for {meaning})')
-        return point_to_numpy(pose_stamped.pose.position)
+        return _bounded(point_to_numpy(pose_stamped.pose.position), what)
+
+    def _check_goal(self, goal, skill, settings):
+        """Refuse a goal out of the arm's reach, or too far from the task plane (2D skills)."""
+        where = f'goal ({goal[0]:.3f}, {goal[1]:.3f}, {goal[2]:.3f})'
+        outside = settings.plan.workspace.violation(goal)
+        if outside is not None:
+            raise ValueError(f"{where} is out of the UR10's reach: {outside[1]}")
+        if skill.dim == 2:
+            height = float(settings.plane.distance(goal.reshape(1, 3))[0])
+            if abs(height) > limits.MAX_GOAL_PLANE_DISTANCE:
+                raise ValueError(f'{where} is {height:.3f} m from the task plane, more than '
+                                 f'MAX_GOAL_PLANE_DISTANCE = {limits.MAX_GOAL_PLANE_DISTANCE:g} '
+                                 f'm: not a goal for the 2D skill {settings.skill!r}')
+
+    def _check_timing(self, plan, skill, settings):
+        """Refuse a plan whose timing the arm cannot follow; say the shortest duration."""
+        with self._state_lock:
+            q = self._joint_state.fresh(settings.tool_state_max_age)
+        q = settings.initial_joints if q is None else q
+        fraction = limits.TIMING_LIMIT_FRACTION
+        model = self._timing_model
+        violation = timing_violation(
+            model, plan.positions, quaternion_to_matrix(plan.orientation), plan.t, q,
+            model.velocity_limits * fraction,
+            np.asarray(DEFAULT_ACCELERATION_LIMITS) * fraction, limits.TIMING_CHECK_SAMPLES)
+        if violation is None:
+            return
+        tau = settings.plan.duration or skill.tau
+        if np.isfinite(violation.slowdown):
+            needed = np.ceil(tau * violation.slowdown * 100.0) / 100.0
+            hint = (f'; the shortest feasible duration is about {needed:.2f} s (parameter '
+                    f'duration, now {tau:g} s)')
+        elif len(plan.t) < 3:
+            hint = (f'; duration {tau:g} s is too short for output_period '
+                    f'{settings.plan.output_period:g} s: set duration to at least '
+                    f'{2 * settings.plan.output_period:g} s (more for the arm to follow it)')
+        else:
+            hint = ''
+        raise ValueError(f'{violation.reason}{hint}')
 
     # -- /generalize ----------------------------------------------------------------------------
 
@@ -416,10 +547,13 @@ class DmpServer(Node):
             goal = self._request_point(request.goal, 'goal', settings)
             obstacles = self._current_obstacles(settings)
             skill = self._library.skill(settings.skill, settings.formulation, settings.n_basis)
-            with self._core_lock:
+            self._check_goal(goal, skill, settings)
+            with self._core_lock, np.errstate(over='raise', invalid='raise', divide='raise'):
                 plan = plan_path(skill, start, goal, obstacles, settings.plan, settings.plane)
-        except ValueError as err:   # PlanningError, UnknownSkillError, DemonstrationError
-            self.get_logger().error(f'/generalize with skill {settings.skill!r}: {err}')
+                if settings.check_timing:
+                    self._check_timing(plan, skill, settings)
+        except (ValueError, ArithmeticError) as err:   # PlanningError, UnknownSkillError, ...
+            self.get_logger().error(f'/generalize with skill {settings.skill!r}: {_short(err)}')
             response.plan = path_from_numpy(np.zeros((0, 3)), stamp=stamp)
             return response
         response.plan = path_from_numpy(plan.positions, plan.t, stamp, 'base_link',

@@ -239,6 +239,8 @@ def _breakdown():
         rows[f'plan_path (rollout + checks), {n_obs} obstacles'] = _median_ms(
             lambda: plan_path(skill, START, GOAL, obstacles, settings, plane))
     plan = plan_path(skill, START, GOAL, (), PlanSettings(duration=DURATION), plane)
+    rows['timing check (IK at 64 poses, check_timing)'] = _median_ms(
+        lambda: _timing_check(plan))
     args = (plan.positions, plan.t, time.time_ns(), 'base_link', plan.orientation)
     rows['response Path (path_from_numpy)'] = _median_ms(lambda: path_from_numpy(*args))
     message = path_from_numpy(*args)
@@ -252,12 +254,31 @@ def _breakdown():
     return rows
 
 
+def _timing_check(plan):
+    """Run dmp_server's joint timing check on ``plan`` as the node does (initial joints)."""
+    from etdmp_ros import limits, system
+    from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
+    from etdmp_ros.robot._timing import timing_violation
+    global _TIMING_MODEL
+    if _TIMING_MODEL is None:
+        _TIMING_MODEL = UR10Model(tool_offset=system.scene_defaults()['tool_offset'])
+    q0 = system.scene_defaults()['initial_joint_positions']
+    return timing_violation(_TIMING_MODEL, plan.positions, quaternion_to_matrix(plan.orientation),
+                            plan.t, q0, _TIMING_MODEL.velocity_limits,
+                            DEFAULT_ACCELERATION_LIMITS, limits.TIMING_CHECK_SAMPLES)
+
+
+_TIMING_MODEL = None
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--install', type=FsPath, help='an existing colcon install prefix')
     parser.add_argument('--calls', type=int, default=200, help='timed calls per case')
     parser.add_argument('--sustain', type=float, default=10.0, help='seconds at 20 req/s')
     parser.add_argument('--json', type=FsPath, help='also write the figures here')
+    parser.add_argument('--check-timing', choices=('true', 'false'), default='true',
+                        help="dmp_server's check_timing (the joint timing check of each plan)")
     parser.add_argument('--floor-server', choices=('single', 'multi'), help=argparse.SUPPRESS)
     parser.add_argument('--worker', type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -281,7 +302,8 @@ def main():
         overrides.write_text(
             'dmp_server:\n  ros__parameters:\n'
             f'    duration: {DURATION}\n    output_period: {PERIOD}\n'
-            f'    obstacle_max_age: 0.0\n    skills_dir: {tmp / "skills"}\n')
+            f'    obstacle_max_age: 0.0\n    skills_dir: {tmp / "skills"}\n'
+            f'    check_timing: {args.check_timing}\n')
         env = dict(os.environ, ROS_HOME=str(tmp / 'ros_home'))
         log = open(tmp / 'dmp_server.log', 'w')
         processes = [subprocess.Popen(_sourced(

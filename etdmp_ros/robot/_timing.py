@@ -1,0 +1,86 @@
+"""
+Timing feasibility of a planned tool path: can the UR10's joints follow it within their limits.
+
+:func:`timing_violation` solves the arm's pose IK (the controller's model,
+:meth:`UR10Model.solve_pose`, warm-started along the path from the current joints) at poses
+evenly spaced in time, and compares the joint velocities and accelerations between them (finite
+differences) with the limits the controller commands within (``UR10Model.velocity_limits``,
+``DEFAULT_ACCELERATION_LIMITS``). A path whose timing needs more is refused with the factor by
+which it must be slowed down: joint velocities scale as 1 / duration and accelerations as
+1 / duration^2 when a path is stretched in time, as a DMP's is by its tau.
+
+Accelerations are estimated over the spacing of the solved poses, so a peak shorter than that is
+underestimated: the check is necessary, not sufficient (the controller's tracking has the last
+word). The module needs no ROS.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._ur10 import JOINT_NAMES
+
+#: Pose error (m and rad) above which a pose counts as out of reach of the IK.
+IK_RESIDUAL = 1e-4
+
+
+@dataclass(frozen=True)
+class TimingViolation:
+    """Why a path's timing is infeasible: what is exceeded, where, and the slow-down needed."""
+
+    reason: str
+    slowdown: float
+
+
+def timing_violation(model, positions, rotation, t, q_seed, velocity_limits,
+                     acceleration_limits, samples=64, iterations=1):
+    """
+    Return a TimingViolation if the joints cannot follow ``positions`` at times ``t``, or None.
+
+    ``positions`` (n, 3) tool tip positions in base_link, all with ``rotation`` (3, 3); ``t``
+    (n,) seconds; ``q_seed`` (6,) joints to start the IK from (the current ones); the limits
+    (6,) in rad/s and rad/s^2. IK is solved at up to ``samples`` poses (``iterations`` Newton
+    steps each after the first, warm-started). A path of fewer than 3 poses has no timing to
+    follow and is refused. Unreachable poses are refused too (the reason says where).
+    """
+    positions = np.asarray(positions, dtype=float)
+    t = np.asarray(t, dtype=float)
+    n = len(t)
+    if n < 3:
+        return TimingViolation(f'the plan has {n} pose(s): too short to be followed', np.inf)
+    idx = np.unique(np.linspace(0, n - 1, min(n, max(3, int(samples)))).round().astype(int))
+    q = np.asarray(q_seed, dtype=float)
+    joints = np.empty((len(idx), 6))
+    for k, i in enumerate(idx):
+        q, error = model.solve_pose(positions[i], rotation, q,
+                                    iterations=60 if k == 0 else iterations)
+        residual = float(np.linalg.norm(error))
+        if residual > IK_RESIDUAL and k > 0:   # a jump: give Newton its full budget
+            q, error = model.solve_pose(positions[i], rotation, q)
+            residual = float(np.linalg.norm(error))
+        if residual > IK_RESIDUAL:
+            p = positions[i]
+            return TimingViolation(f'pose at t = {t[i]:.2f} s, ({p[0]:.3f}, {p[1]:.3f}, '
+                                   f'{p[2]:.3f}) m, is out of reach of the arm (IK misses it by '
+                                   f'{residual * 1000:.1f} mm)', np.inf)
+        joints[k] = q
+    times = t[idx]
+    qd = np.diff(joints, axis=0) / np.diff(times)[:, None]
+    qdd = np.diff(qd, axis=0) / (0.5 * (times[2:] - times[:-2]))[:, None]
+    v_ratio = np.abs(qd) / np.asarray(velocity_limits, dtype=float)
+    a_ratio = np.abs(qdd) / np.asarray(acceleration_limits, dtype=float)
+    rv, ra = float(v_ratio.max()), float(a_ratio.max())
+    if rv <= 1.0 and ra <= 1.0:
+        return None
+    if rv >= np.sqrt(ra):
+        k, j = np.unravel_index(np.argmax(v_ratio), v_ratio.shape)
+        what = (f'{JOINT_NAMES[j]} velocity {abs(qd[k, j]):.2f} rad/s at t = '
+                f'{0.5 * (times[k] + times[k + 1]):.2f} s, {rv:.2f} x its limit '
+                f'{velocity_limits[j]:.2f} rad/s')
+    else:
+        k, j = np.unravel_index(np.argmax(a_ratio), a_ratio.shape)
+        what = (f'{JOINT_NAMES[j]} acceleration {abs(qdd[k, j]):.1f} rad/s^2 at t = '
+                f'{times[k + 1]:.2f} s, {ra:.2f} x its limit {acceleration_limits[j]:.1f} '
+                'rad/s^2')
+    return TimingViolation(f'the arm cannot follow the plan in time: it needs {what}',
+                           max(rv, float(np.sqrt(ra))))
