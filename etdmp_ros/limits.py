@@ -75,3 +75,55 @@ TIMING_CHECK_SAMPLES = 64
 #: Fraction of each joint's velocity and acceleration limit a plan may need (the limits the
 #: controller commands within: UR10Model.velocity_limits, DEFAULT_ACCELERATION_LIMITS).
 TIMING_LIMIT_FRACTION = 1.0
+
+# perception and camera input -------------------------------------------------------------------
+# What a RealSense D435 colour camera (with depth aligned to it) can deliver in this workcell.
+# A camera_info, image or detection outside these is refused with the reason (docs/perception.md).
+
+#: Image width (px) of camera_info and the images: the D435 colour stream's modes, 320x180 up
+#: to 1920x1080.
+CAMERA_WIDTH_RANGE = (320, 1920)
+
+#: Image height (px) of camera_info and the images (D435 colour modes).
+CAMERA_HEIGHT_RANGE = (180, 1080)
+
+#: Horizontal field of view (deg) that fx of camera_info must give, 2 atan(width / 2 fx). A
+#: D435's colour lens sees about 69 x 42 deg (16:9 modes; 55 x 43 deg in the 4:3 modes such as
+#: 640x480, fx = fy = 617 px there). fx = 1e-300 px (180 deg) put a goal at 1e301 m.
+CAMERA_HFOV_RANGE = (40.0, 90.0)
+
+#: Vertical field of view (deg) that fy of camera_info must give, 2 atan(height / 2 fy).
+CAMERA_VFOV_RANGE = (30.0, 65.0)
+
+#: Largest difference of fx and fy, relative to fx (the D435's pixels are square).
+MAX_FOCAL_ASPECT_ERROR = 0.05
+
+#: Largest distance of the principal point (cx, cy) from the image centre, as a fraction of the
+#: image width and height (a D435's is within 2 %).
+MAX_PRINCIPAL_POINT_OFFSET = 0.1
+
+#: Depth (z in the optical frame, m) a D435 can measure: its minimum distance at 640x480 is about
+#: 0.1 m, its range at most 10 m. An object whose median depth is outside is refused (a depth
+#: image in metres or with swapped bytes reads as centimetres or 20 m).
+DEPTH_RANGE = (0.1, 10.0)
+
+#: A blob may cover at most this many times the image area of the sphere around its object,
+#: seen at the blob's depth and stretched as perspective stretches it in the image corners (the
+#: goal marker's disc covers about 0.8 of the unstretched sphere at 1.1 m depth, an obstacle
+#: 0.55; the margin is for the pixels along the edge of a small blob): an all-green frame
+#: (307 200 px) is no goal marker (700 px; at most 2 300 px at its 1.1 m).
+MAX_BLOB_AREA_FACTOR = 1.5
+
+#: Obstacles of one colour that touch are one blob, reported once (Detection.single False): a
+#: blob may be this many obstacles large, in image area and in metres.
+MAX_MERGED_OBSTACLES = 3
+
+#: How much farther (m, horizontally in base_link) than its radius a located object's points
+#: may lie from its axis (depth noise; see MAX_OUTSIDE_FRACTION).
+OBJECT_EXTENT_MARGIN = 0.015
+
+#: Fraction of a located object's points that may lie farther from its axis than its radius +
+#: OBJECT_EXTENT_MARGIN (flying pixels at its edges, up to the object's depth extent behind
+#: it). A green strip of 160 x 12 px on the table (1 900 px, below the area bound) spreads over
+#: 0.3 m: refused.
+MAX_OUTSIDE_FRACTION = 0.05

@@ -40,11 +40,14 @@ class Parameter:
 
     ``value_range`` is ``(low, high)`` (ints for an integer parameter), ``choices`` the allowed
     strings. ``dynamic``: may change at runtime (``ros2 param set``); otherwise read-only.
-    ``dynamic_typing``: values of another type are accepted and converted by the node (for
-    lists typed on the command line). ``array_type`` types an empty-list default. ``section``
-    starts a new group of parameters in the YAML file; ``note`` is the comment above the
-    parameter there (the description when empty); ``example``, for an empty default, is shown
-    commented out.
+    ``dynamic_typing``: values of another type are accepted and converted by the node (a list
+    as a YAML string). Every list parameter takes ``[]`` (which ``ros2 param set`` types as
+    ``bool[]``), integers for floats and whole floats for integers without it: they are turned
+    into its declared list type before rclpy checks the type
+    (:func:`etdmp_ros.nodes._parameters.as_declared`). ``array_type`` types an empty-list
+    default. ``section`` starts a new group of parameters in the YAML file; ``note`` is the
+    comment above the parameter there (the description when empty); ``example``, for an empty
+    default, is shown commented out.
     """
 
     name: str
@@ -210,8 +213,8 @@ UR10_SIM = (
 )
 
 # ------------------------------------------------------------------------------- perception
-PERCEPTION_SCENE = _scene('camera.position', 'camera.orientation', 'goal_marker.radius',
-                          'obstacle.radius', 'obstacle.height')
+PERCEPTION_SCENE = _scene('camera.position', 'camera.orientation', 'table.center', 'table.size',
+                          'goal_marker.radius', 'obstacle.radius', 'obstacle.height')
 _DETECTION = {'dynamic': True}
 PERCEPTION = (
     P('goal_hsv_low', [45, 100, 50], 'Lower corner [h, s, v] of the goal colour (OpenCV HSV: '
@@ -242,6 +245,10 @@ PERCEPTION = (
       'instead of the radius-constrained circle fit.', value_range=(3, 100_000), **_DETECTION),
     P('max_rim_rms', 0.004, 'A worse rim fit (RMS) flags the blob as two objects overlapping '
       'in the image.', unit='m', value_range=(1e-4, 0.1), **_DETECTION),
+    P('height_tolerance', 0.02, 'A goal or obstacle whose top face is seen higher than this '
+      'above its height (goal marker 2 mm, obstacle.height) or lower below the table top is '
+      'refused, as is one off the table (table.center, table.size).', unit='m',
+      value_range=(1e-3, 1.0), **_DETECTION),
     P('stamp_tolerance', 0.005, 'Colour, depth (and camera_info) messages belong to one frame '
       'when their stamps are this close (a RealSense stamps aligned depth with the colour '
       "frame's stamp).", unit='s', value_range=(0.0, 1.0), section='Frames', **_DETECTION),

@@ -40,6 +40,7 @@ SUITES = {
              'test_ros_conversions_tf', 'test_sim',
              'test_skill_library', 'test_system', 'test_vision'),
     'nodes': ('test_adversarial_controller', 'test_adversarial_dmp_server',
+              'test_adversarial_perception',
               'test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
               'test_install_layout', 'test_namespaces', 'test_perception_node',
               'test_ros2_cli', 'test_ur10_sim_node', 'test_ur10_sim_tf'),

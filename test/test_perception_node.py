@@ -119,6 +119,57 @@ class Client:
         return rows
 
 
+class CameraFeed:
+    """
+    Publishes colour, depth and camera_info from this test, as a RealSense driver would.
+
+    Each :meth:`send` is one frame: the three messages with one stamp, 33 ms after the last.
+    """
+
+    def __init__(self, client, *processes):
+        """Create the publishers; wait until perception (``processes``) subscribes to them."""
+        self.client = client
+        self.pubs = {topic: client.node.create_publisher(kind, topic, 10)
+                     for topic, kind in ((COLOR, Image), (DEPTH, Image), (INFO, CameraInfo))}
+        client.spin_until(lambda: all(p.get_subscription_count() for p in self.pubs.values()),
+                          TIMEOUT, 'perception subscribes to the camera', *processes)
+        self.stamp_ns = 1_000_000_000
+
+    def send(self, color, depth, info, color_encoding='rgb8', depth_encoding='16UC1',
+             edit=None):
+        """
+        Publish one frame (``info``: CameraIntrinsics); return its stamp (ns).
+
+        ``edit(color_msg, depth_msg, info_msg)``, if given, changes the messages before they go
+        out (a lying flag, a skewed camera matrix).
+        """
+        self.stamp_ns += 33_000_000
+        stamp = ns_to_stamp(self.stamp_ns)
+        messages = (image_msg(color, color_encoding, stamp),
+                    image_msg(depth, depth_encoding, stamp), camera_info_msg(info, stamp))
+        if edit is not None:
+            edit(*messages)
+        for topic, msg in zip((COLOR, DEPTH, INFO), messages):
+            self.pubs[topic].publish(msg)
+        self.client.spin_for(0.15)
+        return self.stamp_ns
+
+    def until(self, condition, what, process, frame, timeout=10.0):
+        """
+        Send ``frame`` (a dict of :meth:`send` arguments) until ``condition()``; return stamps.
+
+        A camera streams: a throttled warning or the next goal shows after some frames. Fails
+        with the node's log when ``process`` exits or after ``timeout``.
+        """
+        sent = []
+        deadline = time.monotonic() + timeout
+        while not condition():
+            assert process.process.poll() is None, f'node exited:\n{process.log()}'
+            assert time.monotonic() < deadline, f'timeout: {what}\n{process.log()}'
+            sent.append(self.send(**frame))
+        return sent
+
+
 @pytest.fixture
 def client(ros_env):
     """Return a Client in the test's isolated DDS domain; closed afterwards."""
@@ -201,21 +252,8 @@ def test_bad_frames_are_skipped(colcon_install, ros_env, tmp_path, client):
         rgb, depth = sim.render_rgb_depth()
         intrinsics = sim.intrinsics
         truth = sim.goal_position
-    pubs = {topic: client.node.create_publisher(kind, topic, 10)
-            for topic, kind in ((COLOR, Image), (DEPTH, Image), (INFO, CameraInfo))}
-    client.spin_until(lambda: all(p.get_subscription_count() for p in pubs.values()), TIMEOUT,
-                      'perception subscribes to the camera', perception)
-    stamp_ns = [1_000_000_000]
-
-    def send(color, depth_image, info=intrinsics, color_encoding='rgb8',
-             depth_encoding='16UC1'):
-        stamp_ns[0] += 33_000_000
-        stamp = ns_to_stamp(stamp_ns[0])
-        pubs[COLOR].publish(image_msg(color, color_encoding, stamp))
-        pubs[DEPTH].publish(image_msg(depth_image, depth_encoding, stamp))
-        pubs[INFO].publish(camera_info_msg(info, stamp))
-        client.spin_for(0.15)
-        return stamp_ns[0]
+    camera = CameraFeed(client, perception)
+    good = {'color': rgb, 'depth': depth, 'info': intrinsics}
 
     bad = [
         (rgb[:, :, 0].copy(), depth, {'color_encoding': 'mono8'}, "encoding 'mono8'"),
@@ -225,20 +263,11 @@ def test_bad_frames_are_skipped(colcon_install, ros_env, tmp_path, client):
     ]
     try:
         for color, depth_image, kwargs, message in bad:
-            # A camera streams: send until the (throttled) warning shows.
-            deadline = time.monotonic() + 10.0
-            while message not in perception.log():
-                assert perception.process.poll() is None, perception.log()
-                assert time.monotonic() < deadline, f'no warning "{message}":\n' + \
-                    perception.log()
-                send(color, depth_image, **kwargs)
+            camera.until(lambda: message in perception.log(), f'no warning "{message}"',
+                         perception, dict(good, color=color, depth=depth_image, **kwargs))
         assert client.goals == []
         assert perception.log().count('[WARN]') >= len(bad)
-        sent = []
-        deadline = time.monotonic() + 10.0
-        while not client.goals:
-            assert time.monotonic() < deadline, 'no goal from good frames:\n' + perception.log()
-            sent.append(send(rgb, depth))
+        sent = camera.until(lambda: client.goals, 'no goal from good frames', perception, good)
         stamp, point, _ = client.goals[-1]
         assert stamp in sent
         assert np.linalg.norm(point - truth) < TOLERANCE
@@ -251,17 +280,12 @@ def test_bad_frames_are_skipped(colcon_install, ros_env, tmp_path, client):
         assert client.set_perception(min_blob_area=10**6)[0].successful   # nothing that big
         client.spin_for(0.5)            # goals of frames sent before
         count = len(client.goals)
-        deadline = time.monotonic() + 10.0
-        while 'no goal marker visible' not in perception.log():
-            assert time.monotonic() < deadline, 'no warning:\n' + perception.log()
-            send(rgb, depth)
+        camera.until(lambda: 'no goal marker visible' in perception.log(), 'no warning',
+                     perception, good)
         assert len(client.goals) == count
         assert client.set_perception(min_blob_area=40)[0].successful
-        deadline = time.monotonic() + 10.0
-        while len(client.goals) == count:
-            assert time.monotonic() < deadline, 'no goal after min_blob_area 40:\n' + \
-                perception.log()
-            send(rgb, depth)
+        camera.until(lambda: len(client.goals) > count, 'no goal after min_blob_area 40',
+                     perception, good)
     finally:
         code = perception.stop()
     assert code == 0, perception.log()

@@ -6,9 +6,9 @@ From the colcon install, sourced, on a DDS domain of its own (fixture ``ros2``, 
 skill:=W`` shared by the rest of the module: the node, topic and service lists against the
 README's tables, both ``ros2 service call /generalize`` examples of the README verbatim (the
 first one makes the arm write the W, checked on the true tool tip, the commands with ``ros2
-topic echo`` and ``ros2 topic hz``), bad requests, ``ros2 param set|get|describe``, and Ctrl-C
-to ``ros2 launch``. The tests of the shared system run in file order. Skipped, with one reason,
-when the CLI is not installed (``make ros-tools``).
+topic echo`` and ``ros2 topic hz``), bad requests, ``ros2 param set|get|describe`` (a list
+parameter set to ``[]``), and Ctrl-C to ``ros2 launch``. The tests of the shared system run in
+file order. Skipped, with one reason, when the CLI is not installed (``make ros-tools``).
 """
 
 import math
@@ -371,6 +371,46 @@ def test_param_set_changes_the_plan_and_the_goal(launched):
     assert np.linalg.norm(positions[-1] - projected(goal)) < PLAN_TOLERANCE, (positions[-1], goal)
     truth = echo_once(ros2, '/ur10_sim/ground_truth/goal', 3)
     assert np.linalg.norm(truth - target) < 1e-6, truth
+
+
+def test_param_set_of_an_empty_list_clears_static_obstacles(launched):
+    """
+    ``ros2 param set /dmp_server static_obstacles "[]"`` clears them (issue 13).
+
+    The CLI types ``[]`` as bool[]; it was refused (expected 'Type.DOUBLE_ARRAY'), and after an
+    obstacle on the goal every request failed. A wrong type is still refused with the reason.
+    """
+    ros2 = launched.ros2
+    param(ros2, 'set', '/dmp_server', 'execute', 'false')
+    example = ros2_cli.readme_commands(GENERALIZE)[1]
+    goal = [float(v) for v in re.findall(r'[xyz]: (-?[0-9.]+)', example)][3:]
+    on_goal = '[' + ', '.join(f'{v:.3f}' for v in goal) + ']'
+    param(ros2, 'set', '/dmp_server', 'static_obstacles', on_goal)
+    get = param(ros2, 'get', '/dmp_server', 'static_obstacles').stdout.strip()
+    assert get == f'Double values are: {[round(v, 3) for v in goal]}', get
+
+    def plan():
+        return ros2_cli.plan_positions(ros2.run(example).stdout)
+    assert len(plan()) == 0       # an obstacle on the goal: the request fails
+
+    cleared = param(ros2, 'set', '/dmp_server', 'static_obstacles', '[]')
+    assert 'Set parameter successful' in cleared.stdout, (cleared.stdout, cleared.stderr)
+    get = param(ros2, 'get', '/dmp_server', 'static_obstacles').stdout.strip()
+    assert get == 'Double values are: []', get
+    positions = plan()
+    assert len(positions) > 100 and np.linalg.norm(positions[-1] - goal) < PLAN_TOLERANCE
+
+    refused = param(ros2, 'set', '/dmp_server', 'static_obstacles', 'abc', check=False)
+    out = refused.stdout + refused.stderr
+    assert 'Setting parameter failed' in out and \
+        "expected 'Type.DOUBLE_ARRAY' got 'Type.STRING'" in out, out
+    assert param(ros2, 'get', '/dmp_server', 'static_obstacles').stdout.strip() == \
+        'Double values are: []'
+    # Integers as the CLI types them are numbers of the list too.
+    param(ros2, 'set', '/dmp_server', 'static_obstacles', '[1, 0, 0]')
+    get = param(ros2, 'get', '/dmp_server', 'static_obstacles').stdout.strip()
+    assert get == 'Double values are: [1.0, 0.0, 0.0]', get
+    param(ros2, 'set', '/dmp_server', 'static_obstacles', '[]')
 
 
 def test_ctrl_c_to_ros2_launch_stops_the_four_nodes(launched):

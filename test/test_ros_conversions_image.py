@@ -1,8 +1,17 @@
-"""Image conversions: the reader of serialized images agrees with rclpy's own serialization."""
+"""
+Image conversions: the reader of serialized images agrees with rclpy's own serialization.
+
+And what perception accepts from a camera: encodings it names, this host's byte order, a
+pinhole camera matrix in camera_info.
+"""
+
+import sys
 
 from builtin_interfaces.msg import Time
-from etdmp_ros.ros_conversions import (ENCODINGS, header_stamp_ns, image_from_cdr,
-                                       image_from_msg, image_msg)
+from etdmp_ros.robot import CameraIntrinsics
+from etdmp_ros.ros_conversions import (camera_image_from_msg, camera_info_msg, ENCODINGS,
+                                       header_stamp_ns, image_from_cdr, image_from_msg,
+                                       image_msg, intrinsics_from_camera_info)
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -65,3 +74,38 @@ def test_an_unsupported_encoding_is_refused_as_by_image_from_msg():
     msg = Image(height=1, width=1, encoding='yuv422', step=2, data=b'\x00\x00')
     with pytest.raises(ValueError, match='unsupported image encoding'):
         image_from_cdr(serialize_message(msg))
+
+
+def test_camera_images_in_the_other_byte_order_are_refused():
+    """is_bigendian = 1 on 16-bit depth (the attack: little-endian data flagged big): refused."""
+    depth = example('16UC1', 4, 3)
+    msg = image_msg(depth, '16UC1')
+    np.testing.assert_array_equal(camera_image_from_msg(msg, ('16UC1',)), depth)
+    assert msg.is_bigendian == int(sys.byteorder == 'big')
+    msg.is_bigendian = int(not msg.is_bigendian)
+    # The plain conversion trusts the flag and swaps the bytes: 1.1 m would read 20 m ...
+    np.testing.assert_array_equal(image_from_msg(msg), depth.byteswap())
+    # ... the camera reader refuses it, naming the flag.
+    with pytest.raises(ValueError, match=r'16UC1 image flagged \w+-endian \(is_bigendian = '):
+        camera_image_from_msg(msg, ('16UC1',))
+    # 8-bit pixels have no byte order: the flag does not matter.
+    rgb = example('rgb8', 2, 2)
+    msg = image_msg(rgb, 'rgb8')
+    msg.is_bigendian = 1
+    np.testing.assert_array_equal(camera_image_from_msg(msg, ('rgb8', 'bgr8')), rgb)
+    with pytest.raises(ValueError, match="image encoding 'rgb8', expected 16UC1 or mono16"):
+        camera_image_from_msg(msg, ('16UC1', 'mono16'))
+
+
+@pytest.mark.parametrize('index, value', [(1, 5.0), (3, 0.1), (6, 1.0), (7, -2.0), (8, 0.0),
+                                          (8, 2.0), (0, float('nan')), (4, -617.0)])
+def test_a_camera_matrix_that_is_no_pinhole_one_is_refused(index, value):
+    """Skew, a last row other than [0, 0, 1], NaN, a negative focal length: ValueError."""
+    k = CameraIntrinsics.from_fovy(640, 480, 42.5)
+    msg = camera_info_msg(k)
+    assert intrinsics_from_camera_info(msg) == k
+    matrix = list(msg.k)
+    matrix[index] = value
+    msg.k = matrix
+    with pytest.raises(ValueError, match='not a pinhole camera matrix'):
+        intrinsics_from_camera_info(msg)

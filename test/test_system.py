@@ -7,7 +7,7 @@ give back its defaults; the nodes must declare exactly what it describes, with i
 
 from conftest import REPO
 from etdmp_ros import config_files, system
-from etdmp_ros.nodes._parameters import declare, descriptor
+from etdmp_ros.nodes._parameters import as_declared, declare, descriptor, list_type
 import numpy as np
 import pytest
 import rclpy
@@ -118,6 +118,85 @@ def test_declare_refuses_file_values_out_of_range_or_of_another_type(context):
                 declare(node, spec)
         finally:
             node.destroy_node()
+
+
+LIST_TYPES = (Parameter.Type.BOOL_ARRAY, Parameter.Type.INTEGER_ARRAY,
+              Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY)
+
+
+@pytest.mark.parametrize('spec', system.NODES, ids=system.NODE_NAMES)
+def test_an_empty_list_of_any_type_is_the_declared_empty_list(spec):
+    """``ros2 param set <node> <list> "[]"`` sends bool[]: every list parameter takes it."""
+    lists = [p for p in spec.all_parameters if list_type(p) is not None]
+    assert lists
+    for p in lists:
+        for given in LIST_TYPES:
+            [converted] = as_declared(spec, [Parameter(p.name, given, [])])
+            assert (converted.name, converted.type_, list(converted.value)) == (
+                p.name, list_type(p), []), (p.name, given)
+
+
+def test_lists_the_command_line_types_otherwise_are_converted_or_left_to_be_refused():
+    perception, dmp_server = system.node('perception'), system.node('dmp_server')
+    cases = [   # (spec, given, expected type and value; None: left as it is)
+        (dmp_server, Parameter('static_obstacles', value=[1, 0, 0]),
+         (Parameter.Type.DOUBLE_ARRAY, [1.0, 0.0, 0.0])),
+        (perception, Parameter('goal_hsv_low', value=[45.0, 100.0, 50.0]),
+         (Parameter.Type.INTEGER_ARRAY, [45, 100, 50])),
+        (perception, Parameter('goal_hsv_low', value=[45.5, 100.0, 50.0]), None),
+        (perception, Parameter('goal_hsv_low', value=[float('inf'), 100.0, 50.0]), None),
+        (dmp_server, Parameter('static_obstacles', value='[]'), None),
+        (dmp_server, Parameter('static_obstacles', value=[True]), None),
+        (dmp_server, Parameter('demo_files', value=[1, 2]), None),
+        (dmp_server, Parameter('duration', value=[]), None),           # a scalar: left
+        (dmp_server, Parameter('not_declared', value=[]), None),
+    ]
+    for spec, given, expected in cases:
+        [converted] = as_declared(spec, [given])
+        if expected is None:
+            assert converted is given, given.name
+        else:
+            assert (converted.type_, list(converted.value)) == expected, given.name
+
+
+def test_set_parameters_takes_an_empty_list_and_refuses_a_wrong_type(context):
+    """What `ros2 param set /dmp_server static_obstacles "[]"` does, on a declared node."""
+    spec = system.node('dmp_server')
+    node = _node(context, spec.name)
+    try:
+        declare(node, spec)
+        obstacles = 'static_obstacles'
+        assert node.set_parameters([Parameter(obstacles, value=[0.7, 0.3, 0.0])])[0].successful
+        result = node.set_parameters([Parameter(obstacles, Parameter.Type.BOOL_ARRAY, [])])[0]
+        assert result.successful, result.reason
+        value = node.get_parameter(obstacles)
+        assert value.type_ == Parameter.Type.DOUBLE_ARRAY and list(value.value) == []
+        assert node.set_parameters([Parameter(obstacles, value=[1, 0, 0])])[0].successful
+        assert list(node.get_parameter(obstacles).value) == [1.0, 0.0, 0.0]
+        for wrong in ('abc', [True, False], ['a']):
+            result = node.set_parameters([Parameter(obstacles, value=wrong)])[0]
+            assert not result.successful
+            assert "Wrong parameter type, expected 'Type.DOUBLE_ARRAY'" in result.reason
+        assert list(node.get_parameter(obstacles).value) == [1.0, 0.0, 0.0]
+    finally:
+        node.destroy_node()
+
+
+def test_list_overrides_typed_by_the_command_line_are_converted_too(context):
+    """``--ros-args -p tool_orientation:=[0, 1, 0, 0]`` is integer[]: taken as the floats."""
+    spec = system.node('dmp_server')
+    node = _node(context, spec.name, [Parameter('tool_orientation', value=[0, 1, 0, 0])])
+    try:
+        assert declare(node, spec)['tool_orientation'] == [0.0, 1.0, 0.0, 0.0]
+        assert node.get_parameter('tool_orientation').type_ == Parameter.Type.DOUBLE_ARRAY
+    finally:
+        node.destroy_node()
+    node = _node(context, spec.name, [Parameter('tool_orientation', value=['a', 'b'])])
+    try:
+        with pytest.raises(InvalidParameterTypeException):
+            declare(node, spec)
+    finally:
+        node.destroy_node()
 
 
 def test_every_descriptor_matches_its_parameter():

@@ -9,14 +9,16 @@ the known geometry at points of each object's top face and camera-facing side, a
 objects do not overlap in the image (overlaps and occlusions have their own tests).
 """
 
+import dataclasses
 import math
+import re
 
 import cv2
 from etdmp_ros.config_files import read_node_parameters
-from etdmp_ros.robot import (check_frame, Detections, Detector, detector_from_parameters,
-                             DetectorSettings, FrameSynchronizer, HsvRange, ObjectModel,
-                             Rejection, UR10Sim)
-from etdmp_ros.robot._vision import fit_circle
+from etdmp_ros.robot import (CameraIntrinsics, check_frame, Detections, Detector,
+                             detector_from_parameters, DetectorSettings, FrameSynchronizer,
+                             HsvRange, ObjectModel, Rejection, UR10Sim)
+from etdmp_ros.robot._vision import check_intrinsics, fit_circle
 import numpy as np
 import pytest
 
@@ -355,6 +357,113 @@ def test_frame_checks(sim, detector):
     check_frame(rgb, depth, k)
 
 
+#: A D435's colour stream at 1920x1080 (its factory calibration: fx = fy = 1380 px).
+D435_FULL_HD = CameraIntrinsics(1920, 1080, 1380.0, 1381.0, 958.2, 543.7)
+
+
+@pytest.mark.parametrize('changes, reason', [
+    ({'fx': 1e-300, 'fy': 1e-300}, 'horizontal field of view of 180.0 deg'),
+    ({'fx': 1e6, 'fy': 1e6}, 'horizontal field of view of 0.0 deg'),
+    ({'fy': 200.0}, 'vertical field of view of 100.4 deg'),
+    ({'fx': 560.0}, 'differ by more than 5%'),
+    ({'cx': 5000.0}, 'principal point (5000, 239.5)'),
+    ({'cy': -3.0}, 'principal point'),
+    ({'width': 16, 'height': 12, 'cx': 7.5, 'cy': 5.5, 'fx': 15.4, 'fy': 15.4},
+     'image size 16x12 is no D435 colour mode'),
+    ({'width': 4096, 'height': 3072, 'cx': 2047.5, 'cy': 1535.5, 'fx': 3950.0, 'fy': 3950.0},
+     'image size 4096x3072'),
+])
+def test_intrinsics_no_d435_has_are_refused(sim, detector, changes, reason):
+    """camera_info values impossible for a D435 raise ValueError naming the value."""
+    check_intrinsics(sim.intrinsics)
+    check_intrinsics(D435_FULL_HD)
+    k = dataclasses.replace(sim.intrinsics, **changes)
+    with pytest.raises(ValueError, match=re.escape(reason)):
+        check_intrinsics(k)
+    if (k.width, k.height) == (640, 480):   # the detector refuses the whole frame
+        rgb, depth = place(sim, sim.scene.goal_position, sim.scene.obstacle_positions)
+        with pytest.raises(ValueError, match=re.escape(reason)):
+            detector.detect(rgb, depth, k)
+
+
+def _painted(rgb, rows, columns):
+    """Return a copy of rgb with the goal marker's green painted over rows x columns."""
+    out = rgb.copy()
+    out[rows, columns] = (25, 190, 50)
+    return out
+
+
+def test_blobs_that_cannot_be_an_object_are_refused(sim, detector):
+    """
+    Depth outside the D435's range, blobs too large, objects off the table: a Rejection each.
+
+    The attacks of issue 13: swapped depth bytes put the goal at (-11.8, 1.0, -14.9), an
+    all-green frame at z = 0.15. Nothing is located from such blobs; a good frame still is.
+    """
+    scene = sim.scene
+    rgb, depth = place(sim, scene.goal_position, scene.obstacle_positions)
+    k = sim.intrinsics
+    good = detector.detect(rgb, depth, k)
+    assert np.linalg.norm(good.goal.position - scene.goal_position) < TOLERANCE
+    assert good.rejected == []
+    sim.set_goal((0.8, 0.1, 0.15))              # floating 15 cm above the table
+    floating = sim.render_rgb_depth()
+    sim.set_goal(scene.goal_position)
+    cases = {
+        'swapped bytes': (rgb, depth.byteswap(), 'depth 20.484 m is outside what a D435 '
+                          'measures (0.1 to 10 m)'),
+        'metres': (rgb, depth // 1000, 'depth 0.001 m is outside'),
+        'all green': (_painted(rgb, slice(None), slice(None)), depth,
+                      'blob of 307200 px: more than a goal can cover at 1.1'),
+        'green strip': (_painted(rgb, slice(300, 312), slice(80, 240)), depth,
+                        'mm from its axis: larger than a goal'),
+        'floating goal': (*floating, 'top face at z = 0.150 m, off the table plane'),
+    }
+    for name, (image, depth_image, reason) in cases.items():
+        found = detector.detect(image, depth_image, k)
+        reasons = [r.reason for r in found.rejected if r.kind == 'goal']
+        assert any(reason in r for r in reasons), (name, reasons)
+        if name != 'green strip':       # there the true goal is found beside the strip
+            assert found.goal is None, (name, found.goal)
+        else:
+            assert np.linalg.norm(found.goal.position - scene.goal_position) < TOLERANCE
+        for position in found.obstacle_positions():   # only true obstacles, if any
+            assert match(scene.obstacle_positions, position[None])[0] < TOLERANCE, name
+    # Obstacles too: swapped bytes refuse every blob.
+    found = detector.detect(rgb, depth.byteswap(), k)
+    assert found.obstacles == [] and len(found.rejected) == 3
+    # Off the table: the same goal with a table that ends before it.
+    small = Detector(detector.goal, detector.obstacle, detector.camera_pose,
+                     ((0.3, 0.0), (0.6, 1.5)), detector.settings)
+    found = small.detect(rgb, depth, k)
+    assert found.goal is None and found.obstacles == []
+    assert 'off the table (x 0.00 to 0.60 m, y -0.75 to 0.75 m)' in \
+        found.rejected[0].reason, found.rejected
+    # height_tolerance is the bound: at 0.2 m the floating goal is accepted (at its truth).
+    loose = Detector(detector.goal, detector.obstacle, detector.camera_pose, detector.table,
+                     dataclasses.replace(detector.settings, height_tolerance=0.2))
+    found = loose.detect(*floating, k)
+    assert np.linalg.norm(found.goal.position - (0.8, 0.1, 0.15)) < TOLERANCE
+
+
+def test_an_obstacle_above_its_height_is_refused_one_seen_lower_is_not(sim, detector):
+    """
+    A top face seen lower than the obstacle's height is what the arm hiding it shows: reported.
+
+    One floating with its top 0.25 m up (0.08 m tall) cannot be: refused, the other one kept.
+    """
+    goal = sim.scene.goal_position
+    sunk, floating = np.array([0.6, -0.2, 0.05]), np.array([1.0, 0.3, 0.25])
+    rgb, depth = place(sim, goal, [sunk, floating])
+    found = detector.detect(rgb, depth, sim.intrinsics)
+    assert len(found.obstacles) == 1, found.rejected
+    assert np.linalg.norm(found.obstacles[0].position - sunk) < TOLERANCE
+    assert [r.kind for r in found.rejected] == ['obstacle']
+    assert 'top face at z = 0.250 m, off the table plane: an obstacle on the table has it at ' \
+        '0.080 m (seen: 0 to 0.080 m, height_tolerance 0.02 m)' == found.rejected[0].reason
+    assert np.linalg.norm(found.goal.position - goal) < TOLERANCE
+
+
 def test_bgr_input_gives_the_same_result(sim, detector):
     """A bgr8 image (bgr=True) is located exactly like its rgb8 original."""
     rgb, depth = place(sim, sim.scene.goal_position, sim.scene.obstacle_positions)
@@ -416,7 +525,15 @@ def test_parameters_are_validated():
     with pytest.raises(ValueError, match='height'):
         ObjectModel('goal', HsvRange((0, 0, 0), (1, 1, 1)), 0.03, 0.0)
     with pytest.raises(ValueError, match='CameraPose'):
-        Detector(None, None, None)
+        Detector(None, None, None, None)
+    detector = detector_from_parameters(good)
+    pose, table = detector.camera_pose, detector.table
+    for bad in (None, ([0.0, 0.0], [1.0]), ([0.0, 0.0], [1.0, 0.0]), ([np.nan, 0.0], [1.0, 1.0])):
+        with pytest.raises(ValueError, match='table'):
+            Detector(detector.goal, detector.obstacle, pose, bad)
+    assert [v.tolist() for v in table] == [good['table.center'], good['table.size']]
+    with pytest.raises(ValueError, match='height_tolerance'):
+        DetectorSettings(height_tolerance=0.0)
 
 
 def test_fit_circle():

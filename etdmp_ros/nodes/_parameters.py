@@ -4,7 +4,15 @@ Declare a node's parameters from the system description (:mod:`etdmp_ros.system`
 The one helper every node uses: the descriptor (description with unit, range, choices,
 read-only unless runtime-changeable) and the default come from the node's
 :class:`~etdmp_ros.system.NodeSpec`; values given in parameter files override the defaults.
+
+List parameters take a list however the command line types it: ``ros2 param set`` types ``[]``
+as ``bool[]`` and ``[1, 0, 0]`` as ``integer[]``. :func:`declare` registers :func:`as_declared`
+as the node's pre-set callback, which turns such a value into the list type the parameter is
+declared with before rclpy checks the type; any other type is refused by rclpy with its reason
+(``Wrong parameter type, expected 'Type.DOUBLE_ARRAY' got 'Type.STRING'``).
 """
+
+import math
 
 from etdmp_ros.system import DOUBLE_ARRAY, STRING_ARRAY
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -13,6 +21,10 @@ from rclpy.parameter import Parameter
 
 _ARRAY_TYPES = {STRING_ARRAY: Parameter.Type.STRING_ARRAY,
                 DOUBLE_ARRAY: Parameter.Type.DOUBLE_ARRAY}
+_ELEMENT_TYPES = ((bool, Parameter.Type.BOOL_ARRAY), (int, Parameter.Type.INTEGER_ARRAY),
+                  (float, Parameter.Type.DOUBLE_ARRAY), (str, Parameter.Type.STRING_ARRAY))
+_LISTS = (Parameter.Type.BOOL_ARRAY, Parameter.Type.BYTE_ARRAY, Parameter.Type.INTEGER_ARRAY,
+          Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY)
 
 
 def descriptor(parameter):
@@ -32,17 +44,65 @@ def descriptor(parameter):
     return d
 
 
+def list_type(parameter):
+    """Return the rclpy list type of a :class:`~etdmp_ros.system.Parameter`, None for a scalar."""
+    if parameter.array_type:
+        return _ARRAY_TYPES[parameter.array_type]
+    if not isinstance(parameter.default, list):
+        return None
+    for kind, ros_type in _ELEMENT_TYPES:
+        if isinstance(parameter.default[0], kind):
+            return ros_type
+    return None
+
+
+def as_declared(spec, parameters):
+    """
+    Return rclpy ``parameters`` with list values in the list type ``spec`` declares for them.
+
+    An empty list of any type becomes the declared type's empty list, integers become floats
+    for a list of floats, and whole floats integers for a list of integers. Anything else is
+    returned as it is (rclpy refuses a wrong type; a node with ``dynamic_typing`` checks it).
+    """
+    declared = {p.name: list_type(p) for p in spec.all_parameters}
+    return [_converted(parameter, declared.get(parameter.name)) for parameter in parameters]
+
+
+def _converted(parameter, target):
+    given = parameter.type_
+    if target is None or given == target or given not in _LISTS:
+        return parameter
+    value = list(parameter.value)
+    if not value:
+        return Parameter(parameter.name, target, [])
+    if target == Parameter.Type.DOUBLE_ARRAY and given == Parameter.Type.INTEGER_ARRAY:
+        return Parameter(parameter.name, target, [float(v) for v in value])
+    if target == Parameter.Type.INTEGER_ARRAY and given == Parameter.Type.DOUBLE_ARRAY and \
+            all(math.isfinite(v) and v == int(v) for v in value):
+        return Parameter(parameter.name, target, [int(v) for v in value])
+    return parameter
+
+
 def declare(node, spec):
     """
     Declare every parameter of ``spec`` (a NodeSpec) on ``node``; return their values.
 
-    Raises rclpy's InvalidParameterValueException / InvalidParameterTypeException when a value
-    given in a parameter file is out of range or of the wrong type.
+    Lists given as parameter overrides are converted as :func:`as_declared` does, which is
+    registered as the node's pre-set callback (the only one: rclpy joins the lists that several
+    return). Raises rclpy's InvalidParameterValueException /
+    InvalidParameterTypeException when a value given in a parameter file is out of range or of
+    the wrong type.
     """
+    # Values given with --ros-args -p (typed by rcl as the command line is): the same
+    # conversion. rclpy keeps them in this dict and offers no public way to change them.
+    overrides = getattr(node, '_parameter_overrides', {})
     for p in spec.all_parameters:
+        if p.name in overrides:
+            overrides[p.name] = _converted(overrides[p.name], list_type(p))
         # An empty list has no ROS type: declare the type alone (unset means empty).
         default = _ARRAY_TYPES[p.array_type] if p.array_type and not p.default else p.default
         node.declare_parameter(p.name, default, descriptor(p))
+    node.add_pre_set_parameters_callback(lambda parameters: as_declared(spec, parameters))
     return values(node, spec)
 
 

@@ -19,11 +19,13 @@ newest complete frame. Publishes, stamped with the image's stamp, in base_link:
 
 Latest-only: image subscriptions keep the last 2 messages and the synchronizer drops every set
 older than the one processed, so a slow machine skips frames instead of falling behind. Bad input
-(unsupported encodings, sizes that do not match camera_info, stamps that never match) is
-skipped with a throttled warning; the node keeps running.
+(unsupported encodings, a wrong byte order, sizes that do not match camera_info, intrinsics no
+D435 has, stamps that never match) is skipped with a throttled warning; blobs that cannot be the
+goal or an obstacle (depth outside the D435's range, too large, off the table) are not reported,
+with a throttled warning naming the reason (docs/perception.md). The node keeps running.
 
-Parameters: the camera pose and the object sizes from config/scene.yaml (read-only), colours,
-thresholds and rates from config/perception.yaml (changeable at runtime, validated).
+Parameters: the camera pose, the table and the object sizes from config/scene.yaml (read-only),
+colours, thresholds and rates from config/perception.yaml (changeable at runtime, validated).
 """
 
 from dataclasses import dataclass
@@ -35,8 +37,9 @@ from etdmp_ros import system
 from etdmp_ros.nodes._parameters import declare, plain, values as parameter_values
 from etdmp_ros.nodes._spin import run
 from etdmp_ros.robot import detector_from_parameters, FrameSynchronizer
-from etdmp_ros.ros_conversions import (image_from_msg, image_msg, intrinsics_from_camera_info,
-                                       pose_array_from_numpy, stamp_to_ns)
+from etdmp_ros.ros_conversions import (camera_image_from_msg, image_msg,
+                                       intrinsics_from_camera_info, pose_array_from_numpy,
+                                       stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
@@ -229,14 +232,15 @@ class PerceptionNode(Node):
             info = messages.get('info', self._latest_info)
             if info is None:
                 raise ValueError(f'no camera_info received yet on {INFO_TOPIC}')
-            if color_msg.encoding not in COLOR_ENCODINGS:
-                raise ValueError(f'colour image encoding {color_msg.encoding!r}, expected rgb8')
-            if depth_msg.encoding not in DEPTH_ENCODINGS:
-                raise ValueError(f'depth image encoding {depth_msg.encoding!r}, expected 16UC1 '
-                                 '(millimetres)')
-            rgb = image_from_msg(color_msg)
-            depth = image_from_msg(depth_msg)
-            intrinsics = intrinsics_from_camera_info(info)
+            try:
+                rgb = camera_image_from_msg(color_msg, COLOR_ENCODINGS)
+            except ValueError as exc:
+                raise ValueError(f'colour {exc}') from None
+            try:
+                depth = camera_image_from_msg(depth_msg, DEPTH_ENCODINGS)
+            except ValueError as exc:
+                raise ValueError(f'depth {exc} (millimetres)') from None
+            intrinsics = intrinsics_from_camera_info(info)   # checked in detect
             bgr = color_msg.encoding == 'bgr8'
             detections = settings.detector.detect(rgb, depth, intrinsics, bgr=bgr)
         except ValueError as exc:
@@ -272,6 +276,10 @@ class PerceptionNode(Node):
             else:
                 self._warn(f'no goal marker visible: nothing published on {GOAL_TOPIC}',
                            key='goal')
+        refused = [r.reason for r in detections.rejected if r.kind == 'obstacle']
+        if refused:
+            self._warn(f'{len(refused)} obstacle blob(s) not reported: ' + '; '.join(refused),
+                       key='obstacle')
         merged = sum(not d.single for d in detections.obstacles)
         if merged:
             self._warn(f'{merged} obstacle blob(s) do not fit one cylinder (obstacles '

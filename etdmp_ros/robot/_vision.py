@@ -44,6 +44,17 @@ Pipeline of :meth:`Detector.detect`, per object class (goal, obstacle):
    truth on rendered 640x480 frames, also partly occluded (median about 0.5 mm, slightly towards
    the camera: outline pixels lie up to a pixel inside the true rim; test/test_vision.py).
 
+Plausibility (limits in :mod:`etdmp_ros.limits`, section perception and camera input): the
+intrinsics must be a D435 colour camera's (:func:`check_intrinsics`: image size, field of view,
+square pixels, principal point near the centre), else the frame raises ValueError. A blob is
+refused (a :class:`Rejection` naming the reason) when its median depth is outside the D435's
+range, when it covers more of the image than its object can at that depth
+(``MAX_BLOB_AREA_FACTOR``: checked before the blob is deprojected, so an all-green frame costs
+little), or when the located object does not fit the workcell: its points spread wider than
+the object, its top face is above the object's height or below the table top (z = 0) by more
+than ``height_tolerance`` (lower than its height is what a partly hidden top face shows), or it
+lies off the table. So no absurd position is ever reported.
+
 Objects of one colour that overlap in the image (obstacles in a row towards the camera) form one
 blob: it is cut where the depth steps by more than ``occlusion_gap`` between neighbouring pixels
 (the nearer object's edge), and each part of at least ``min_blob_area`` pixels is an object.
@@ -64,6 +75,7 @@ import numpy as np
 
 from ._camera import CameraIntrinsics, CameraPose
 from ._scene import GOAL_MARKER_THICKNESS
+from .. import limits
 
 #: Kinds of detected objects, as in :attr:`Detection.kind`.
 GOAL = 'goal'
@@ -74,8 +86,16 @@ _RIM_KERNEL = np.ones((3, 3), np.uint8)
 _MARGIN = 2
 _OCCLUDER_KERNEL = np.ones((2 * _MARGIN + 1, 2 * _MARGIN + 1), np.uint8)
 _NO_DEPTH = np.float32(np.inf)
+# Depth pixels of a blob whose median checks it against the D435's range (a subsample of bigger
+# blobs: an all-green frame's median would cost 3 ms).
+_DEPTH_SAMPLES = 4096
 # Drawing colours (RGB) of the annotated image.
 _DRAW = {GOAL: (255, 230, 0), OBSTACLE: (0, 230, 255), 'rejected': (150, 150, 150)}
+
+
+def _a(noun):
+    """Return ``noun`` with its indefinite article (a goal, an obstacle)."""
+    return ('an ' if noun[:1] in 'aeiou' else 'a ') + noun
 
 
 @dataclass(frozen=True)
@@ -165,6 +185,8 @@ class DetectorSettings:
     the camera by more than this is an occlusion edge, not the object's rim. ``min_rim_points``:
     fewer rim points than this and the top-face centroid is reported instead of the circle fit.
     ``max_rim_rms``: a circle fit worse than this (RMS, m) flags the blob as not one object.
+    ``height_tolerance``: a located top face higher than this (m) above its object's height,
+    or lower below the table top, is refused.
     """
 
     min_blob_area: int = 40
@@ -173,6 +195,7 @@ class DetectorSettings:
     occlusion_gap: float = 0.01
     min_rim_points: int = 8
     max_rim_rms: float = 0.004
+    height_tolerance: float = 0.02
 
     def __post_init__(self):
         """Validate the values."""
@@ -181,7 +204,7 @@ class DetectorSettings:
             if int(value) != value or value < 1:
                 raise ValueError(f'{name} must be a positive integer, got {value}')
             object.__setattr__(self, name, int(value))
-        for name in ('top_band', 'occlusion_gap', 'max_rim_rms'):
+        for name in ('top_band', 'occlusion_gap', 'max_rim_rms', 'height_tolerance'):
             value = float(getattr(self, name))
             if not math.isfinite(value) or value <= 0:
                 raise ValueError(f'{name} must be positive (m), got {value}')
@@ -255,11 +278,43 @@ def check_frame(rgb, depth_mm, intrinsics):
     if depth_mm.shape != rgb.shape[:2]:
         raise ValueError(f'depth {depth_mm.shape[1]}x{depth_mm.shape[0]} is not aligned to the '
                          f'colour image {rgb.shape[1]}x{rgb.shape[0]}')
-    if not isinstance(intrinsics, CameraIntrinsics):
-        raise ValueError(f'intrinsics must be a CameraIntrinsics, got {type(intrinsics).__name__}')
+    check_intrinsics(intrinsics)
     if (intrinsics.width, intrinsics.height) != (rgb.shape[1], rgb.shape[0]):
         raise ValueError(f'camera_info is {intrinsics.width}x{intrinsics.height} but the images '
                          f'are {rgb.shape[1]}x{rgb.shape[0]}')
+
+
+def check_intrinsics(intrinsics):
+    """
+    Raise ValueError unless ``intrinsics`` can be a RealSense D435 colour camera's.
+
+    Image size, the fields of view that fx and fy give, square pixels and a principal point
+    near the image centre, within the limits of :mod:`etdmp_ros.limits` (a dozen float
+    operations).
+    """
+    if not isinstance(intrinsics, CameraIntrinsics):
+        raise ValueError(f'intrinsics must be a CameraIntrinsics, got {type(intrinsics).__name__}')
+    k = intrinsics
+    (w_low, w_high), (h_low, h_high) = limits.CAMERA_WIDTH_RANGE, limits.CAMERA_HEIGHT_RANGE
+    if not (w_low <= k.width <= w_high and h_low <= k.height <= h_high):
+        raise ValueError(f'camera_info image size {k.width}x{k.height} is no D435 colour mode '
+                         f'({w_low}x{h_low} to {w_high}x{h_high})')
+    for axis, size, f, (low, high) in (('horizontal', k.width, k.fx, limits.CAMERA_HFOV_RANGE),
+                                       ('vertical', k.height, k.fy, limits.CAMERA_VFOV_RANGE)):
+        fov = math.degrees(2.0 * math.atan(0.5 * size / f))
+        if not low <= fov <= high:
+            name = 'fx' if axis == 'horizontal' else 'fy'
+            raise ValueError(f'camera_info {name} = {f:.6g} px gives a {axis} field of view of '
+                             f'{fov:.1f} deg at {k.width}x{k.height}; a D435 sees {low:g} to '
+                             f'{high:g} deg')
+    if abs(k.fx - k.fy) > limits.MAX_FOCAL_ASPECT_ERROR * k.fx:
+        raise ValueError(f'camera_info fx = {k.fx:.6g} and fy = {k.fy:.6g} px differ by more '
+                         f'than {limits.MAX_FOCAL_ASPECT_ERROR:.0%} (a D435 has square pixels)')
+    offset = limits.MAX_PRINCIPAL_POINT_OFFSET
+    if abs(k.cx - 0.5 * (k.width - 1)) > offset * k.width or \
+            abs(k.cy - 0.5 * (k.height - 1)) > offset * k.height:
+        raise ValueError(f'camera_info principal point ({k.cx:.6g}, {k.cy:.6g}) px is more than '
+                         f'{offset:.0%} of the image size from the centre of {k.width}x{k.height}')
 
 
 def fit_circle(points, radius, start, iterations=20):
@@ -295,16 +350,28 @@ class Detector:
     Locate the goal marker and the obstacles in colour + aligned depth frames.
 
     ``goal`` and ``obstacle`` are :class:`ObjectModel` instances, ``camera_pose`` the
-    :class:`CameraPose` of the colour optical frame in base_link. Stateless between frames.
+    :class:`CameraPose` of the colour optical frame in base_link, ``table`` the table top
+    ``(centre [x, y], size [x, y])`` (m, at z = 0) on which every object stands. Stateless
+    between frames.
     """
 
-    def __init__(self, goal, obstacle, camera_pose, settings=None):
-        """Keep the object models, the camera pose and the settings."""
+    def __init__(self, goal, obstacle, camera_pose, table, settings=None):
+        """Keep the object models, the camera pose, the table and the settings."""
         if not isinstance(camera_pose, CameraPose):
             raise ValueError(f'camera_pose must be a CameraPose, got {type(camera_pose).__name__}')
+        try:
+            centre, size = (np.array(v, dtype=float).reshape(2) for v in table)
+        except (TypeError, ValueError):
+            raise ValueError(f'table must be (centre [x, y], size [x, y]), got {table!r}') \
+                from None
+        if not (np.all(np.isfinite(centre)) and np.all(np.isfinite(size)) and np.all(size > 0)):
+            raise ValueError(f'table centre and size must be finite, the size positive, got '
+                             f'{centre.tolist()}, {size.tolist()}')
         self.goal = goal
         self.obstacle = obstacle
         self.camera_pose = camera_pose
+        self.table = (centre, size)
+        self._table_low, self._table_high = centre - 0.5 * size, centre + 0.5 * size
         self.settings = DetectorSettings() if settings is None else settings
         self._rotation = camera_pose.rotation
         self._position = np.asarray(camera_pose.position)
@@ -315,7 +382,7 @@ class Detector:
         return cls(ObjectModel(GOAL, goal_color, scene.goal_radius, GOAL_MARKER_THICKNESS),
                    ObjectModel(OBSTACLE, obstacle_color, scene.obstacle_radius,
                                scene.obstacle_height),
-                   scene.camera_pose, settings)
+                   scene.camera_pose, (scene.table_center, scene.table_size), settings)
 
     def detect(self, rgb, depth_mm, intrinsics, bgr=False):
         """
@@ -365,6 +432,10 @@ class Detector:
             bx1, by1 = min(x + x0 + w + _MARGIN, width), min(y + y0 + h + _MARGIN, height)
             blob = labels[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] == index
             depth = depth_mm[by0:by1, bx0:bx1]
+            reason = self._implausible_blob(model, blob, depth, area, intrinsics)
+            if reason:
+                rejected.append(Rejection(model.kind, (x + x0, y + y0, w, h), area, reason))
+                continue
             for part in self._split(model, blob, depth):
                 detection = self._locate(model, part, depth, (bx0, by0), intrinsics)
                 if isinstance(detection, Rejection):
@@ -372,6 +443,69 @@ class Detector:
                 else:
                     found.append(detection)
         return found
+
+    def _implausible_blob(self, model, blob, depth, area, intrinsics):
+        """
+        Return why a blob cannot be an object of ``model`` seen by a D435, or ''.
+
+        Its median depth (of at most _DEPTH_SAMPLES of its pixels) must be in the D435's range,
+        and its area at most MAX_BLOB_AREA_FACTOR times that of the sphere around the object
+        at that depth, as stretched by perspective in the image corners (module doc).
+        """
+        d = depth[blob]
+        d = d[d > 0]
+        if d.size < self.settings.min_depth_pixels:
+            return ''   # _locate gives the reason: no depth
+        z = float(np.median(d[::max(1, d.size // _DEPTH_SAMPLES)])) * 0.001
+        low, high = limits.DEPTH_RANGE
+        if not low <= z <= high:
+            return f'depth {z:.3f} m is outside what a D435 measures ({low:g} to {high:g} m)'
+        k = intrinsics
+        sphere = math.hypot(model.radius, 0.5 * model.height)
+        near = max(z - sphere, low)
+        # A sphere seen off the optical axis at angle a looks 1 / cos(a)^3 larger.
+        corner = math.hypot(0.5 * k.width / k.fx, 0.5 * k.height / k.fy)
+        stretch = (1.0 + corner * corner) ** 1.5
+        count = limits.MAX_MERGED_OBSTACLES if model.kind == OBSTACLE else 1
+        most = (limits.MAX_BLOB_AREA_FACTOR * count * stretch * math.pi * k.fx * k.fy
+                * sphere * sphere / max(near * near - sphere * sphere, 1e-6))
+        if area > most:
+            return (f'blob of {area} px: more than {_a(model.kind)} can cover at {z:.2f} m '
+                    f'depth (at most {most:.0f} px)')
+        return ''
+
+    def _implausible_position(self, model, points, position, single):
+        """
+        Return why a located object does not fit the workcell, or ''.
+
+        ``points`` (N, 3): the blob's points in base_link; ``position``: its top-face centre.
+        At most MAX_OUTSIDE_FRACTION of the points may lie farther from its axis (horizontally)
+        than its radius plus OBJECT_EXTENT_MARGIN (a merged obstacle blob: the farthest of
+        MAX_MERGED_OBSTACLES obstacles in a row), the top face must be between the table top
+        (z = 0) and the object's height, within ``height_tolerance``, and the centre on the
+        table. No sorting: about 10 us for 1000 points.
+        """
+        if not np.all(np.isfinite(position)):
+            return 'its position is not finite'
+        count = 1 if single or model.kind == GOAL else limits.MAX_MERGED_OBSTACLES
+        reach = (2 * count - 1) * model.radius + limits.OBJECT_EXTENT_MARGIN
+        dx, dy = points[:, 0] - position[0], points[:, 1] - position[1]
+        outside = np.count_nonzero(dx * dx + dy * dy > reach * reach)
+        if outside > limits.MAX_OUTSIDE_FRACTION * len(points):
+            return (f'{outside} of its {len(points)} points are more than {reach * 1000:.0f} mm '
+                    f'from its axis: larger than {_a(model.kind)}')
+        # The highest points seen may be lower than the top face (the arm hides it), never
+        # higher, and never below the table top.
+        tolerance = self.settings.height_tolerance
+        if not -tolerance <= position[2] <= model.height + tolerance:
+            return (f'top face at z = {position[2]:.3f} m, off the table plane: '
+                    f'{_a(model.kind)} on the table has it at {model.height:.3f} m (seen: 0 '
+                    f'to {model.height:.3f} m, height_tolerance {tolerance:g} m)')
+        if np.any(position[:2] < self._table_low) or np.any(position[:2] > self._table_high):
+            (x0, y0), (x1, y1) = self._table_low, self._table_high
+            return (f'at x, y = {position[0]:.3f}, {position[1]:.3f} m, off the table (x '
+                    f'{x0:.2f} to {x1:.2f} m, y {y0:.2f} to {y1:.2f} m)')
+        return ''
 
     def _split(self, model, blob, depth):
         """
@@ -453,10 +587,14 @@ class Detector:
         else:
             centre, rim_count = centroid, 0
         position = np.array([centre[0], centre[1], z_top])
+        single = rim_count == 0 or rim_rms <= s.max_rim_rms
+        reason = self._implausible_position(model, points, position, single)
+        if reason:
+            return Rejection(model.kind, bbox, area, reason)
         pixel = intrinsics.project(self.camera_pose.from_base(position))[0]
         return Detection(model.kind, position, (float(pixel[0]), float(pixel[1])), area,
                          bbox, median, float(np.count_nonzero(valid)) / area, rim_count,
-                         rim_rms, rim_count == 0 or rim_rms <= s.max_rim_rms)
+                         rim_rms, single)
 
     def _rim_points(self, model, blob, depth, origin, median, z_top, intrinsics):
         """Return the blob's real outline points (N, 2): x, y in base_link, see module doc."""
@@ -537,8 +675,8 @@ class Detector:
 DETECTOR_PARAMETERS = (
     'camera.position', 'camera.orientation', 'goal_marker.radius', 'obstacle.radius',
     'obstacle.height', 'goal_hsv_low', 'goal_hsv_high', 'obstacle_hsv_low', 'obstacle_hsv_high',
-    'min_blob_area', 'min_depth_pixels', 'top_band', 'occlusion_gap', 'min_rim_points',
-    'max_rim_rms',
+    'table.center', 'table.size', 'min_blob_area', 'min_depth_pixels', 'top_band',
+    'occlusion_gap', 'min_rim_points', 'max_rim_rms', 'height_tolerance',
 )
 
 
@@ -567,11 +705,11 @@ def detector_from_parameters(params):
     try:
         settings = DetectorSettings(**{name: p[name] for name in (
             'min_blob_area', 'min_depth_pixels', 'top_band', 'occlusion_gap', 'min_rim_points',
-            'max_rim_rms')})
+            'max_rim_rms', 'height_tolerance')})
         return Detector(
             ObjectModel(GOAL, colors[GOAL], p['goal_marker.radius'], GOAL_MARKER_THICKNESS),
             ObjectModel(OBSTACLE, colors[OBSTACLE], p['obstacle.radius'], p['obstacle.height']),
-            pose, settings)
+            pose, (p['table.center'], p['table.size']), settings)
     except TypeError as exc:   # a list where a number belongs, None
         raise ValueError(f'perception parameters: {exc}') from None
 

@@ -10,8 +10,8 @@ from ._compressed import (compress_image_cdr, compressed_image_cdr,  # noqa: F40
 from ._geometry import (ns_to_stamp, path_from_numpy, path_to_numpy,  # noqa: F401
                         point_to_numpy, points_from_numpy, pose_array_from_numpy,
                         pose_array_to_numpy, serialize_path, stamp_to_ns)
-from ._image import (camera_info_msg, ENCODINGS, image_from_cdr, image_from_msg,  # noqa: F401
-                     image_msg, intrinsics_from_camera_info)
+from ._image import (camera_image_from_msg, camera_info_msg, ENCODINGS,  # noqa: F401
+                     image_from_cdr, image_from_msg, image_msg, intrinsics_from_camera_info)
 from ._joint_state import (joint_state_arrays, joint_state_from_cdr,  # noqa: F401
                            joint_state_msg, MAX_JOINTS, velocity_command_array,
                            velocity_command_msg)

@@ -83,6 +83,26 @@ def image_from_msg(msg):
                    bool(msg.is_bigendian), msg.data)
 
 
+def camera_image_from_msg(msg, encodings):
+    """
+    Return the pixels of an Image from a camera driver, as :func:`image_from_msg` does.
+
+    Raises ValueError unless ``msg.encoding`` is one of ``encodings`` and 16-bit or wider pixels
+    are in this host's byte order: ROS 2 runs on little-endian hosts only, so a RealSense driver
+    never sends ``is_bigendian = 1``; such a flag (or the data) is wrong, and swapping the bytes
+    as it asks turned 1.1 m into 20 m.
+    """
+    if msg.encoding not in encodings:
+        raise ValueError(f'image encoding {msg.encoding!r}, expected {" or ".join(encodings)}')
+    dtype, _ = _encoding(msg.encoding)
+    if np.dtype(dtype).itemsize > 1 and bool(msg.is_bigendian) != _BIG_ENDIAN_HOST:
+        order = 'big' if msg.is_bigendian else 'little'
+        raise ValueError(f'{msg.encoding} image flagged {order}-endian (is_bigendian = '
+                         f'{int(msg.is_bigendian)}) on this {sys.byteorder}-endian host: no '
+                         'camera driver sends that, the flag or the data is wrong')
+    return image_from_msg(msg)
+
+
 def image_from_cdr(data):
     """
     Return the pixels of a serialized sensor_msgs/Image, as :func:`image_from_msg` would.
@@ -142,12 +162,16 @@ def intrinsics_from_camera_info(msg):
     """
     Return the :class:`CameraIntrinsics` of a sensor_msgs/CameraInfo (from K and the size).
 
-    Raises ValueError if K is not a valid camera matrix or distortion is non-zero (the images
-    would need undistorting first).
+    Raises ValueError if K is not a pinhole camera matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0,
+    1]]`` (finite, fx and fy positive, no skew: nothing here would apply one) or distortion is
+    non-zero (the images would need undistorting first). Whether the values are plausible for
+    the camera is the caller's check (:func:`etdmp_ros.robot._vision.check_intrinsics`).
     """
     k = np.asarray(msg.k, dtype=float).reshape(-1)
-    if k.size != 9 or not np.all(np.isfinite(k)) or k[0] <= 0 or k[4] <= 0:
-        raise ValueError(f'camera_info K is not a camera matrix: {k.tolist()}')
+    if k.size != 9 or not np.all(np.isfinite(k)) or k[0] <= 0 or k[4] <= 0 or \
+            np.any(k[[1, 3, 6, 7]] != 0) or k[8] != 1:
+        raise ValueError(f'camera_info K is not a pinhole camera matrix [fx, 0, cx, 0, fy, cy, '
+                         f'0, 0, 1]: {k.tolist()}')
     if len(msg.d) and np.any(np.asarray(msg.d, dtype=float) != 0):
         raise ValueError(f'camera_info has distortion {list(msg.d)}: undistort the images first')
     return CameraIntrinsics(int(msg.width), int(msg.height), float(k[0]), float(k[4]),
