@@ -5,24 +5,28 @@ Parameter files have the ROS 2 layout (``<node or /**>: ros__parameters: {...}``
 become dotted parameter names (``camera.position``), exactly as ``--params-file`` declares them.
 
 ``config/*.yaml`` and the parameter tables of ``docs/<node>.md`` are written from the system
-description (:mod:`etdmp_ros.system`)::
+description (:mod:`etdmp_ros.system`), the table of ``docs/limits.md`` from
+:mod:`etdmp_ros.limits` (each constant's ``#:`` comment)::
 
     python -m etdmp_ros.config_files            # (make config) rewrite them
     python -m etdmp_ros.config_files --check    # exit 1 naming the files that are out of date
 """
 
 import argparse
+import ast
 import json
 from pathlib import Path
 import sys
 import textwrap
 
-from etdmp_ros import system
+from etdmp_ros import limits, system
 import yaml
 
 WIDTH = 99
 TABLE_BEGIN = '<!-- parameters: written by `make config` from etdmp_ros/system.py -->'
 TABLE_END = '<!-- end of parameters -->'
+LIMITS_BEGIN = '<!-- limits: written by `make config` from etdmp_ros/limits.py -->'
+LIMITS_END = '<!-- end of limits -->'
 
 
 def read_parameter_file(path, node_name=None):
@@ -173,11 +177,52 @@ def parameter_table(spec):
 
 def docs_text(spec, current):
     """Return ``current`` (a docs page) with its parameter table replaced by the generated one."""
-    if TABLE_BEGIN not in current or TABLE_END not in current:
-        raise ValueError(f'docs/{spec.name}.md has no "{TABLE_BEGIN}" ... "{TABLE_END}" block')
-    head, rest = current.split(TABLE_BEGIN, 1)
-    _, tail = rest.split(TABLE_END, 1)
-    return f'{head}{TABLE_BEGIN}\n{parameter_table(spec)}\n{TABLE_END}{tail}'
+    return _between(current, TABLE_BEGIN, TABLE_END, parameter_table(spec),
+                    f'docs/{spec.name}.md')
+
+
+def _limit_value(value):
+    if isinstance(value, tuple):
+        return ' – '.join(_limit_value(v) for v in value)
+    if isinstance(value, int) and abs(value) >= 10000:
+        return f'{value:,}'.replace(',', '\u2009')
+    return f'{value:g}' if isinstance(value, float) else str(value)
+
+
+def limits_table():
+    """
+    Return the markdown tables of :mod:`etdmp_ros.limits`: one per section of the module.
+
+    A section starts at a comment line ending in dashes (``# perception ---``); each constant's
+    text is its ``#:`` comment lines; the value is the module's.
+    """
+    source = Path(limits.__file__).read_text(encoding='utf-8')
+    lines = source.splitlines()
+    out = []
+    for node in ast.parse(source).body:
+        if not isinstance(node, ast.Assign) or not isinstance(node.targets[0], ast.Name):
+            continue
+        k, comment = node.lineno - 2, []
+        while k >= 0 and lines[k].startswith('#:'):
+            comment.insert(0, lines[k][2:].strip())
+            k -= 1
+        section = next((line.strip('# -') for line in reversed(lines[:node.lineno - 1])
+                        if line.startswith('# ') and line.rstrip().endswith('---')), '')
+        name = node.targets[0].id
+        if not out or out[-1][0] != section:
+            out.append((section, []))
+        out[-1][1].append(f'| `{name}` | {_cell(_limit_value(getattr(limits, name)))} | '
+                          f'{_cell(" ".join(comment))} |')
+    return '\n\n'.join(f'**{section}**\n\n| limit | value | what it bounds |\n|---|---|---|\n'
+                       + '\n'.join(rows) for section, rows in out)
+
+
+def _between(current, begin, end, table, where):
+    if begin not in current or end not in current:
+        raise ValueError(f'{where} has no "{begin}" ... "{end}" block')
+    head, rest = current.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    return f'{head}{begin}\n{table}\n{end}{tail}'
 
 
 def generated_files(root):
@@ -188,6 +233,9 @@ def generated_files(root):
         files[root / 'config' / f'{spec.name}.yaml'] = node_file_text(spec)
         docs = root / 'docs' / f'{spec.name}.md'
         files[docs] = docs_text(spec, docs.read_text(encoding='utf-8'))
+    page = root / 'docs' / 'limits.md'
+    files[page] = _between(page.read_text(encoding='utf-8'), LIMITS_BEGIN, LIMITS_END,
+                           limits_table(), 'docs/limits.md')
     return files
 
 

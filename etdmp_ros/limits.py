@@ -127,3 +127,17 @@ OBJECT_EXTENT_MARGIN = 0.015
 #: it). A green strip of 160 x 12 px on the table (1 900 px, below the area bound) spreads over
 #: 0.3 m: refused.
 MAX_OUTSIDE_FRACTION = 0.05
+
+# controller and its inputs ---------------------------------------------------------------------
+# The tunable ones are controller parameters: max_path_poses (20 000), joint_state_timeout,
+# simulation_stall_timeout (docs/controller.md).
+
+#: Joint states the controller's subscription holds (KEEP_LAST): a flood from another publisher,
+#: delivered in bursts when the machine is busy, must not push the robot's own out before they
+#: are read (13 000 junk joint states a second through a 10-deep queue lost the robot's for
+#: 0.1 s). Each control step reads all that queued, microseconds each, and steps once.
+JOINT_STATE_QUEUE = 1000
+
+#: Most joints one JointState may name (a whole robot with grippers and sensors: generous);
+#: bounds reading a forged message.
+MAX_JOINT_STATE_JOINTS = 256

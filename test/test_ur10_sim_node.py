@@ -203,9 +203,9 @@ def test_a_stalled_simulation_slips_instead_of_bursting(launch):
 
 
 class Responder(BackgroundNode):
-    """A controller stand-in: answers each joint state at once, but every 0.25 s 12 ms late."""
+    """A controller stand-in: answers each joint state at once, but every 0.25 s 10 ms late."""
 
-    STALL, EVERY = 0.012, 0.25
+    STALL, EVERY = 0.010, 0.25
 
     def __init__(self):
         super().__init__('ur10_sim_test_responder')
@@ -233,7 +233,7 @@ def _waits(log):
 
 def test_a_late_controller_is_waited_for_not_missed(launch):
     """
-    A controller that answers every tick, but now and then 12 ms late (an 8 ms tick): waited for.
+    A controller that answers every tick, but now and then 10 ms late (an 8 ms tick): waited for.
 
     Each late answer holds the next tick back (its time waits too) instead of the arm moving on
     the old command unanswered: the stop line counts a wait per stall, none in vain. With

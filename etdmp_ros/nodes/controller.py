@@ -34,7 +34,7 @@ import sys
 import threading
 import time
 
-from etdmp_ros import system
+from etdmp_ros import limits, system
 from etdmp_ros.nodes._parameters import declare
 from etdmp_ros.nodes._spin import normal_scheduling, rate_qos, run, set_realtime_priority
 from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, trajectory_from_path,
@@ -67,11 +67,6 @@ FRAMES = ('', 'base_link')
 EXIT_ZEROS = 3
 #: s a path received before the first joint state waits for one (e.g. a latched path).
 WAIT_FOR_JOINT_STATES = 5.0
-#: Joint states held for the control thread: a flood from another publisher, delivered in
-#: bursts when the machine is busy, must not push the robot's out before they are read (13 kHz
-#: of junk: a 10-deep queue lost the robot's for 0.1 s). Each step reads all that queued
-#: (microseconds each) and steps once, on the newest, so a backlog never means old steps.
-JOINT_STATE_DEPTH = 1000
 #: s between two warnings about ignored joint states (each says how many were ignored).
 IGNORED_LOG_PERIOD = 2.0
 
@@ -239,7 +234,7 @@ class ControllerNode(Node):
         # not overwrite the robot's own before they are read.
         self._joint_state_sub = self.create_subscription(
             JointState, JOINT_STATES_TOPIC, self._on_joint_state,
-            QoSProfile(depth=JOINT_STATE_DEPTH), raw=True)
+            QoSProfile(depth=limits.JOINT_STATE_QUEUE), raw=True)
         self.create_subscription(Path, PATH_TOPIC, self._on_path, latched, raw=True)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_timer(self.period, self._watchdog,
@@ -329,7 +324,7 @@ class ControllerNode(Node):
             # step once, on the newest of the robot's.
             handle = self._joint_state_sub.handle
             with handle:
-                for _ in range(JOINT_STATE_DEPTH):
+                for _ in range(limits.JOINT_STATE_QUEUE):
                     taken = handle.take_message(JointState, True)
                     if taken is None:
                         break

@@ -13,7 +13,6 @@ from ._geometry import (ns_to_stamp, path_from_numpy, path_to_numpy,  # noqa: F4
 from ._image import (camera_image_from_msg, camera_info_msg, ENCODINGS,  # noqa: F401
                      image_from_cdr, image_from_msg, image_msg, intrinsics_from_camera_info)
 from ._joint_state import (joint_state_arrays, joint_state_from_cdr,  # noqa: F401
-                           joint_state_msg, MAX_JOINTS, velocity_command_array,
-                           velocity_command_msg)
+                           joint_state_msg, velocity_command_array, velocity_command_msg)
 from ._path_cdr import path_from_cdr  # noqa: F401
 from ._tf import MovingTransforms, tf_available, tf_message  # noqa: F401

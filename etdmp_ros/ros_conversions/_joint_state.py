@@ -8,15 +8,13 @@ driver's ``forward_velocity_controller`` expects.
 
 import array
 
+from etdmp_ros.limits import MAX_JOINT_STATE_JOINTS
 from etdmp_ros.robot import JOINT_NAMES
 import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from ._cdr import CdrReader
-
-#: Joints a JointState may name (a whole robot with its grippers and sensors: generous).
-MAX_JOINTS = 256
 
 
 def _doubles(values):
@@ -74,22 +72,22 @@ def joint_state_from_cdr(data, names=JOINT_NAMES):
     What :func:`joint_state_arrays` returns, read from the bytes (a ``raw=True`` subscription)
     without building message objects: a few microseconds, so that a flood of joint states for
     other joints costs little. Raises ValueError like it, and on malformed bytes or more than
-    :data:`MAX_JOINTS` joints.
+    :data:`~etdmp_ros.limits.MAX_JOINT_STATE_JOINTS` joints.
     """
     reader = CdrReader(data)
     sec, nanosec = reader.int32(), reader.uint32()
     reader.string()                                     # frame_id
     n = reader.uint32()
-    if n > MAX_JOINTS:
-        raise ValueError(f'joint state names {n} joints, more than {MAX_JOINTS}')
+    if n > MAX_JOINT_STATE_JOINTS:
+        raise ValueError(f'joint state names {n} joints, more than {MAX_JOINT_STATE_JOINTS}')
     joint_names = [reader.string() for _ in range(n)]
     index = {name: i for i, name in enumerate(joint_names)}
     missing = [name for name in names if name not in index]
     if missing:
         shown = joint_names if n <= 12 else joint_names[:12] + ['...']
         raise ValueError(f'joint state lacks joints {missing} (has {shown})')
-    position = reader.float64_sequence(MAX_JOINTS)
-    velocity = reader.float64_sequence(MAX_JOINTS)
+    position = reader.float64_sequence(MAX_JOINT_STATE_JOINTS)
+    velocity = reader.float64_sequence(MAX_JOINT_STATE_JOINTS)
     if len(position) != n or len(velocity) not in (0, n):
         raise ValueError(f'joint state has {n} names, {len(position)} positions and '
                          f'{len(velocity)} velocities')
