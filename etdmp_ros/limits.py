@@ -69,8 +69,11 @@ MAX_QUEUED_REQUESTS = 256
 
 #: Poses of a plan at which the timing check solves the arm's IK (evenly spaced in time); joint
 #: velocities and accelerations are finite differences between them, so a peak shorter than
-#: the spacing (2 s / 64 = 31 ms at the default) is underestimated. Bounds the check's cost.
-TIMING_CHECK_SAMPLES = 64
+#: the spacing (2 s / 32 = 62 ms at the default) is underestimated: the check is for plans far
+#: beyond the arm (a 2 s letter asked in 0.5 s needs 6 times the elbow's acceleration). Bounds
+#: the check's cost: 32 poses about 1.8 ms per plan, 64 poses 3.7 ms, which took /generalize
+#: past 1.5 x the bare-rclpy floor (bench_dmp_server.py).
+TIMING_CHECK_SAMPLES = 32
 
 #: Fraction of each joint's velocity and acceleration limit a plan may need (the limits the
 #: controller commands within: UR10Model.velocity_limits, DEFAULT_ACCELERATION_LIMITS).

@@ -223,6 +223,7 @@ def _publish_obstacles(caller, points):
 
 def _breakdown():
     """Time the parts of one request in this process (no DDS), medians in ms."""
+    from etdmp_ros import limits
     from etdmp_ros.dmp import builtin_demo, learn
     from etdmp_ros.planning import plan_path, PlanSettings
     from etdmp_ros.ros_conversions import path_from_numpy
@@ -239,7 +240,7 @@ def _breakdown():
         rows[f'plan_path (rollout + checks), {n_obs} obstacles'] = _median_ms(
             lambda: plan_path(skill, START, GOAL, obstacles, settings, plane))
     plan = plan_path(skill, START, GOAL, (), PlanSettings(duration=DURATION), plane)
-    rows['timing check (IK at 64 poses, check_timing)'] = _median_ms(
+    rows[f'timing check (IK at {limits.TIMING_CHECK_SAMPLES} poses, check_timing)'] = _median_ms(
         lambda: _timing_check(plan))
     args = (plan.positions, plan.t, time.time_ns(), 'base_link', plan.orientation)
     rows['response Path (path_from_numpy)'] = _median_ms(lambda: path_from_numpy(*args))
