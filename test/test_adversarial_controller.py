@@ -12,8 +12,8 @@ from another process, a Path of 10^5 poses, a path at the length limit. For ever
 - the controller says why it ignored the input (a WARN or ERROR line naming it);
 - the control loop kept its rate: the simulation never went ``watchdog_timeout`` (0.1 s)
   without a command;
-- the controller is alive and its memory stays under :data:`RSS_LIMIT`; the next row is the next
-  good request.
+- the controller is alive and its memory grows by less than :data:`RSS_GROWTH_LIMIT`; the
+  next row is the next good request.
 """
 
 import os
@@ -29,9 +29,10 @@ import numpy as np
 import pytest
 from test_controller_node import Rig
 
-#: Resident memory the controller must stay under through every attack (bytes). It runs at
-#: about 150 MB; a 10^5-pose path is 8 MB of bytes.
-RSS_LIMIT = 400e6
+#: How much the controller's resident memory may grow over the attacks (bytes), from what it
+#: uses once started (360 MB with numba's cache, 450 MB when numba compiled in the process:
+#: a fresh clone). Measured: +3 to +33 MB; a 10^5-pose path is 8 MB of bytes.
+RSS_GROWTH_LIMIT = 64e6
 #: Joint states per second of the flood: the rate that stopped every letter before (issue 13).
 FLOOD_RATE = 13000
 #: The shipped max_path_poses (config/controller.yaml).
@@ -162,6 +163,7 @@ def letter(rig):
     t = np.linspace(0.0, 1000.0, 100000)
     rig.oversized = serialize_path(np.tile(path.positions[:1], (len(t), 1)), t,
                                    orientation=(0.0, 0.0, 0.0, 0.0))
+    rig.rss_before = _rss(rig.controller.pid)
     return path
 
 
@@ -196,5 +198,6 @@ def test_an_attack_while_writing_leaves_the_letter_whole(rig, letter, attack):
     assert 'no velocity command' not in sim.log()[sim_log_start:], sim.log()[sim_log_start:]
     assert controller.returncode is None
     rss = _rss(controller.pid)
-    print(f'{attack.__name__}: controller RSS {rss / 1e6:.0f} MB')
-    assert rss < RSS_LIMIT
+    print(f'{attack.__name__}: controller RSS {rss / 1e6:.0f} MB '
+          f'({(rss - rig.rss_before) / 1e6:+.0f} MB)')
+    assert rss - rig.rss_before < RSS_GROWTH_LIMIT
