@@ -1,10 +1,9 @@
 """Skill library: demonstrations from every source become skills; bad ones replace nothing."""
 
-import io
 from pathlib import Path
 import time
-import zipfile
 
+from bad_files import forged_npy, npz_bomb
 from etdmp_ros import limits, skill_library
 from etdmp_ros.dmp import (builtin_demo, builtin_demo_names, Demonstration, DemonstrationError,
                            load_demo, nrmse, save_demo)
@@ -227,23 +226,6 @@ def test_default_skills_dir_follows_ros_home():
     assert default_skills_dir({'HOME': '/home/u'}) == Path('/home/u/.ros/etdmp_ros/skills')
 
 
-def _forged_npy(path, shape):
-    header = io.BytesIO()
-    np.lib.format.write_array_header_1_0(
-        header, {'descr': '<f8', 'fortran_order': False, 'shape': shape})
-    path.write_bytes(header.getvalue() + bytes(289 - len(header.getvalue())))
-    return path
-
-
-def _npz_of_zeros(path, rows):
-    with zipfile.ZipFile(path, 'w', compression=zipfile.ZIP_DEFLATED) as archive:
-        with archive.open('positions.npy', 'w', force_zip64=True) as member:
-            np.lib.format.write_array_header_1_0(
-                member, {'descr': '<f8', 'fortran_order': False, 'shape': (rows, 2)})
-            for _ in range(rows // 1_000_000):
-                member.write(bytes(16_000_000))
-
-
 def _wave(n=50):
     positions = np.column_stack([np.linspace(0, 5, n), np.sin(np.linspace(0, 5, n))])
     return Demonstration('w', positions, np.linspace(0, 1, n))
@@ -257,9 +239,9 @@ def test_files_beyond_the_limits_are_refused_before_they_are_read(tmp_path):
     folder = tmp_path / 'demos'
     folder.mkdir()
     save_demo(folder / 'wave.csv', _wave())
-    _forged_npy(folder / 'forged.npy', (10**12, 2))
+    forged_npy(folder / 'forged.npy', (10**12, 2))
     assert (folder / 'forged.npy').stat().st_size == 289
-    _npz_of_zeros(folder / 'bomb.npz', 10**6)
+    npz_bomb(folder / 'bomb.npz', 10**6)
     assert (folder / 'bomb.npz').stat().st_size < 100_000
     with open(folder / 'big.csv', 'w') as f:
         f.write('x,y\n')
