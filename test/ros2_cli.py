@@ -58,6 +58,13 @@ class Ros2:
         env.update(ROS_HOME=str(self.home / 'ros_home'), PYTHONUNBUFFERED='1',
                    RCUTILS_COLORIZED_OUTPUT='0', MUJOCO_GL='egl',
                    RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
+        # The many short-lived ros2 processes talk UDP only, no shared memory. Each one
+        # leaves a shared-memory port behind when it exits. The next writer to find it then
+        # runs Fast DDS's port health check while holding the port mutex that every process
+        # on the host shares. Twice in three fresh-clone runs, every node froze for 2.0 s this
+        # way, and ros2 param then timed out. The nodes, started by ros2 launch with this
+        # environment, keep their profile (config/fastdds.xml: shared memory between them).
+        env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
         self.env = env
         self._count = 0
 
