@@ -191,4 +191,7 @@ def test_without_tf2_msgs_one_warning_and_no_tf(colcon_install, ros_env, tmp_pat
     log = sim.log()
     assert code == 0, log
     assert log.count('tf2_msgs is not installed') == 1, log
-    assert log.count('[WARN]') == 1, log
+    # The only warning: a stall of the loop is timing (a busy machine), not tf.
+    warnings = [line for line in log.splitlines()
+                if '[WARN]' in line and 'simulation loop stalled' not in line]
+    assert len(warnings) == 1, log
