@@ -3,8 +3,8 @@
 from etdmp_ros.robot import CameraIntrinsics, JOINT_NAMES
 from etdmp_ros.ros_conversions import (camera_info_msg, image_from_msg, image_msg,
                                        intrinsics_from_camera_info, joint_state_arrays,
-                                       joint_state_msg, ns_to_stamp, velocity_command_array,
-                                       velocity_command_msg)
+                                       joint_state_from_cdr, joint_state_msg, ns_to_stamp,
+                                       velocity_command_array, velocity_command_msg)
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -91,6 +91,32 @@ def test_joint_state_round_trip_and_reordering():
     shuffled = joint_state_msg(q[order], None, names=[JOINT_NAMES[i] for i in order])
     back_q, back_qd = joint_state_arrays(shuffled)
     assert np.array_equal(back_q, q) and back_qd is None
+
+
+@pytest.mark.parametrize('frame', ['', 'a', 'ab', 'abc', 'base_link'])
+@pytest.mark.parametrize('with_velocity', [False, True])
+def test_joint_states_read_from_their_bytes_equal_rclpys(frame, with_velocity):
+    # Every frame-id length puts the sequences at another alignment.
+    order = np.argsort(JOINT_NAMES)
+    q, qd = RNG.normal(size=6), RNG.normal(size=6)
+    msg = joint_state_msg(q[order], qd[order] if with_velocity else None,
+                          names=[JOINT_NAMES[i] for i in order],
+                          stamp=ns_to_stamp(1_796_000_000_123_456_789))
+    msg.header.frame_id = frame
+    stamp, back_q, back_qd = joint_state_from_cdr(serialize_message(msg))
+    assert stamp == 1_796_000_000_123_456_789
+    assert np.array_equal(back_q, q)
+    assert np.array_equal(back_qd, qd) if with_velocity else back_qd is None
+
+
+def test_joint_states_from_bytes_refuse_what_the_arrays_refuse():
+    for bad, match in ((joint_state_msg(np.zeros(3), names=['a', 'b', 'c']), 'lacks'),
+                       (JointState(name=list(JOINT_NAMES), position=[0.0] * 5), '5 positions'),
+                       (joint_state_msg(np.full(6, np.nan)), 'NaN')):
+        with pytest.raises(ValueError, match=match):
+            joint_state_from_cdr(serialize_message(bad))
+    with pytest.raises(ValueError):
+        joint_state_from_cdr(serialize_message(joint_state_msg(np.zeros(6)))[:40])
 
 
 def test_joint_state_arrays_refuses_bad_messages():

@@ -41,6 +41,31 @@ def joint_state_msg(positions, velocities=None, efforts=None, names=JOINT_NAMES,
     return msg
 
 
+def _check_lengths(n, position, velocity):
+    if len(position) != n or len(velocity) not in (0, n):
+        raise ValueError(f'joint state has {n} names, {len(position)} positions and '
+                         f'{len(velocity)} velocities')
+
+
+def _order(joint_names, names):
+    """Return the indices of ``names`` in a joint state's ``joint_names``; ValueError if absent."""
+    index = {name: i for i, name in enumerate(joint_names)}
+    missing = [name for name in names if name not in index]
+    if missing:
+        shown = list(joint_names) if len(joint_names) <= 12 else list(joint_names[:12]) + ['...']
+        raise ValueError(f'joint state lacks joints {missing} (has {shown})')
+    return [index[name] for name in names]
+
+
+def _picked(position, velocity, order):
+    positions = np.asarray(position, dtype=float)[order]
+    velocities = np.asarray(velocity, dtype=float)[order] if len(velocity) else None
+    if not np.all(np.isfinite(positions)) or \
+            (velocities is not None and not np.all(np.isfinite(velocities))):
+        raise ValueError('joint state holds NaN or infinite values')
+    return positions, velocities
+
+
 def joint_state_arrays(msg, names=JOINT_NAMES):
     """
     Return ``(positions, velocities)`` of ``names`` from a JointState, reordered to ``names``.
@@ -48,21 +73,8 @@ def joint_state_arrays(msg, names=JOINT_NAMES):
     ``velocities`` is None if the message has none. Raises ValueError if a joint is missing,
     the arrays' lengths disagree with ``name`` or a value is not finite.
     """
-    n = len(msg.name)
-    if len(msg.position) != n or len(msg.velocity) not in (0, n):
-        raise ValueError(f'joint state has {n} names, {len(msg.position)} positions and '
-                         f'{len(msg.velocity)} velocities')
-    index = {name: i for i, name in enumerate(msg.name)}
-    missing = [name for name in names if name not in index]
-    if missing:
-        raise ValueError(f'joint state lacks joints {missing} (has {list(msg.name)})')
-    order = [index[name] for name in names]
-    positions = np.asarray(msg.position, dtype=float)[order]
-    velocities = np.asarray(msg.velocity, dtype=float)[order] if len(msg.velocity) else None
-    if not np.all(np.isfinite(positions)) or \
-            (velocities is not None and not np.all(np.isfinite(velocities))):
-        raise ValueError('joint state holds NaN or infinite values')
-    return positions, velocities
+    _check_lengths(len(msg.name), msg.position, msg.velocity)
+    return _picked(msg.position, msg.velocity, _order(msg.name, names))
 
 
 def joint_state_from_cdr(data, names=JOINT_NAMES):
@@ -71,7 +83,8 @@ def joint_state_from_cdr(data, names=JOINT_NAMES):
 
     What :func:`joint_state_arrays` returns, read from the bytes (a ``raw=True`` subscription)
     without building message objects: a few microseconds, so that a flood of joint states for
-    other joints costs little. Raises ValueError like it, and on malformed bytes or more than
+    other joints costs little (their names are checked before anything else is read). Raises
+    ValueError like it, and on malformed bytes or more than
     :data:`~etdmp_ros.limits.MAX_JOINT_STATE_JOINTS` joints.
     """
     reader = CdrReader(data)
@@ -80,23 +93,11 @@ def joint_state_from_cdr(data, names=JOINT_NAMES):
     n = reader.uint32()
     if n > MAX_JOINT_STATE_JOINTS:
         raise ValueError(f'joint state names {n} joints, more than {MAX_JOINT_STATE_JOINTS}')
-    joint_names = [reader.string() for _ in range(n)]
-    index = {name: i for i, name in enumerate(joint_names)}
-    missing = [name for name in names if name not in index]
-    if missing:
-        shown = joint_names if n <= 12 else joint_names[:12] + ['...']
-        raise ValueError(f'joint state lacks joints {missing} (has {shown})')
+    order = _order([reader.string() for _ in range(n)], names)
     position = reader.float64_sequence(MAX_JOINT_STATE_JOINTS)
     velocity = reader.float64_sequence(MAX_JOINT_STATE_JOINTS)
-    if len(position) != n or len(velocity) not in (0, n):
-        raise ValueError(f'joint state has {n} names, {len(position)} positions and '
-                         f'{len(velocity)} velocities')
-    order = [index[name] for name in names]
-    positions = position[order]
-    velocities = velocity[order] if len(velocity) else None
-    if not np.all(np.isfinite(positions)) or \
-            (velocities is not None and not np.all(np.isfinite(velocities))):
-        raise ValueError('joint state holds NaN or infinite values')
+    _check_lengths(n, position, velocity)
+    positions, velocities = _picked(position, velocity, order)
     return sec * 1_000_000_000 + nanosec, positions, velocities
 
 
