@@ -310,6 +310,47 @@ def test_input_counts_as_lost_on_the_robots_time():
     assert watch.lost(20 * ms, 110 * ms, True) == ''
 
 
+def test_joint_states_queued_behind_the_clock_are_late_not_lost(ros_env):
+    # After the controller's process was not scheduled for a while, its executor may run the
+    # watchdog (and the /clock callbacks) before the joint states that queued meanwhile. Those
+    # must be used, not reported as lost: a fresh clone's make test next to a busy loop stopped
+    # with "stale-input (none for 0.104 s of simulated time)" that way.
+    import rclpy
+    from etdmp_ros.nodes.controller import ControllerNode
+    from rclpy.parameter import Parameter
+    from rclpy.time import Time
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = ControllerNode(context=context, parameter_overrides=[
+            Parameter('use_sim_time', value=True), Parameter('tool_offset', value=TOOL_OFFSET)])
+        source = rclpy.create_node('joint_state_source', context=context)
+        pub = source.create_publisher(JointState, 'joint_states', 10)
+        clock = node.get_clock()
+        clock._set_ros_time_is_active(True)      # as rclpy's TimeSource does on /clock
+        ms = 1_000_000
+        clock.set_ros_time_override(Time(nanoseconds=5000 * ms))
+        node.watch.received(5000 * ms, time.monotonic_ns(), True, stamp_ns=5000 * ms)
+        deadline = time.monotonic() + 10.0
+        while not pub.get_subscription_count():
+            assert time.monotonic() < deadline, 'the controller did not match the publisher'
+            time.sleep(0.05)
+        pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp(5150 * ms)))
+        time.sleep(0.5)                          # delivered to the subscription, not yet taken
+        clock.set_ros_time_override(Time(nanoseconds=5160 * ms))   # the clock went on
+        node._watchdog()
+        assert not node._stale, 'joint states waiting in the subscription were called lost'
+        np.testing.assert_allclose(node._q, Q_INITIAL)
+        node._watchdog()                         # and with none waiting, lost they are
+        clock.set_ros_time_override(Time(nanoseconds=5300 * ms))
+        node._watchdog()
+        assert node._stale
+        source.destroy_node()
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
 def test_a_joint_state_stamp_must_advance_with_the_robots_clock():
     ms = 1_000_000
     watch = InputWatch(timeout=0.1, stall_timeout=1.0)

@@ -49,7 +49,7 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool
@@ -231,10 +231,13 @@ class ControllerNode(Node):
         self._status_pub = self.create_publisher(String, STATUS_TOPIC, latched)
         # Raw bytes, read with numpy (joint_state_from_cdr): a flood of joint states for other
         # joints is refused in microseconds. A deep history, not depth 1: such a flood must
-        # not overwrite the robot's own before they are read.
+        # not overwrite the robot's own before they are read. Best effort: a reliable reader
+        # holds every later sample back until a lost one is repaired, so one lost joint state
+        # meant none for ~0.1 s (stale input); best effort, the next one comes a period later.
         self._joint_state_sub = self.create_subscription(
             JointState, JOINT_STATES_TOPIC, self._on_joint_state,
-            QoSProfile(depth=limits.JOINT_STATE_QUEUE), raw=True)
+            QoSProfile(depth=limits.JOINT_STATE_QUEUE, reliability=ReliabilityPolicy.BEST_EFFORT),
+            raw=True)
         self.create_subscription(Path, PATH_TOPIC, self._on_path, latched, raw=True)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_timer(self.period, self._watchdog,
@@ -318,39 +321,46 @@ class ControllerNode(Node):
         receipt = time.monotonic()
         with self._lock:
             times = self._input_times()
-            newest = self._read_joint_state(data, times)
-            # The executor hands over one message per wait: take here what queued meanwhile (a
-            # flood from another publisher costs microseconds each, not an executor cycle) and
-            # step once, on the newest of the robot's.
-            handle = self._joint_state_sub.handle
-            with handle:
-                for _ in range(limits.JOINT_STATE_QUEUE):
-                    taken = handle.take_message(JointState, True)
-                    if taken is None:
-                        break
-                    newest = self._read_joint_state(taken[0], times) or newest
-            if newest is None:
-                return
-            stamp, q = newest
-            t = stamp * 1e-9
-            if self.controller.status == 'tracking' and self._last_receipt is not None:
-                self._tracked.joint_state(receipt - self._last_receipt, t)
-            self._last_receipt = receipt
-            self.watch.received(*times, stamp_ns=stamp)
-            self._q = q
-            if self._last_step is not None and self._last_step - 1e-9 <= t \
-                    < self._last_step + 0.75 * self.period and not self._stale:
-                return      # joint states faster than control_rate: step at control_rate
-            if self._stale:
-                self._stale = False
-                self.get_logger().info('joint states are back')
-            self._last_step = t
-            command = self.controller.step(q, t)
-            self._summarize(command, t)
-            self._rotation = command.tool_rotation
-            self._publish_command(command.qd)
-            self._publish_feedback(command, ns_to_stamp(stamp))
-            self._publish_status()
+            self._use_joint_states(self._read_joint_state(data, times), times, receipt)
+
+    def _use_joint_states(self, newest, times, receipt):
+        """
+        Take the joint states queued in the subscription and step once, on the newest.
+
+        ``newest`` is (stamp, q) of one read already, or None. The executor hands over one
+        message per wait: what queued meanwhile is taken here (a flood from another publisher
+        costs microseconds each, not an executor cycle). Return whether a joint state was used.
+        """
+        handle = self._joint_state_sub.handle
+        with handle:
+            for _ in range(limits.JOINT_STATE_QUEUE):
+                taken = handle.take_message(JointState, True)
+                if taken is None:
+                    break
+                newest = self._read_joint_state(taken[0], times) or newest
+        if newest is None:
+            return False
+        stamp, q = newest
+        t = stamp * 1e-9
+        if self.controller.status == 'tracking' and self._last_receipt is not None:
+            self._tracked.joint_state(receipt - self._last_receipt, t)
+        self._last_receipt = receipt
+        self.watch.received(*times, stamp_ns=stamp)
+        self._q = q
+        if self._last_step is not None and self._last_step - 1e-9 <= t \
+                < self._last_step + 0.75 * self.period and not self._stale:
+            return True     # joint states faster than control_rate: step at control_rate
+        if self._stale:
+            self._stale = False
+            self.get_logger().info('joint states are back')
+        self._last_step = t
+        command = self.controller.step(q, t)
+        self._summarize(command, t)
+        self._rotation = command.tool_rotation
+        self._publish_command(command.qd)
+        self._publish_feedback(command, ns_to_stamp(stamp))
+        self._publish_status()
+        return True
 
     def _read_joint_state(self, data, times):
         """Return (stamp ns, q) of serialized joint state bytes, or None if they are not usable."""
@@ -396,7 +406,13 @@ class ControllerNode(Node):
 
     def _watchdog(self):
         with self._lock:
-            lost = self.watch.lost(*self._input_times())
+            times = self._input_times()
+            lost = self.watch.lost(*times)
+            # After the process was not scheduled for a while, the executor may run this timer
+            # and the /clock callbacks before the joint states that queued meanwhile: those are
+            # late, not lost.
+            if lost and self._use_joint_states(None, times, time.monotonic()):
+                return
             if lost:
                 if not self._stale:
                     self._stale = True
