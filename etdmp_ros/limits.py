@@ -60,11 +60,12 @@ MAX_REASON_CHARS = 300
 #: refused instead of being projected onto the plane.
 MAX_GOAL_PLANE_DISTANCE = 0.2
 
-#: Requests /generalize keeps waiting to be served (the service's request-history depth,
-#: KEEP_LAST).
-#: rclpy's default of 10 dropped 38 of a burst of 50 silently. A burst beyond this many requests
-#: outstanding at once still loses the oldest ones in the middleware, unseen by the node (rclpy
-#: offers no notification of a dropped request): the remaining limit.
+#: Requests /generalize holds waiting to be served: the depth of the middleware's request history
+#: (KEEP_LAST) and of the node's own queue, into which its service thread takes them with their
+#: receipt times. rclpy's default of 10 dropped 38 of a burst of 50 silently. A request whose
+#: turn comes after more than ``max_request_wait`` is answered at once with an empty plan
+#: (refused as busy), so the queues stay short under overload and none is dropped unanswered
+#: unless more than about twice this many arrive faster than ~1 ms apart.
 MAX_QUEUED_REQUESTS = 256
 
 #: Poses of a plan at which the timing check solves the arm's IK (evenly spaced in time); joint

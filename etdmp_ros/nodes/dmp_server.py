@@ -15,11 +15,14 @@ Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward 
 serves ``/generalize`` (nav_msgs/srv/GetPlan); publishes ``/etdmp/path`` (transient local) and
 ``/etdmp/markers``.
 
-Threads: one executor (``_spin.make_executor``) serves calls one at a time (each takes about a
-millisecond of this node's own work; the round trip is dominated by rclpy and DDS); markers
-are built and published by a worker thread after the response. The service sits in a reentrant
-callback group and the state is locked, so a multi-threaded executor (e.g. in a user's own
-process) is safe: ``_state_lock`` guards the latest inputs and the Pinocchio model,
+Threads: the executor (``_spin.make_executor``) runs the input callbacks and parameters;
+/generalize is served by a thread of its own, first come first served, one call at a time
+(:mod:`etdmp_ros.nodes._queued_service`: a request that waited longer than
+``max_request_wait`` is refused as busy at once, so none is lost unanswered under overload; a
+call takes about a millisecond of this node's own work, the round trip is dominated by rclpy's
+message conversion and DDS); markers are built and published by a worker thread after the
+response. The state is locked, so a multi-threaded executor (e.g. in a user's own process) is
+safe too: ``_state_lock`` guards the latest inputs and the Pinocchio model,
 ``_core_lock`` the skills' rollouts (their caches are not thread-safe; a rollout takes well under
 a millisecond), and the skill library has its own lock. Settings are an immutable snapshot,
 replaced whole when parameters change.
@@ -33,6 +36,7 @@ import time
 from etdmp_ros import limits, system
 from etdmp_ros.dmp import builtin_demo, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.nodes._parameters import declare, values as parameter_values
+from etdmp_ros.nodes._queued_service import QueuedService
 from etdmp_ros.nodes._spin import run
 from etdmp_ros.planning import place_demo, plan_path, PlanSettings, Workspace
 from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
@@ -48,7 +52,7 @@ from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
@@ -62,6 +66,8 @@ _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _THROTTLE = 5.0   # s between repeated warnings about the same bad input
 _TAUGHT = 'taught on /etdmp/demonstrations'
+#: Seconds between two reports of requests refused as busy (each report counts them).
+BUSY_LOG_PERIOD = 2.0
 #: /generalize keeps up to MAX_QUEUED_REQUESTS requests waiting (rclpy's default: 10).
 _SERVICE_QOS = QoSProfile(depth=limits.MAX_QUEUED_REQUESTS,
                           reliability=ReliabilityPolicy.RELIABLE)
@@ -116,6 +122,7 @@ class Settings:
     publish_markers: bool
     teach_overwrite: bool
     check_timing: bool
+    max_request_wait: float
     initial_joints: np.ndarray
 
     @classmethod
@@ -153,7 +160,7 @@ class Settings:
             recorded_dim=_choice(values, 'recorded_dim', RECORDED_DIMS),
             plane_tolerance=values['plane_tolerance'], execute=values['execute'],
             publish_markers=values['publish_markers'], teach_overwrite=values['teach_overwrite'],
-            check_timing=values['check_timing'],
+            check_timing=values['check_timing'], max_request_wait=values['max_request_wait'],
             initial_joints=_joints(values['initial_joint_positions']))
 
 
@@ -237,8 +244,11 @@ class DmpServer(Node):
         self._marker_pub = self.create_publisher(MarkerArray, 'etdmp/markers', _LATCHED)
         self._pending_markers = None
         self._marker_thread = None   # builds markers after a call, off the service's path
-        self.create_service(GetPlan, 'generalize', self._on_generalize, qos_profile=_SERVICE_QOS,
-                            callback_group=ReentrantCallbackGroup())
+        self._refused_busy, self._busy_log_time = 0, -float('inf')
+        self._planned = 0   # requests answered with a plan
+        self._generalize = QueuedService(self, GetPlan, 'generalize', self._on_generalize,
+                                         self._refuse_busy, _SERVICE_QOS,
+                                         settings.max_request_wait, limits.MAX_QUEUED_REQUESTS)
         log.info(f'serving /generalize with skill {settings.skill!r} '
                  f'({settings.plan.method}); skills: {", ".join(self._library.names())}')
 
@@ -262,6 +272,7 @@ class DmpServer(Node):
         settings = Settings.from_values(self._values())
         self._library.formulation, self._library.n_basis = settings.formulation, settings.n_basis
         self._settings = settings
+        self._generalize.max_wait = settings.max_request_wait
         self._subscribe_tool_source(settings.tool_position_source)
 
     def _subscribe_tool_source(self, source):
@@ -558,6 +569,7 @@ class DmpServer(Node):
             return response
         response.plan = path_from_numpy(plan.positions, plan.t, stamp, 'base_link',
                                         plan.orientation)
+        self._planned += 1
         if settings.execute:
             self._path_pub.publish(response.plan)
             if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
@@ -565,6 +577,37 @@ class DmpServer(Node):
         self.get_logger().debug(f'/generalize: {settings.skill} ({plan.method}), '
                                 f'{len(plan.t)} poses over {plan.t[-1]:.2f} s')
         return response
+
+    def _refuse_busy(self, request, response, waited):
+        """Answer a request that waited too long with an empty plan; say so every few seconds."""
+        response.plan = path_from_numpy(np.zeros((0, 3)), stamp=self.get_clock().now().nanoseconds)
+        self._refused_busy += 1
+        now = time.monotonic()
+        if now >= self._busy_log_time + BUSY_LOG_PERIOD:
+            more = (f' ({self._refused_busy} refused so since the last report)'
+                    if self._refused_busy > 1 else '')
+            self.get_logger().error(
+                f'/generalize refused as busy: the request waited {waited:.2f} s for its turn, '
+                f'more than max_request_wait {self._settings.max_request_wait:g} s; requests '
+                f'come faster than they are planned{more}')
+            self._refused_busy, self._busy_log_time = 0, now
+        return response
+
+    def stop(self):
+        """Stop serving /generalize (called before the node is destroyed)."""
+        service = getattr(self, '_generalize', None)
+        if service is not None and service.running:
+            service.stop()
+            answered = service.answered
+            self.get_logger().info(
+                f'/generalize answered {sum(answered.values())} requests: {self._planned} with '
+                f'a plan, {answered["handled"] - self._planned} refused with a reason, '
+                f'{answered["refused"]} refused as busy, {answered["failed"]} failed')
+
+    def destroy_node(self):
+        """Stop the /generalize thread, then destroy the node."""
+        self.stop()
+        super().destroy_node()
 
     # -- markers --------------------------------------------------------------------------------
 

@@ -92,7 +92,10 @@ class Client(BackgroundNode):
     def __init__(self, domain, index, rate):
         super().__init__(f'soak_client_{index}', domain)
         self.rate = rate
-        self.client = self.node.create_client(GetPlan, 'generalize')
+        # A client that has many calls outstanding must keep as many responses (rclpy's default
+        # depth of 10 drops the rest in this client, unseen).
+        self.client = self.node.create_client(GetPlan, 'generalize',
+                                              qos_profile=QoSProfile(depth=1000))
         self.lock = threading.Lock()
         self.sent = []              # send times
         self.answers = []           # (latency s, poses)
@@ -262,6 +265,10 @@ def main():
             if node is not None:
                 node.close()
         nodes.stop()
+        served = [line.split('/generalize answered ')[1] for line in
+                  nodes.log('dmp_server').splitlines() if '/generalize answered ' in line]
+        if served:    # its own count, at exit: answers lost on the way show as a difference
+            print(f'dmp_server at exit: /generalize answered {served[-1]}')
 
 
 if __name__ == '__main__':
