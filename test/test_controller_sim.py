@@ -118,3 +118,56 @@ def test_singularity_halt_in_mujoco(sim, ur10):
     assert np.max(np.abs(run['q'][:, 4])) < 0.9 and run['q'][-1, 4] < -0.05
     sim.advance(0.5)                                  # stays put after the halt
     np.testing.assert_allclose(sim.q, run['q'][-1], atol=2e-3)
+
+
+def _shifted_remainder(path, t, positions, t_from, t_shift, shift):
+    """Return the path's remainder from ``t_from`` on, bent smoothly by ``shift`` after t_shift."""
+    keep = t >= t_from - 1e-9
+    s = np.clip((t[keep] - t_shift) / (t[-1] - t_shift), 0.0, 1.0)
+    blend = s ** 3 * (10.0 - 15.0 * s + 6.0 * s * s)        # C2, zero slope at both ends
+    moved = positions[keep] + blend[:, None] * np.asarray(shift)
+    rotations = np.repeat(path.rotations[:1], keep.sum(), axis=0)
+    return PoseTrajectory(t[keep] - t[keep][0], moved, rotations), t[keep][0], moved
+
+
+@pytest.mark.parametrize('stamped', [True, False])
+def test_a_replanned_remainder_is_spliced_in_without_an_approach(sim, ur10, stamped):
+    # A re-plan of the path being tracked (its remainder from 0.8 s, the goal moved 10 mm from
+    # 1.2 s on), stamped on the same clock, is taken over at the same path time: no approach,
+    # no stop, the tool ends at the new end. Unstamped, it is a new path: approach from rest.
+    path, t, positions = g_plan(dt=0.01)
+    controller = TrajectoryController(ur10, ControllerConfig(rate=125.0, actuation_delay=0.0))
+    controller.follow(path, 0.0)
+    remainder, stamp, moved = _shifted_remainder(path, t, positions, 0.8, 1.2, [0.0, 0.01, 0.0])
+    sim.reset(Q_INITIAL)
+    T = controller.period
+    statuses, qds, tools, began, switched = [], [], [], None, None
+    for k in range(int(round(8.0 / T))):
+        q, now = sim.q, sim.time
+        if switched is None and began is not None and now - began >= 1.0:
+            controller.follow(remainder, stamp if stamped else None)
+            switched = k
+        command = controller.step(q, now)
+        if began is None and command.status == 'tracking':
+            began = now
+        statuses.append(command.status)
+        qds.append(command.qd)
+        tools.append(ur10.frame_pose(q)[0])
+        sim.set_velocity_command(command.qd)
+        sim.advance(T)
+        if switched is not None and command.status == 'idle':
+            break
+    assert switched is not None
+    after = statuses[switched:]
+    assert_within_limits(controller, {'qd': np.array(qds), 'q': np.array([Q_INITIAL])})
+    np.testing.assert_allclose(tools[-1], moved[-1], atol=0.2e-3)
+    speeds = np.linalg.norm(np.diff(np.array(tools), axis=0), axis=1) / T
+    if stamped:
+        assert controller.splices == 1
+        assert 'approaching' not in after, sorted(set(after))
+        # No stop-and-go: the tool keeps its speed through the switch.
+        window = speeds[switched - 5:switched + 25]
+        assert window.min() > 0.3 * speeds[switched - 6], window
+    else:
+        assert controller.splices == 0
+        assert 'approaching' in after

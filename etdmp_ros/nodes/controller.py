@@ -498,7 +498,9 @@ class ControllerNode(Node):
             if reason:
                 self.controller.reject(reason)
             else:
-                self.controller.follow(path)
+                # Timed poses: the first one's stamp lets a re-planned remainder be spliced in.
+                timed = len(stamps) > 1 and stamps[-1] != stamps[0]
+                self.controller.follow(path, stamps[0] * 1e-9 if timed else None)
                 self.get_logger().info(f'new path: {len(stamps)} poses over '
                                        f'{path.duration:.2f} s')
             self._publish_status()

@@ -271,7 +271,10 @@ class TrajectoryController:
         self._path_start = 0.0       # path time at which the schedule enters the path
         self._ramp = 0.0             # duration of the path clock's ramp-in (resume)
         self._t_start = None         # measurement time of the schedule's start
-        self._pending = None         # (path, path time) to start at the next step
+        self._pending = None         # (path, path time, start stamp) to start at the next step
+        self._path_stamp = None      # stamp (s) of the path's first pose, if it has one
+        #: Paths spliced in so far (continuations of the tracked one, taken without an approach).
+        self.splices = 0
         self._paused = False
         self._last_theta = 0.0
         self._t_last = None
@@ -303,9 +306,17 @@ class TrajectoryController:
         """Return a copy of the last joint velocity command (rad/s)."""
         return self._previous.copy()
 
-    def follow(self, path):
-        """Execute ``path`` (a PoseTrajectory) from the next step on, replacing any other."""
-        self._pending = (path, 0.0)
+    def follow(self, path, stamp=None):
+        """
+        Execute ``path`` (a PoseTrajectory) from the next step on, replacing any other.
+
+        ``stamp`` (s): the time its first pose is stamped with, on the clock of the path it
+        replaces. A path that continues the one being tracked (a re-plan of its remainder,
+        stamped on the same clock) is spliced in without an approach: at the next step the
+        controller moves on the new path from the same time, when the new path is within
+        ``approach_tolerance`` of the current reference there (:meth:`_splice`).
+        """
+        self._pending = (path, 0.0, stamp)
 
     def cancel(self, reason=''):
         """Stop following (brake to zero at the acceleration limits) and become idle."""
@@ -328,7 +339,7 @@ class TrajectoryController:
                 tau = 0.0
                 if self._approach is None or self._last_theta >= self._approach.duration:
                     tau = min(self._path_time(self._last_theta), self._path.duration)
-                self._pending = (self._path, tau)
+                self._pending = (self._path, tau, self._path_stamp)
             self._path = None
             self._previous = np.zeros(6)
             self._set(PAUSED)
@@ -376,9 +387,46 @@ class TrajectoryController:
         p, rot = self._path.pose(tau, self.fast)
         return p, rot, TRACKING if tau < self._path.duration else HOLDING, tau
 
+    def _splice(self, t, path, stamp):
+        """
+        Continue on ``path`` from the current path time if it continues the current path.
+
+        It does when both have stamps, the schedule is on the path (not approaching, not in a
+        ramp-in), the new path covers the current time on the common clock, and its pose then
+        is within ``approach_tolerance`` (and ``approach_angle_tolerance``) of the current
+        reference. Return whether it was spliced in.
+        """
+        c = self.config
+        if stamp is None or self._path_stamp is None or self._path is None:
+            return False
+        theta = t - self._t_start
+        t_app = self._approach.duration if self._approach is not None else 0.0
+        if theta < t_app + self._ramp:
+            return False
+        tau_old = self._path_time(theta)
+        if tau_old >= self._path.duration:
+            return False            # holding the end: a new path starts as any other
+        tau_new = tau_old - (stamp - self._path_stamp)
+        if not 0.0 <= tau_new < path.duration:
+            return False
+        p_old, rot_old = self._path.pose(tau_old)
+        p_new, rot_new = path.pose(tau_new)
+        if (np.linalg.norm(p_new - p_old) > c.approach_tolerance
+                or np.linalg.norm(pin.log3(rot_new @ rot_old.T)) > c.approach_angle_tolerance):
+            return False
+        self._path, self._path_start, self._t_start = path, tau_new, t
+        self._path_stamp = stamp
+        self._approach, self._ramp = None, 0.0
+        self._last_theta = 0.0
+        self.splices += 1
+        return True
+
     def _start(self, t, p, rot, jac):
-        path, tau0 = self._pending
+        path, tau0, stamp = self._pending
         self._pending = None
+        if self._splice(t, path, stamp):
+            return
+        self._path_stamp = stamp
         c = self.config
         p1, rot1 = path.pose(tau0)
         twist = jac @ self._previous
