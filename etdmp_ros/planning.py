@@ -280,3 +280,111 @@ def place_demo(skill, start, goal, plane=None):
     ratio = np.linalg.norm(i_current) / np.linalg.norm(i_demo)
     # Row-vector form of x = g + ratio R^T (y - g_D).
     return space.outward(goal_s + ratio * (skill.demo - skill.goal) @ transform.R)
+
+
+class FollowedPlan:
+    """
+    A plan being executed whose goal and obstacles may still move (online ET-DMP, issue 14).
+
+    Made from the :class:`Plan` that :func:`plan_path` returned, with the same arguments. It
+    keeps the skill's online rollout (:meth:`etdmp_ros.dmp.Skill.online`) in step with the
+    plan: the online run reproduces the plan while nothing moves. :meth:`update` changes the
+    goal or the obstacles from path time ``t_switch`` on and returns the new remainder; each
+    update starts from the state the previous ones left, so the path stays continuous in
+    position and velocity however often it changes (the goal filter keeps the acceleration
+    bounded). ``t`` and ``positions`` are the whole path as it stands (the plan's own time base).
+    """
+
+    def __init__(self, skill, plan, settings=None, plane=None):
+        """Start following ``plan`` (planned for ``skill`` with ``settings`` and ``plane``)."""
+        settings = PlanSettings() if settings is None else settings
+        self.skill, self.settings = skill, settings
+        self._space = _Space(skill, plane)
+        space = self._space
+        gains = settings.gains
+        if settings.obstacle_k > 0.0:
+            gains = replace(gains, k=settings.obstacle_k * space.scale)
+        try:
+            self._run = skill.online(
+                space.inward(plan.start), space.inward(plan.goal), space.inward(plan.obstacles),
+                method=settings.method, mode=settings.mode,
+                independent_axis=settings.independent_axis, dt=settings.output_period,
+                tau=settings.duration or None, gains=gains)
+        except GeneralizationError as err:
+            raise PlanningError(str(err)) from None
+        self.t, self.positions = plan.t.copy(), plan.positions.copy()
+        self.velocities = plan.velocities.copy()
+        self.goal, self.obstacles = plan.goal.copy(), plan.obstacles.copy()
+        self.orientation = plan.orientation
+        self.updates = 0
+        self._run.warm()
+
+    def placed(self, points):
+        """Return base_link ``points`` (..., 3) as the plan uses them (on the task plane, 2D)."""
+        points = np.asarray(points, dtype=float)
+        return self._space.outward(self._space.inward(points.reshape(-1, 3))).reshape(
+            points.shape)
+
+    @property
+    def duration(self):
+        """Path time (s) of the path's last pose."""
+        return float(self.t[-1])
+
+    def index(self, t):
+        """Return the index of the pose at path time ``t`` (the last one at or before it)."""
+        return int(np.clip(np.searchsorted(self.t, t + 1e-9) - 1, 0, len(self.t) - 1))
+
+    def update(self, t_switch, goal=None, obstacles=None, t_max=None):
+        """
+        Move the goal to ``goal`` and/or the obstacles to ``obstacles`` from ``t_switch`` on.
+
+        ``goal`` (3,) and ``obstacles`` (m, 3) are base_link points (projected onto the task
+        plane for 2D skills), None for unchanged. Return the index of the first changed pose:
+        the path from there on (``t``, ``positions``, ``velocities``) is new; before it, it is
+        as it was. The new path runs until the online run is done or ``t_max`` (default: the
+        old end plus the skill's duration). Raises PlanningError, leaving the path as it was,
+        for a goal out of reach or on the start, an obstacle on the goal, or a new path that
+        leaves the workspace.
+        """
+        space, settings = self._space, self.settings
+        goal_s = None if goal is None else space.inward(_points(goal, 'goal', (3,)))
+        obstacles_s = None if obstacles is None else space.inward(
+            _points(obstacles, 'obstacles', None))
+        if goal_s is not None:
+            goal_b = space.outward(goal_s)
+            outside = settings.workspace.violation(goal_b)
+            if outside is not None:
+                raise PlanningError(f"goal {_fmt(goal_b)} is out of the UR10's reach: "
+                                    f'{outside[1]}')
+        k = self.index(max(t_switch, self._run.t))
+        run = self._run
+        run.run(self.t[k])      # in step with the path as it stands
+        t_max = self.duration + self._run.tau if t_max is None else t_max
+        trial = run.copy()      # what-if: the run itself changes only on success
+        try:
+            with np.errstate(over='raise', invalid='raise', divide='raise'):
+                x, v, _ = trial.step(goal=goal_s, obstacles=obstacles_s)
+                after = trial.copy()
+                _, xs, vs, _ = trial.run(t_max)
+        except (GeneralizationError, ArithmeticError) as err:
+            raise PlanningError(str(err)) from None
+        xs, vs = np.vstack([x[None], xs]), np.vstack([v[None], vs])
+        positions = space.outward(xs)
+        outside = settings.workspace.violation(positions)
+        if outside is not None:
+            i, reason = outside
+            raise PlanningError(f"the new path leaves the UR10's reach at "
+                                f'{_fmt(positions[i])}: {reason}')
+        t_new = run.t + run.dt * np.arange(1, len(xs) + 1)
+        keep = k + 1
+        self.t = np.concatenate([self.t[:keep], t_new])
+        self.positions = np.concatenate([self.positions[:keep], positions])
+        self.velocities = np.concatenate([self.velocities[:keep],
+                                          space.outward_vectors(vs)])
+        self._run = after
+        if goal_s is not None:
+            self.goal = space.outward(goal_s)
+        if obstacles_s is not None:
+            self.obstacles = space.outward(obstacles_s)
+        self.updates += 1
+        return keep

@@ -23,6 +23,12 @@ metres, so a letter written 5 cm above the table is still a letter). Positions m
 ``base_link`` (an empty frame id counts as base_link): no TF is available to transform others.
 A path whose poses all carry the same stamp (unset) is taken as sampled uniformly over 1 s, the
 convention of ``load_demo`` for files without times.
+
+Recorded and taught poses also bring the tool's orientations (:func:`recorded_orientations`):
+the demonstration then has orientations (base_link for a 3D skill, the task plane's frame for a
+2D one; docs/orientation.md), unless every pose carries the all-zero quaternion or exactly the
+message default (0, 0, 0, 1), which mean "no orientation recorded": such a path stays the
+position-only demonstration it always was.
 """
 
 from dataclasses import dataclass, field
@@ -36,6 +42,7 @@ from etdmp_ros import limits
 from etdmp_ros.dmp import (Demonstration, DemonstrationError, FORMULATIONS, learn, load_demo,
                            save_demo)
 from etdmp_ros.dmp._demos import check_file_size
+from etdmp_ros.dmp._quaternion import unit_quaternions
 import numpy as np
 
 #: File types a demonstration can be read from.
@@ -46,6 +53,8 @@ RECORDED_DIMS = ('auto', '2d', '3d')
 POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
 PATH = 'nav_msgs/msg/Path'
 BASE_FRAMES = ('', 'base_link')
+#: Orientations that mean "none recorded" when every pose carries one of them.
+UNSET_ORIENTATIONS = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
 
 # Skill names become file names in the skills folder: keep them portable and path-free.
 _NAME = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,63}\Z')
@@ -98,20 +107,44 @@ def demonstration_files(paths):
 
 @dataclass(frozen=True, eq=False)
 class RecordedPath:
-    """Positions (n, 3) in base_link recorded on ``topic``, with times ``t`` (n,) or None."""
+    """
+    Positions (n, 3) in base_link recorded on ``topic``, with times ``t`` (n,) or None.
+
+    ``orientations`` (n, 4) (x, y, z, w) in base_link, or None when none were recorded
+    (:func:`recorded_orientations`).
+    """
 
     positions: np.ndarray
     t: np.ndarray | None
     topic: str
+    orientations: np.ndarray | None = None
 
 
-def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tolerance=0.01):
+def recorded_orientations(values, where='path'):
+    """
+    Return the recorded orientations (n, 4) of a path's poses, normalised, or None for none.
+
+    ``values`` (n, 4) are the poses' quaternions (x, y, z, w). None when every one is the zero
+    quaternion or every one exactly the message default (0, 0, 0, 1) (UNSET_ORIENTATIONS);
+    otherwise a zero or non-finite one raises DemonstrationError naming its pose.
+    """
+    q = np.asarray(values, dtype=float).reshape(-1, 4)
+    for unset in UNSET_ORIENTATIONS:
+        if len(q) and np.all(q == np.array(unset)):
+            return None
+    return unit_quaternions(q, len(q), where, lambda row: f'pose {row}')
+
+
+def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tolerance=0.01,
+                       orientations=None):
     """
     Turn a base_link path (n, 3) with times ``t`` (n,) or None into a Demonstration.
 
     The result is 2D (demo units on ``plane``, a TaskPlane) or 3D (metres), following
     ``recorded_dim`` (see the module docstring). Times that are all equal count as unset.
-    Raises DemonstrationError if the path is unusable.
+    ``orientations`` (n, 4) in base_link (see :func:`recorded_orientations`), if given, are
+    kept, in the plane's frame for a 2D skill. Raises DemonstrationError if the path is
+    unusable.
     """
     if recorded_dim not in RECORDED_DIMS:
         raise DemonstrationError(f'recorded_dim must be one of {RECORDED_DIMS}, '
@@ -133,9 +166,14 @@ def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tol
     if dim == 'auto':
         heights = plane.distance(positions) if len(positions) else np.zeros(1)
         dim = '2d' if np.ptp(heights) <= plane_tolerance else '3d'
+    if orientations is not None:
+        orientations = unit_quaternions(orientations, len(positions), where,
+                                        lambda row: f'pose {row}')
     if dim == '2d':
         positions = plane.to_plane(positions)
-    return Demonstration(name, positions, t)
+        if orientations is not None:
+            orientations = plane.orientation_to_plane(orientations)
+    return Demonstration(name, positions, t, orientations)
 
 
 def read_mcap_path(path, topic=None):
@@ -180,6 +218,7 @@ def read_mcap_path(path, topic=None):
     if kind == POSE_STAMPED:
         frames = {msg.header.frame_id for _, msg in records}
         positions = [_xyz(msg.pose.position) for _, msg in records]
+        quaternions = [_xyzw(msg.pose.orientation) for _, msg in records]
         stamps = np.array([_stamp(msg.header.stamp) for _, msg in records])
         if np.all(stamps == stamps[0]):   # unset header stamps: use the recording times
             stamps = np.array([log_time * 1e-9 for log_time, _ in records])
@@ -191,12 +230,15 @@ def read_mcap_path(path, topic=None):
                                      f'{limits.MAX_DEMO_SAMPLES}; not learned')
         frames = {last.header.frame_id} | {pose.header.frame_id for pose in last.poses}
         positions = [_xyz(pose.pose.position) for pose in last.poses]
+        quaternions = [_xyzw(pose.pose.orientation) for pose in last.poses]
         stamps = np.array([_stamp(pose.header.stamp) for pose in last.poses])
     wrong = sorted(frames - set(BASE_FRAMES))
     if wrong:
         raise DemonstrationError(f'{path}: topic {chosen!r} is in frame {wrong[0]!r}; only '
                                  'base_link recordings can be used (no TF here)')
-    return RecordedPath(np.array(positions, dtype=float).reshape(-1, 3), stamps, chosen)
+    orientations = recorded_orientations(quaternions, f'{path}: topic {chosen!r}')
+    return RecordedPath(np.array(positions, dtype=float).reshape(-1, 3), stamps, chosen,
+                        orientations)
 
 
 def _mcap_topics(reader):
@@ -229,6 +271,10 @@ def _xyz(point):
     return (point.x, point.y, point.z)
 
 
+def _xyzw(quaternion):
+    return (quaternion.x, quaternion.y, quaternion.z, quaternion.w)
+
+
 def _stamp(stamp):
     return stamp.sec + stamp.nanosec * 1e-9
 
@@ -249,7 +295,7 @@ def load_demonstration(path, plane, name=None, mcap_topic=None, recorded_dim='au
     recorded = read_mcap_path(path, mcap_topic)
     try:
         return recorded_path_demo(name, recorded.positions, recorded.t, plane, recorded_dim,
-                                  plane_tolerance)
+                                  plane_tolerance, recorded.orientations)
     except DemonstrationError as err:
         raise DemonstrationError(f'{path} (topic {recorded.topic!r}): {err}') from None
 
@@ -344,7 +390,7 @@ class SkillLibrary:
                 f'demonstration {name!r} has {demo.dim} coordinate(s); a skill needs 2 (a task '
                 'plane skill in demo units) or 3 (a base_link skill in metres)')
         if demo.name != name:
-            demo = Demonstration(name, demo.positions, demo.t)
+            demo = Demonstration(name, demo.positions, demo.t, demo.orientations)
         entry = SkillEntry(name, demo, str(source))
         key = (self.formulation, self.n_basis)
         entry._learned[key] = learn(demo, n_basis=self.n_basis, formulation=self.formulation)

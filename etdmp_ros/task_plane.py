@@ -8,7 +8,9 @@ an ``origin`` and two orthonormal axes ``x_axis``, ``y_axis`` in base_link (metr
     u = ((p - origin) . x_axis, (p - origin) . y_axis) / scale
 
 (its orthogonal projection onto the plane, in demo units) and back with
-``p = origin + scale (u_0 x_axis + u_1 y_axis)``, which lies on the plane.
+``p = origin + scale (u_0 x_axis + u_1 y_axis)``, which lies on the plane. Orientations of a 2D
+skill are expressed in the plane's frame (x_axis, y_axis and the normal as z):
+``q_base = q_P q_plane`` (:meth:`TaskPlane.orientation_from_plane`, docs/orientation.md).
 
 ET-DMP scales the movement by ``|x0 - g|``, so the scale does not change a plan between given
 points; it fixes the size of demonstrations recorded in metres (a taught path becomes a skill in
@@ -23,6 +25,7 @@ sector that begins there.
 from dataclasses import dataclass
 import math
 
+from etdmp_ros.dmp import _quaternion as quat
 import numpy as np
 
 #: Largest |x_axis . y_axis| accepted for the (normalised) plane axes.
@@ -113,3 +116,23 @@ class TaskPlane:
     def distance(self, points):
         """Return the signed distances (...) of base_link points (..., 3) from the plane (m)."""
         return (np.asarray(points, dtype=float) - self.origin) @ self.normal
+
+    @property
+    def rotation(self):
+        """
+        Return the plane's frame in base_link (3, 3): columns x_axis, y_axis, normal.
+
+        ``y_axis`` is made exactly orthogonal to ``x_axis`` first (the axes are accepted within
+        ORTHOGONALITY_TOLERANCE), so the matrix is a rotation.
+        """
+        y = self.y_axis - (self.y_axis @ self.x_axis) * self.x_axis
+        y = y / np.linalg.norm(y)
+        return np.stack([self.x_axis, y, np.cross(self.x_axis, y)], axis=1)
+
+    def orientation_to_plane(self, q):
+        """Express base_link orientations (..., 4) (x, y, z, w) in the plane's frame."""
+        return quat.multiply(quat.conjugate(quat.from_matrix(self.rotation)), q)
+
+    def orientation_from_plane(self, q):
+        """Express orientations (..., 4) given in the plane's frame in base_link."""
+        return quat.multiply(quat.from_matrix(self.rotation), q)

@@ -205,8 +205,12 @@ def test_round_trip_npy_keeps_positions_and_assumes_one_second(tmp_path):
 
 
 def test_csv_header_names(tmp_path):
-    save_demo(tmp_path / 'a.csv', builtin_demo('stir'))
+    stir = builtin_demo('stir')
+    save_demo(tmp_path / 'a.csv', Demonstration('a', stir.positions, stir.t))
     assert (tmp_path / 'a.csv').read_text().splitlines()[0] == 't,x,y,z'
+    # The built-in stir carries orientations (docs/orientation.md): four more columns.
+    save_demo(tmp_path / 'o.csv', stir)
+    assert (tmp_path / 'o.csv').read_text().splitlines()[0] == 't,x,y,z,qx,qy,qz,qw'
     save_demo(tmp_path / 'b.csv', Demonstration('b', np.zeros((12, 4)) + np.arange(12)[:, None]))
     assert (tmp_path / 'b.csv').read_text().splitlines()[0] == 't,x0,x1,x2,x3'
 

@@ -3,8 +3,8 @@
 import math
 
 from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains
-from etdmp_ros.planning import (place_demo, plan_path, PlanningError, PlanSettings, TOOL_DOWN,
-                                Workspace)
+from etdmp_ros.planning import (FollowedPlan, place_demo, plan_path, PlanningError,
+                                PlanSettings, TOOL_DOWN, Workspace)
 from etdmp_ros.robot import UR10Model
 from etdmp_ros.task_plane import TaskPlane
 import numpy as np
@@ -182,3 +182,34 @@ def test_demo_placed_between_start_and_goal(g_skill):
     assert nrmse(placed, plan.positions) < 0.005
     with pytest.raises(PlanningError, match='start equals goal'):
         place_demo(g_skill, GOAL, GOAL, PLANE)
+
+
+def test_a_followed_plan_moves_its_goal_without_a_jump():
+    # The remainder of a plan re-planned at 1.6 s for a goal 40 mm away: unchanged before the
+    # switch, continuous in position and velocity through it, at the new goal at the end.
+    plane = TaskPlane.create([0.75, 0.15, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0], 0.003)
+    skill = learn(builtin_demo('G'))
+    settings = PlanSettings(duration=4.0)
+    start, goal = np.array([0.70, 0.20, 0.0]), np.array([0.838, 0.1, 0.0])
+    plan = plan_path(skill, start, goal, (), settings, plane)
+    followed = FollowedPlan(skill, plan, settings, plane)
+    new_goal = goal + [0.04, 0.0, 0.0]
+    k = followed.update(1.6, goal=new_goal)
+    assert followed.t[k - 1] == pytest.approx(1.6)
+    np.testing.assert_array_equal(followed.positions[:k], plan.positions[:k])
+    dt = settings.output_period
+    np.testing.assert_allclose(np.diff(followed.t), dt, atol=1e-9)
+    speed_step = np.linalg.norm(followed.velocities[k] - followed.velocities[k - 1])
+    typical = np.linalg.norm(np.diff(plan.velocities, axis=0), axis=1).max()
+    assert speed_step <= typical, (speed_step, typical)   # no larger than the plan's own steps
+    assert np.linalg.norm(followed.positions[-1] - new_goal) < 1e-3
+    np.testing.assert_allclose(followed.goal, new_goal)
+    # A second move continues from the first; a bad one changes nothing.
+    k2 = followed.update(2.4, goal=new_goal + [0.0, 0.02, 0.0])
+    assert k2 > k and np.linalg.norm(followed.positions[-1] - new_goal - [0, 0.02, 0]) < 1e-3
+    before = followed.positions.copy()
+    with pytest.raises(PlanningError, match='reach'):
+        followed.update(2.6, goal=[5.0, 0.0, 0.0])
+    with pytest.raises(PlanningError):
+        followed.update(2.6, goal=[np.nan, 0.0, 0.0])
+    np.testing.assert_array_equal(followed.positions, before)

@@ -11,6 +11,22 @@ Each demonstration is one continuous stroke designed here from hand-placed contr
   above and 0.08 m beside the mouth, in, a 2.5 cm spiral down, ending on the axis near the bottom;
   500 samples over 5 s.
 
+"wipe" and "stir" also carry the tool's orientation (columns ``qx,qy,qz,qw``, ROS order), made
+from the positions as written to the file (the positions themselves are exactly what they were
+before orientations were added; docs/orientation.md). The tool frame is the one of dmp_server's
+``tool_orientation`` default, ``TOOL_DOWN``: tool z points down into the board or bottle.
+
+- "wipe" (in the task plane's axes): the tool turns about the plane's normal so that the
+  sponge's long side (the tool's y axis) lies along the stroke it wipes: the undirected angle of
+  each straight run between two corners (chosen nearest the previous one, so that a turnaround
+  is no half turn), blended from one run to the next by a Gaussian step (sigma 0.08 s) at the time
+  the path passes the corner.
+- "stir" (base_link): the stirrer tilts so that its shaft points from the tip to a spot on the
+  bottle axis 0.12 m above the tip: upright on the axis, tilted by atan(r / 0.12) at radius r,
+  the tilt circling with the spiral (9.5 to 12 degrees while stirring, 34 degrees at the start
+  beside the mouth, upright at the goal). The tilt is the shortest rotation from upright, so the
+  stirrer does not spin about its own axis.
+
 How a stroke is made:
 
 1. A polyline of control points (straight runs densified so that the spline follows them, turns
@@ -200,11 +216,13 @@ def letter_w():
     return densify([[0.0, 10.0], [1.9, 0.0], [3.9, 7.0], [5.9, 0.0], [8.2, 7.4]], 0.5)
 
 
+WIPE_CORNERS = [[0.0, 6.0], [10.0, 5.3], [0.3, 4.2], [9.9, 3.1], [0.2, 2.0], [9.8, 0.9],
+                [0.4, 0.0], [5.0, 3.0]]
+
+
 def wipe():
     """Wipe: from the top-left corner of a 10 x 6 area, back and forth, ending at its centre."""
-    corners = [[0.0, 6.0], [10.0, 5.3], [0.3, 4.2], [9.9, 3.1], [0.2, 2.0], [9.8, 0.9],
-               [0.4, 0.0], [5.0, 3.0]]
-    return densify(corners, 0.5)
+    return densify(WIPE_CORNERS, 0.5)
 
 
 def stir():
@@ -228,6 +246,62 @@ def stir():
     spiral = np.c_[r * np.cos(angle), r * np.sin(angle), z]
     finish = densify([spiral[-1], [0.0, 0.0, goal_z]], 0.01)
     return chain(approach, spiral, finish)
+
+
+# ----------------------------------------------------------------------------- orientations
+
+#: dmp_server's default tool orientation (x, y, z, w): tool z down, tool x along -y, y along -x.
+TOOL_DOWN = np.array([-np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0])
+WIPE_BLEND_SECONDS = 0.08
+STIR_LEVER = 0.12
+
+
+def quaternion_multiply(p, q):
+    """Hamilton products ``p q`` of quaternions (..., 4) in ROS order (x, y, z, w)."""
+    px, py, pz, pw = np.moveaxis(np.asarray(p, dtype=float), -1, 0)
+    qx, qy, qz, qw = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
+    return np.stack([pw * qx + px * qw + py * qz - pz * qy, pw * qy - px * qz + py * qw + pz * qx,
+                     pw * qz + px * qy - py * qx + pz * qw, pw * qw - px * qx - py * qy - pz * qz],
+                    axis=-1)
+
+
+def wipe_orientations(t, x):
+    """Sponge's long side along each straight run of the wipe, blended at the corners."""
+    from math import erf
+    corners = np.array(WIPE_CORNERS)
+    runs = np.diff(corners, axis=0)
+    angles = [np.arctan2(runs[0, 1], runs[0, 0])]
+    for run in runs[1:]:
+        a = np.arctan2(run[1], run[0])
+        angles.append(a + np.pi * np.round((angles[-1] - a) / np.pi))   # undirected: mod pi
+    # When the path passes each inner corner (the corners are visited in order).
+    times, first = [], 0
+    for corner in corners[1:-1]:
+        k = first + int(np.argmin(np.linalg.norm(x[first:] - corner, axis=1)))
+        times.append(t[k])
+        first = k + 1
+    psi = np.full(len(t), angles[0])
+    for when, before, after in zip(times, angles[:-1], angles[1:]):
+        step = np.array([0.5 * (1.0 + erf((tk - when) / (np.sqrt(2) * WIPE_BLEND_SECONDS)))
+                         for tk in t])
+        psi += (after - before) * step
+    yaw = np.c_[np.zeros((len(t), 2)), np.sin(psi / 2), np.cos(psi / 2)]
+    return quaternion_multiply(yaw, TOOL_DOWN)
+
+
+def stir_orientations(t, x):
+    """Stirrer's shaft from the tip towards the bottle axis STIR_LEVER above it (no spin)."""
+    shaft = np.c_[x[:, :2], np.full(len(x), -STIR_LEVER)]
+    shaft /= np.linalg.norm(shaft, axis=1, keepdims=True)
+    down = np.array([0.0, 0.0, -1.0])
+    # Shortest rotation from down to the shaft: (down x shaft, 1 + down . shaft), normalised.
+    tilt = np.c_[np.cross(down, shaft), 1.0 + shaft @ down]
+    tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)
+    return quaternion_multiply(tilt, TOOL_DOWN)
+
+
+ORIENTATIONS = {'wipe': wipe_orientations, 'stir': stir_orientations}
+QUATERNION_DECIMALS = 9
 
 
 def scale_to_height(control, height):
@@ -266,6 +340,20 @@ def build(name):
     return np.round(t, 9) + 0.0, np.round(x, decimals) + 0.0, length
 
 
+def check_orientations(name, t, q):
+    """Assert unit, sign-continuous quaternions at rest at both ends; return the turn (deg)."""
+    assert np.all(np.isfinite(q)), name
+    assert np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-8), name
+    assert np.all(np.sum(q[1:] * q[:-1], axis=1) > 0.99), f'{name}: orientation jumps'
+    dq = np.gradient(q, t, axis=0)
+    omega = 2.0 * quaternion_multiply(dq, q * [-1, -1, -1, 1])[:, :3]
+    speed = np.linalg.norm(omega, axis=1)
+    assert speed[0] < 0.02 * speed.max() and speed[-1] < 0.02 * speed.max(), (
+        f'{name}: orientation not at rest at the ends ({speed[0]}, {speed[-1]})')
+    relative = quaternion_multiply(q, q[-1] * [-1, -1, -1, 1])
+    return np.degrees(2 * np.arccos(np.clip(np.abs(relative[:, 3]), 0, 1)).max())
+
+
 def check(name, t, x):
     """Assert the properties the package relies on; return the printed statistics."""
     assert np.all(np.isfinite(x)) and np.all(np.diff(t) > 0), name
@@ -284,13 +372,14 @@ def check(name, t, x):
             'separation': separation / size}
 
 
-def write_csv(path, t, x, decimals):
-    """Write ``t,x,y[,z]`` with a fixed number of decimals."""
-    names = ['x', 'y', 'z'][:x.shape[1]]
+def write_csv(path, t, x, decimals, q=None):
+    """Write ``t,x,y[,z]`` (then ``qx,qy,qz,qw`` if ``q`` is given), fixed decimals."""
+    names = ['x', 'y', 'z'][:x.shape[1]] + ([] if q is None else ['qx', 'qy', 'qz', 'qw'])
     lines = [','.join(['t'] + names)]
-    for tk, row in zip(t, x):
+    for k, (tk, row) in enumerate(zip(t, x)):
+        quaternion = [] if q is None else [f'{v:.{QUATERNION_DECIMALS}f}' for v in q[k] + 0.0]
         lines.append(','.join([f'{tk:.9f}'.rstrip('0').rstrip('.') or '0']
-                              + [f'{v:.{decimals}f}' for v in row]))
+                              + [f'{v:.{decimals}f}' for v in row] + quaternion))
     path.write_text('\n'.join(lines) + '\n', encoding='utf-8')
 
 
@@ -336,13 +425,16 @@ def main(argv=None):
     for name, (_, _, duration, decimals, _) in DEMOS.items():
         t, x, length = build(name)
         stats = check(name, t, x)
-        write_csv(args.out / f'{name}.csv', t, x, decimals)
+        q = ORIENTATIONS[name](t, x) if name in ORIENTATIONS else None
+        turn = '' if q is None else f' turn={check_orientations(name, t, q):.1f}deg'
+        write_csv(args.out / f'{name}.csv', t, x, decimals, q)
         results[name] = (t, x, length)
         print(f'{name:5s} T={len(t)} tau={duration:g}s size={np.round(stats["size"], 4)} '
               f'length={length:.4g} start={x[0]} goal={x[-1]} '
               f'|goal-start|/size={np.round(stats["separation"], 2)} '
               f'speed peak={stats["peak_speed"]:.4g} mean={stats["mean_speed"]:.4g} '
-              f'accel peak={stats["peak_accel"]:.4g} ends={np.round(stats["end_accel"], 4)}')
+              f'accel peak={stats["peak_accel"]:.4g} ends={np.round(stats["end_accel"], 4)}'
+              f'{turn}')
     if args.plot is not None:
         plot(results, args.plot)
         print(f'picture: {args.plot}')

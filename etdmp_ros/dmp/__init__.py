@@ -15,6 +15,11 @@ Notation (the paper's symbols, used in every module here):
   ``x0' = R I_C + g``: the virtual start (Eq. 12).
 - ``lambda``: obstacle coupling added to ``tau dv/dt`` (Eq. 22-27), gains ``gamma``, ``beta``,
   ``gamma2``, ``k``.
+- Online (``Skill.online``, docs/design.md#online-goal): ``g_f`` the filtered goal,
+  ``tau dg_f/dt = alpha_goal (g - g_f)``; the transform is taken between ``x0`` and ``g_f``.
+- Orientation (docs/orientation.md): ``q`` unit quaternions (x, y, z, w), ``omega`` angular
+  velocity; ``e = 2 log(q q_g^-1)`` the rotation vector of the quaternion DMP; ``Q`` the rotation
+  part of ``R^T`` that turns the orientation with the motion.
 
 Typical use::
 
@@ -27,6 +32,8 @@ Typical use::
 from ._demos import builtin_demo, builtin_demo_names, Demonstration, load_demo, save_demo
 from ._errors import DemonstrationError, GeneralizationError
 from ._obstacles import obstacle_coupling, ObstacleGains
+from ._online import OnlineGains, OnlineRun
+from ._orientation import ORIENTATION_MODES
 from ._similarity import clearance, nrmse, Similarity, similarity
 from ._skill import (FORMULATIONS, learn, METHOD_LABELS, METHODS, OBSTACLE_MARGIN, Skill,
                      Trajectory)
@@ -34,8 +41,8 @@ from ._transform import euclidean_transform, EuclideanTransform
 
 __all__ = [
     'Demonstration', 'DemonstrationError', 'EuclideanTransform', 'FORMULATIONS',
-    'GeneralizationError', 'METHOD_LABELS', 'METHODS', 'OBSTACLE_MARGIN', 'ObstacleGains',
-    'Similarity', 'Skill', 'Trajectory',
+    'GeneralizationError', 'METHOD_LABELS', 'METHODS', 'OBSTACLE_MARGIN', 'ORIENTATION_MODES',
+    'ObstacleGains', 'OnlineGains', 'OnlineRun', 'Similarity', 'Skill', 'Trajectory',
     'builtin_demo', 'builtin_demo_names', 'clearance', 'euclidean_transform', 'learn',
     'load_demo', 'nrmse', 'obstacle_coupling', 'save_demo', 'similarity',
 ]

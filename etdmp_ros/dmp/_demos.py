@@ -5,10 +5,18 @@ A demonstration is a path ``positions`` of shape (T, d) sampled at times ``t`` (
 Files hold one demonstration each:
 
 - ``.csv``: comma separated, UTF-8, a header row naming the columns, one sample per line. A column
-  named ``t``, ``time`` or ``stamp`` (any case) holds the sample times in seconds; every other
-  column is a position coordinate, in file order (e.g. ``t,x,y`` or ``x,y,z``).
+  named ``t``, ``time`` or ``stamp`` (any case) holds the sample times in seconds. Columns named
+  ``qx``, ``qy``, ``qz``, ``qw`` (any case; all four or none), by convention after the
+  positions, hold the tool orientation of each sample as a quaternion in ROS order (e.g.
+  ``t,x,y,z,qx,qy,qz,qw``); every other column is a position coordinate, in file order (e.g.
+  ``t,x,y`` or ``x,y,z``).
 - ``.npy``: a numeric array (T, d) of positions (or (T,) for d = 1).
-- ``.npz``: arrays ``positions`` (T, d) and, optionally, ``t`` (T,).
+- ``.npz``: arrays ``positions`` (T, d) and, optionally, ``t`` (T,) and ``quaternions`` (T, 4).
+
+Orientations are optional (``Demonstration.orientations`` is None without them). They are
+normalised on reading; a zero or non-finite quaternion is refused with its line (or index). For a
+2D skill they are expressed in the task plane's axes (x, y and the normal z); for a 3D skill in
+base_link (docs/orientation.md).
 
 Sizes are bounded (:mod:`etdmp_ros.limits`): a file is refused before it is read when it is
 larger than ``MAX_DEMO_FILE_BYTES``; an ``.npy`` array (alone or in an ``.npz``) when its header
@@ -26,7 +34,8 @@ are refused (a pickle can run arbitrary code).
 The built-in demonstrations (``builtin_demo_names()``) are original to this project, authored by
 ``tools/make_builtin_demos.py``: the handwritten letters "G", "P", "R", "W" and a board "wipe"
 (2D, demo units, letters 10 units tall) and a bottle "stir" (3D, metres, z up, origin on
-the bottle axis at its mouth).
+the bottle axis at its mouth). "wipe" and "stir" carry orientations (the sponge's long side
+along the stroke; a tilted stirrer circling with the spiral), the letters none.
 """
 
 import csv
@@ -41,6 +50,7 @@ import zipfile
 import numpy as np
 
 from ._errors import DemonstrationError
+from ._quaternion import unit_quaternions
 from .. import limits
 
 # Forcing-term fitting and finite-difference accelerations need a few samples per basis width;
@@ -48,6 +58,8 @@ from .. import limits
 MIN_SAMPLES = 10
 
 TIME_COLUMNS = ('t', 'time', 'stamp')
+#: CSV columns of the orientation quaternion, in the order (x, y, z, w) it is stored in.
+ORIENTATION_COLUMNS = ('qx', 'qy', 'qz', 'qw')
 SUFFIXES = ('.csv', '.npy', '.npz')
 
 _DATA_DIR = 'data'
@@ -60,13 +72,15 @@ class Demonstration:
 
     Arrays are copied to read-only float64 on construction. ``t`` defaults to uniform samples
     over tau = 1 s. A 1-D ``positions`` (T,) is taken as a one-dimensional movement (T, 1).
+    ``orientations`` (T, 4), optional, are unit quaternions (x, y, z, w), normalised here.
     Raises :class:`DemonstrationError` if the data is unusable (too short, NaN/inf, time not
-    increasing, shapes inconsistent).
+    increasing, shapes inconsistent, a zero quaternion).
     """
 
     name: str
     positions: np.ndarray
     t: np.ndarray = field(default=None)
+    orientations: np.ndarray = field(default=None)
 
     def __post_init__(self):
         """Validate and freeze the arrays."""
@@ -88,6 +102,11 @@ class Demonstration:
         t.flags.writeable = False
         object.__setattr__(self, 'positions', positions)
         object.__setattr__(self, 't', t)
+        if self.orientations is not None:
+            q = unit_quaternions(self.orientations, len(positions), where,
+                                 lambda row: f'orientations[{row}]')
+            q.flags.writeable = False
+            object.__setattr__(self, 'orientations', q)
 
     @property
     def n_samples(self):
@@ -98,6 +117,11 @@ class Demonstration:
     def dim(self):
         """Return the number of position coordinates d."""
         return self.positions.shape[1]
+
+    @property
+    def has_orientation(self):
+        """Return True if the samples carry orientations."""
+        return self.orientations is not None
 
     @property
     def duration(self):
@@ -117,7 +141,8 @@ class Demonstration:
     def __repr__(self):
         """Summarise without printing the arrays."""
         return (f'Demonstration(name={self.name!r}, samples={self.n_samples}, dim={self.dim}, '
-                f'duration={self.duration:g} s)')
+                f'duration={self.duration:g} s'
+                f'{", with orientations" if self.has_orientation else ""})')
 
 
 def load_demo(path, name=None):
@@ -179,11 +204,13 @@ def save_demo(path, demo, precision=None):
     """
     Write ``demo`` to ``path`` in the format its suffix names; :func:`load_demo` reads it back.
 
-    - ``.csv``: header ``t,x``, ``t,x,y``, ``t,x,y,z``, or ``t,x0,...,x{d-1}`` for d > 3. Numbers
-      are written in the shortest form that reads back to the same float (exact round trip)
-      unless ``precision`` (decimal places) is given.
-    - ``.npy``: positions only; the times are NOT stored and read back as uniform over 1 s.
-    - ``.npz``: ``positions`` and ``t``.
+    - ``.csv``: header ``t,x``, ``t,x,y``, ``t,x,y,z``, or ``t,x0,...,x{d-1}`` for d > 3, then
+      ``qx,qy,qz,qw`` if the demonstration has orientations. Numbers are written in the
+      shortest form that reads back to the same float (exact round trip) unless ``precision``
+      (decimal places) is given.
+    - ``.npy``: positions only; the times and orientations are NOT stored (times read back as
+      uniform over 1 s).
+    - ``.npz``: ``positions``, ``t`` and, with orientations, ``quaternions``.
     """
     if not isinstance(demo, Demonstration):
         raise TypeError(f'save_demo expects a Demonstration, got {type(demo).__name__}')
@@ -196,8 +223,11 @@ def save_demo(path, demo, precision=None):
         with open(path, 'wb') as f:
             np.save(f, demo.positions, allow_pickle=False)
     elif suffix == '.npz':
+        arrays = {'positions': demo.positions, 't': demo.t}
+        if demo.has_orientation:
+            arrays['quaternions'] = demo.orientations
         with open(path, 'wb') as f:
-            np.savez(f, positions=demo.positions, t=demo.t)
+            np.savez(f, **arrays)
     else:
         path.write_text(_format_csv(demo, precision), encoding='utf-8')
 
@@ -252,8 +282,10 @@ def _format_number(value, precision):
 
 def _format_csv(demo, precision):
     out = io.StringIO()
-    out.write(','.join(['t'] + _column_names(demo.dim)) + '\n')
-    for t, row in zip(demo.t, demo.positions):
+    quaternions = list(ORIENTATION_COLUMNS) if demo.has_orientation else []
+    out.write(','.join(['t'] + _column_names(demo.dim) + quaternions) + '\n')
+    rows = demo.positions if not quaternions else np.hstack([demo.positions, demo.orientations])
+    for t, row in zip(demo.t, rows):
         out.write(','.join(_format_number(v, precision) for v in (t, *row)) + '\n')
     return out.getvalue()
 
@@ -294,12 +326,20 @@ def _parse_csv(text, source, name):
     if len(time_cols) > 1:
         raise DemonstrationError(f'{source}: header (line {header_line}) has more than one time '
                                  f'column: {", ".join(header[k] for k in time_cols)}')
-    pos_cols = [k for k in range(len(header)) if k not in time_cols]
+    quat_cols = [k for name in ORIENTATION_COLUMNS for k, h in enumerate(header)
+                 if h.lower() == name]
+    if quat_cols and len(quat_cols) != len(ORIENTATION_COLUMNS):
+        named = [header[k] for k in quat_cols]
+        raise DemonstrationError(f'{source}: header (line {header_line}) names the orientation '
+                                 f'column(s) {", ".join(named)} but not all of '
+                                 f'{", ".join(ORIENTATION_COLUMNS)}; orientations need the four '
+                                 'quaternion columns (x, y, z, w)')
+    pos_cols = [k for k in range(len(header)) if k not in time_cols and k not in quat_cols]
     if not pos_cols:
         raise DemonstrationError(f'{source}: header (line {header_line}) names no position '
                                  f'column, only the time column {header[time_cols[0]]!r}')
 
-    if len(header) > limits.MAX_DEMO_COORDINATES + 1:
+    if len(header) > limits.MAX_DEMO_COORDINATES + 1 + len(quat_cols):
         raise DemonstrationError(f'{source}: header (line {header_line}) names {len(header)} '
                                  f'columns; at most {limits.MAX_DEMO_COORDINATES} coordinates '
                                  'and a time column (MAX_DEMO_COORDINATES)')
@@ -334,7 +374,11 @@ def _parse_csv(text, source, name):
         return f'line {lines[row]}, column {column!r}'
 
     _validate(positions, t, source, locate)
-    return Demonstration(name, positions, t)
+    orientations = None
+    if quat_cols:
+        orientations = unit_quaternions(values[:, quat_cols], len(data), source,
+                                        lambda row: f'line {lines[row]}')
+    return Demonstration(name, positions, t, orientations)
 
 
 _NPY_MAGIC = b'\x93NUMPY'
@@ -377,18 +421,19 @@ def _load_numpy(path, suffix, name):
         if 'positions' not in keys:
             raise DemonstrationError(f'{path}: no array named "positions" (found: '
                                      f'{_shorten(", ".join(keys), 80) or "nothing"})')
-        for key in ['positions', 't'] if 't' in keys else ['positions']:
+        for key in ['positions'] + [k for k in ('t', 'quaternions') if k in keys]:
             member_name = f'{key}.npy' if f'{key}.npy' in loaded.zip.namelist() else key
             with loaded.zip.open(member_name) as member:
                 _check_npy_header(member, f'{path}: array {key!r}')
         try:
             positions = loaded['positions']
             t = loaded['t'] if 't' in keys else None
+            orientations = loaded['quaternions'] if 'quaternions' in keys else None
         except ValueError as err:
             if 'pickle' in str(err):
                 raise DemonstrationError(f'{path}: {_PICKLE_REFUSED}') from None
             raise DemonstrationError(f'{path}: unreadable array ({err})') from None
-    return _from_arrays(positions, t, str(path), name)
+    return _from_arrays(positions, t, str(path), name, orientations)
 
 
 def _check_npy_header(stream, source):
@@ -430,7 +475,7 @@ def _check_npy_header(stream, source):
                                  f'{_shorten(str(shape), 80)}: {problem}; not loaded')
 
 
-def _from_arrays(positions, t, source, name):
+def _from_arrays(positions, t, source, name, orientations=None):
     positions = _as_float_array(positions, 'positions', source)
     if positions.ndim == 1:
         positions = positions[:, None]
@@ -439,7 +484,10 @@ def _from_arrays(positions, t, source, name):
     elif positions.ndim == 2:
         t = np.linspace(0.0, 1.0, positions.shape[0])
     _validate(positions, t, source, _array_location)
-    return Demonstration(name, positions, t)
+    if orientations is not None:
+        orientations = unit_quaternions(orientations, len(positions), source,
+                                        lambda row: f'quaternions[{row}]')
+    return Demonstration(name, positions, t, orientations)
 
 
 def _as_float_array(value, what, where):

@@ -13,7 +13,9 @@ and precomputed for all sub-steps at once); the obstacle coupling, which only tu
 applied as an exact rotation of v after each sub-step, so it never adds energy.
 
 Two implementations: a readable numpy reference (the oracle in tests) and a numba step loop (the
-fast path, used when numba is importable).
+fast path, used when numba is importable). Both start from a given state (``x0`` and, optionally,
+``v0``), so the same loop serves a whole offline rollout and, with two output samples, one step of
+the online rollout (``_online.py``): the DMP equations are written here once.
 """
 
 import numpy as np
@@ -64,20 +66,22 @@ def _rotate(v, omega, angle_scale):
 
 
 def rollout_reference(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau,
-                      h, substeps, R):
+                      h, substeps, R, v0=None):
     """
     Numpy reference rollout in the virtual situation, returned in the real one.
 
     Shapes: x0 (virtual start), goal, A, M (B, d); s_mid (n_sub,); f_mid (n_sub, d); s_out (n,);
     f_out (n, d); obstacles (B, n_obs, d), virtual; gains (gamma, beta, gamma2, k (B,));
-    R (B, d, d) the Euclidean transform. Returns positions, velocities dx/dt and accelerations,
-    each (B, n, d), mapped back with ``x = R^T (x' - g) + g`` (Eq. 13-14).
+    R (B, d, d) the Euclidean transform; v0 (B, d) the virtual scaled velocity ``tau dx'/dt`` at
+    the start (None: at rest). Returns positions, velocities dx/dt and accelerations, each
+    (B, n, d), mapped back with ``x = R^T (x' - g) + g`` (Eq. 13-14).
     """
     phi, gam = discretize(K, D, tau, h)
     B, d = x0.shape
     n = len(s_out)
     X, V, Acc = (np.empty((B, n, d)) for _ in range(3))
-    x, v = x0.copy(), np.zeros((B, d))
+    x = x0.copy()
+    v = np.zeros((B, d)) if v0 is None else np.array(v0, dtype=float)
     have_obstacles = obstacles.shape[1] > 0
     gamma, beta, gamma2, k = gains
     k = np.asarray(k, dtype=float)[:, None]
@@ -148,7 +152,7 @@ if numba is not None:
 
     @numba.njit(cache=True, fastmath=False)
     def _rollout_nb(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gamma, beta, gamma2,
-                    k, K, D, tau, phi, gam, angle_scale, substeps, R, X, V, Acc):
+                    k, K, D, tau, phi, gam, angle_scale, substeps, R, vel0, X, V, Acc):
         B, d = x0.shape
         n = s_out.shape[0]
         n_obs = obstacles.shape[1]
@@ -158,7 +162,7 @@ if numba is not None:
         for b in range(B):
             for i in range(d):
                 x[i] = x0[b, i]
-                v[i] = 0.0
+                v[i] = vel0[b, i]
             for step in range(n):
                 lam0 = lam1 = lam2 = 0.0
                 if n_obs > 0:
@@ -203,18 +207,113 @@ if numba is not None:
                             if d == 3:
                                 v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
 
+    @numba.njit(cache=True, fastmath=False)
+    def _chain_nb(x_real, xd_real, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles,
+                  gamma, beta, gamma2, K, D, tau, phi, gam, angle_scale, substeps, X, Xd, Acc):
+        N, d = goal.shape
+        n_obs = obstacles.shape[0]
+        x = np.empty(d)
+        v = np.empty(d)
+        xr = x_real.copy()
+        vr = xd_real * tau
+        obs = np.empty((max(n_obs, 1), d))
+        om = np.zeros(3)
+        for n in range(N):
+            g = goal[n]
+            # Into the virtual situation of this step's placement: x' = R (x - g) + g, v' = R v.
+            for i in range(d):
+                x[i] = g[i]
+                v[i] = 0.0
+                for j in range(d):
+                    x[i] += R[n, i, j] * (xr[j] - g[j])
+                    v[i] += R[n, i, j] * vr[j]
+            for m in range(n_obs):
+                for i in range(d):
+                    obs[m, i] = g[i]
+                    for j in range(d):
+                        obs[m, i] += R[n, i, j] * (obstacles[m, j] - g[j])
+            for jj in range(n * substeps, (n + 1) * substeps):
+                for i in range(d):
+                    u = K * g[i] + A[n, i] * s_mid[jj] + M[n, i] * f_mid[jj, i]
+                    xi = x[i]
+                    x[i] = phi[0, 0] * xi + phi[0, 1] * v[i] + gam[0] * u
+                    v[i] = phi[1, 0] * xi + phi[1, 1] * v[i] + gam[1] * u
+                if n_obs > 0:
+                    _omega_nb(x, v, obs[:n_obs], g, gamma, beta, gamma2, k[n], d, om)
+                    norm = np.sqrt(om[0] ** 2 + om[1] ** 2 + om[2] ** 2)
+                    if norm > 0.0:
+                        k0, k1, k2 = om[0] / norm, om[1] / norm, om[2] / norm
+                        ang = norm * angle_scale
+                        ca, sa = np.cos(ang), np.sin(ang)
+                        v0, v1 = v[0], v[1]
+                        v2 = v[2] if d == 3 else 0.0
+                        kv = k0 * v0 + k1 * v1 + k2 * v2
+                        v[0] = v0 * ca + (k1 * v2 - k2 * v1) * sa + k0 * kv * (1.0 - ca)
+                        v[1] = v1 * ca + (k2 * v0 - k0 * v2) * sa + k1 * kv * (1.0 - ca)
+                        if d == 3:
+                            v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
+            lam0 = lam1 = lam2 = 0.0
+            if n_obs > 0:
+                _omega_nb(x, v, obs[:n_obs], g, gamma, beta, gamma2, k[n], d, om)
+                v2 = v[2] if d == 3 else 0.0
+                lam0 = om[1] * v2 - om[2] * v[1]
+                lam1 = om[2] * v[0] - om[0] * v2
+                lam2 = om[0] * v[1] - om[1] * v[0]
+            for j in range(d):
+                X[n, j] = g[j]
+                Xd[n, j] = 0.0
+                Acc[n, j] = 0.0
+            for i in range(d):
+                lam = lam0 if i == 0 else (lam1 if i == 1 else lam2)
+                acc = (K * (g[i] - x[i]) - D * v[i] + A[n, i] * s_out[n]
+                       + M[n, i] * f_out[n, i] + lam) / (tau * tau)
+                for j in range(d):     # back to the real situation: x = R^T (x' - g) + g
+                    X[n, j] += R[n, i, j] * (x[i] - g[i])
+                    Xd[n, j] += R[n, i, j] * v[i] / tau
+                    Acc[n, j] += R[n, i, j] * acc
+            for j in range(d):
+                xr[j] = X[n, j]
+                vr[j] = Xd[n, j] * tau
+
+
+def chain(x, xd, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau, h,
+          substeps):
+    """
+    Advance one system N output steps, each in the virtual situation of its own placement.
+
+    Step ``n`` maps the real state (``x``, ``xd = dx/dt`` at the start) into the virtual
+    situation of (``goal[n]``, ``R[n]``, ``A[n]``, ``M[n]``, obstacle decay ``k[n]``), integrates
+    one output step of ``substeps`` sub-steps (forcing at the midpoints ``s_mid``, ``f_mid``:
+    N * substeps rows) and maps the new sample (forcing ``s_out[n]``, ``f_out[n]``) back: what
+    N calls of :func:`rollout` with two output samples do, in one numba loop (the online
+    rollout's remainder, ``OnlineRun.run``). ``obstacles`` (n_obs, d) in the real situation.
+    Returns X, Xd, Acc (N, d): the samples after each step. Needs numba.
+    """
+    phi, gam = discretize(K, D, tau, h)
+    N, d = goal.shape
+    X, Xd, Acc = (np.empty((N, d)) for _ in range(3))
+    gamma, beta, gamma2, _ = gains
+    f64 = np.ascontiguousarray
+    _chain_nb(f64(x, float), f64(xd, float), f64(goal, float), f64(A, float), f64(M, float),
+              f64(R, float), f64(k, float), f64(s_mid, float), f64(f_mid, float),
+              f64(s_out, float), f64(f_out, float), f64(obstacles, float).reshape(-1, d),
+              float(gamma), float(beta), float(gamma2), float(K), float(D), float(tau), phi,
+              gam, h / tau, int(substeps), X, Xd, Acc)
+    return X, Xd, Acc
+
 
 def rollout(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau, h,
-            substeps, R, fast=True):
+            substeps, R, fast=True, v0=None, step=None):
     """
     Roll out B systems; same arguments and results as :func:`rollout_reference`.
 
-    ``fast`` selects the numba step loop when numba is available.
+    ``fast`` selects the numba step loop when numba is available. ``step`` may give
+    ``discretize(K, D, tau, h)`` already computed (the online rollout caches it).
     """
     if not fast or numba is None:
         return rollout_reference(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains,
-                                 K, D, tau, h, substeps, R)
-    phi, gam = discretize(K, D, tau, h)
+                                 K, D, tau, h, substeps, R, v0)
+    phi, gam = discretize(K, D, tau, h) if step is None else step
     B, d = x0.shape
     n = len(s_out)
     X, V, Acc = (np.empty((B, n, d)) for _ in range(3))
@@ -223,5 +322,6 @@ def rollout(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, 
     _rollout_nb(f64(x0, float), f64(goal, float), f64(A, float), f64(M, float), f64(s_mid),
                 f64(f_mid), f64(s_out), f64(f_out), f64(obstacles, float), float(gamma),
                 float(beta), float(gamma2), f64(np.broadcast_to(k, (B,)), float), float(K),
-                float(D), float(tau), phi, gam, h / tau, int(substeps), f64(R, float), X, V, Acc)
+                float(D), float(tau), phi, gam, h / tau, int(substeps), f64(R, float),
+                np.zeros((B, d)) if v0 is None else f64(v0, float), X, V, Acc)
     return X, V, Acc

@@ -11,6 +11,7 @@ from ._errors import DemonstrationError, GeneralizationError
 from ._forcing_term import ForcingTerm, phase
 from ._integrate import rollout
 from ._obstacles import ObstacleGains
+from ._orientation import check_goal_orientation, OrientationDMP, turn_quaternions
 from ._transform import EPS, EuclideanTransform, transforms
 from .. import limits
 
@@ -36,7 +37,10 @@ class Trajectory:
 
     ``x``, ``v`` (dx/dt) and ``a`` (d2x/dt2) have shape (n, d) for one start or (B, n, d) for a
     batch; ``t`` has shape (n,). ``rotation`` is the Euclidean transform R ((d, d) or (B, d, d)),
-    the identity for plain DMPs; ``virtual_start`` is ``x0' = R I_C + g``.
+    the identity for plain DMPs; ``virtual_start`` is ``x0' = R I_C + g``. For a skill with
+    orientations, ``q`` ((n, 4) or (B, n, 4)) holds unit quaternions (x, y, z, w) and ``omega``
+    ((n, 3) or (B, n, 3)) the angular velocity in rad/s, both in the skill's frame
+    (docs/orientation.md); both are None for a position-only skill.
     """
 
     t: np.ndarray
@@ -48,6 +52,8 @@ class Trajectory:
     method: str
     rotation: np.ndarray
     virtual_start: np.ndarray
+    q: np.ndarray = None
+    omega: np.ndarray = None
 
 
 class _Request(NamedTuple):
@@ -74,29 +80,37 @@ def _finite_array(value, name):
     return arr
 
 
-def learn(positions, dt=None, t=None, n_basis=100, K=156.25, D=25.0, alpha=4.0,
-          formulation='ijspeert', regularization=1e-8):
+def learn(positions, orientations=None, dt=None, t=None, n_basis=100, K=156.25, D=25.0,
+          alpha=4.0, formulation='ijspeert', regularization=1e-8):
     """
     Learn a skill from one demonstration.
 
-    ``positions`` is a (T, d) or (T,) array or a :class:`Demonstration`. Give the sample period
-    ``dt`` (tau = (T - 1) dt) or the timestamps ``t`` (may be non-uniform); with neither, tau = 1
-    (or the Demonstration's own times). Raises DemonstrationError for unusable input.
+    ``positions`` is a (T, d) or (T,) array or a :class:`Demonstration`. ``orientations``
+    (T, 4), optional, are the tool's unit quaternions in ROS order (x, y, z, w), for d = 2 (in
+    the task plane's axes) or d = 3 (docs/orientation.md); a Demonstration brings its own. Give
+    the sample period ``dt`` (tau = (T - 1) dt) or the timestamps ``t`` (may be non-uniform);
+    with neither, tau = 1 (or the Demonstration's own times). Raises DemonstrationError for
+    unusable input.
     """
     if isinstance(positions, Demonstration):
+        if orientations is None:
+            orientations = positions.orientations
         positions, t = positions.positions, positions.t if t is None else t
     if t is None and dt is not None:
         if not (np.isfinite(dt) and dt > 0.0):
             raise DemonstrationError(f'dt must be a positive number, got {dt!r}')
         t = np.arange(len(np.atleast_1d(positions))) * float(dt)
-    demo = Demonstration('demonstration', positions, t)
+    demo = Demonstration('demonstration', positions, t, orientations)
+    if demo.has_orientation and demo.dim not in (2, 3):
+        raise DemonstrationError(f'orientations need a 2D (task plane) or 3D skill, this one has '
+                                 f'{demo.dim} coordinate(s)')
     if formulation not in FORMULATIONS:
         raise DemonstrationError(f'formulation must be one of {FORMULATIONS}, got {formulation!r}')
     for name, value in (('K', K), ('D', D), ('alpha', alpha)):
         if not (np.isfinite(value) and value > 0.0):
             raise DemonstrationError(f'{name} must be a positive number, got {value!r}')
     return Skill(np.array(demo.positions), demo.t - demo.t[0], int(n_basis), float(K), float(D),
-                 float(alpha), formulation, float(regularization))
+                 float(alpha), formulation, float(regularization), demo.orientations)
 
 
 class Skill:
@@ -109,7 +123,8 @@ class Skill:
     by ~0. The Ijspeert per-dimension scaling is applied only when the plain DMP is asked for.
     """
 
-    def __init__(self, y, t, n_basis, K, D, alpha, formulation, regularization):
+    def __init__(self, y, t, n_basis, K, D, alpha, formulation, regularization,
+                 orientations=None):
         self.demo, self.demo_t = y, t
         self.K, self.D, self.alpha = K, D, alpha
         self.formulation = formulation
@@ -140,6 +155,14 @@ class Skill:
             raise DemonstrationError('learning this demonstration overflows (its coordinates or '
                                      'accelerations are too large to be represented)')
         self._tables = OrderedDict()
+        #: The orientation DMP (docs/orientation.md), or None for a position-only skill.
+        self.orientation = None if orientations is None else OrientationDMP(
+            orientations, t, self.tau, K, D, alpha, n_basis, regularization)
+
+    @property
+    def has_orientation(self):
+        """Return True if the skill was learned with orientations."""
+        return self.orientation is not None
 
     def __repr__(self):
         return (f'Skill(dim={self.dim}, tau={self.tau:.3g}, samples={len(self.demo)}, '
@@ -152,7 +175,7 @@ class Skill:
         return self.generalize(self.start, self.goal, method='dmp', dt=dt)
 
     def generalize(self, start, goal, obstacles=(), method='etdmp', mode=1, independent_axis=2,
-                   dt=None, tau=None, margin=None, gains=None, fast=True):
+                   dt=None, tau=None, margin=None, gains=None, fast=True, goal_orientation=None):
         """
         Generalize the skill from ``start`` to ``goal``.
 
@@ -162,26 +185,20 @@ class Skill:
         (default: the demonstration's mean sample period) from 0 to ``tau * (1 + margin)``; the
         default margin is 0 without obstacles (the output is phase-aligned with the demonstration)
         and OBSTACLE_MARGIN with them, since a detour delays arrival at the goal.
+        For a skill with orientations the output also carries ``q`` and ``omega``: the
+        demonstrated orientations turned with the motion or, given ``goal_orientation``
+        (x, y, z, w), (4,) or (B, 4), converging to it (docs/orientation.md).
         Raises GeneralizationError on bad or degenerate input.
         """
         r = self._check_request(start, goal, obstacles, method, dt, tau, margin, gains)
-        d, B = self.dim, len(r.starts)
+        if goal_orientation is not None or self.orientation is not None:
+            goal_q = check_goal_orientation(self.orientation, goal_orientation, len(r.starts))
+        B = len(r.starts)
+        transform, virtual_start, A, M = self._placement(r.starts, r.goals, method, mode,
+                                                         independent_axis)
         i_current = r.starts - r.goals
-        if method == 'etdmp':
-            transform = transforms(self.start - self.goal, i_current, mode, independent_axis,
-                                   self.size)
-        else:
-            transform = EuclideanTransform(np.broadcast_to(np.eye(d), (B, d, d)).copy(),
-                                           self._plain_scale(i_current))
-        virtual_start = transform.to_virtual(r.starts[:, None], r.goals[:, None])[:, 0]
         virtual_obs = transform.to_virtual(np.broadcast_to(r.obstacles, (B,) + r.obstacles.shape),
                                            r.goals[:, None])
-        if self.formulation == 'ijspeert':
-            A = np.zeros_like(r.starts)
-            M = transform.scale * self.size
-        else:
-            A = -self.K * (r.goals - virtual_start)
-            M = np.full_like(r.starts, self.K * self.size)
         substeps = max(1, int(np.ceil(r.dt / (MAX_SUBSTEP * r.tau))))
         s_mid, f_mid, s_out, f_out = self._forcing_table(r.tau, r.dt, r.n_out, substeps)
         k = np.array([r.gains.decay(gap) for gap in np.linalg.norm(i_current, axis=1)])
@@ -189,10 +206,59 @@ class Skill:
                           (r.gains.gamma, r.gains.beta, r.gains.gamma2, k), self.K, self.D,
                           r.tau, r.dt / substeps, substeps, transform.R, fast=fast)
         t = np.arange(r.n_out) * r.dt
+        q = omega = None
+        if self.orientation is not None:
+            q, omega = self.orientation.generalize(
+                turn_quaternions(transform.R, method, mode, independent_axis), goal_q, r.tau,
+                r.dt, r.n_out, substeps, fast)
         if r.single:
             return Trajectory(t, x[0], v[0], a[0], r.starts[0], r.goals[0], method,
-                              transform.R[0], virtual_start[0])
-        return Trajectory(t, x, v, a, r.starts, r.goals, method, transform.R, virtual_start)
+                              transform.R[0], virtual_start[0],
+                              None if q is None else q[0], None if omega is None else omega[0])
+        return Trajectory(t, x, v, a, r.starts, r.goals, method, transform.R, virtual_start, q,
+                          omega)
+
+    def online(self, start, goal, obstacles=(), method='etdmp', mode=1, independent_axis=2,
+               dt=None, tau=None, gains=None, online=None, fast=True):
+        """
+        Start an online rollout from ``start`` to ``goal``: the goal may move while it runs.
+
+        The arguments are those of :meth:`generalize` for one start (``start`` and ``goal`` of
+        shape (d,)); ``online`` is an :class:`OnlineGains` (goal filter, phase stopping). Returns
+        an :class:`OnlineRun`; ``run.step(goal=None, obstacles=None, actual=None)`` advances it
+        by ``dt`` and returns ``(x, v, a)``. With a goal that never changes the samples are those
+        of :meth:`generalize`. The method: docs/design.md#online-goal. Raises
+        GeneralizationError on bad or degenerate input.
+        """
+        from ._online import OnlineRun   # _online builds on this module
+        return OnlineRun(self, start, goal, obstacles, method, mode, independent_axis, dt, tau,
+                         gains, online, fast)
+
+    def _placement(self, starts, goals, method, mode, independent_axis):
+        """
+        Place the skill between ``starts`` and ``goals`` (both (B, d)): the transform and A, M.
+
+        Returns the :class:`EuclideanTransform` (the identity with Ijspeert's per-dimension scale
+        for the plain DMP), the virtual starts ``x0' = R I_C + g`` and the coefficients ``A``,
+        ``M`` (B, d) of the integrated system (docs/design.md#dmp-formulations). Raises
+        GeneralizationError where the placement is undefined.
+        """
+        i_current = starts - goals
+        if method == 'etdmp':
+            transform = transforms(self.start - self.goal, i_current, mode, independent_axis,
+                                   self.size)
+        else:
+            d, B = self.dim, len(starts)
+            transform = EuclideanTransform(np.broadcast_to(np.eye(d), (B, d, d)).copy(),
+                                           self._plain_scale(i_current))
+        virtual_start = transform.to_virtual(starts[:, None], goals[:, None])[:, 0]
+        if self.formulation == 'ijspeert':
+            A = np.zeros_like(starts)
+            M = transform.scale * self.size
+        else:
+            A = -self.K * (goals - virtual_start)
+            M = np.full_like(starts, self.K * self.size)
+        return transform, virtual_start, A, M
 
     def _check_request(self, start, goal, obstacles, method, dt, tau, margin, gains):
         """

@@ -23,6 +23,19 @@ the 90th percentile of wall-clock time (``time.perf_counter``) after warm-up cal
 (cold) call of ours, which includes numba compilation or cache loading, is printed separately.
 The script prints a markdown table with ratios (fastest peer / ours) and exits 0 whatever the
 outcome, unless ``--strict`` is given (then 1 when a target is missed).
+
+Online section (ours only, no peer has it; docs/design.md#online-goal): the cost of one
+``OnlineRun.step`` on the same workload (G, dt = 1 ms, tau = 1 s), p50 and p99 over every step of
+several runs, for a step with a goal that stands still, a step with a new goal every step and a
+step with phase stopping (``actual`` given and lagging); target <= 2 ms. Then the comparison of
+three ways to handle a goal that jumps at 40 % of the movement (``compare_goal_jump``) for the
+built-in G, W and stir.
+
+Orientation section (docs/orientation.md): on the built-in stir (with orientations), learn and
+generalize with orientation vs position only, and vs movement-primitives' ``CartesianDMP`` (Ude et
+al. 2014) on the same demonstration: time and orientation reproduction error, the error at the end
+of a goal-orientation rollout, and ET-DMP's turned orientation against the reproduction turned by
+the transform. Without movement-primitives its column shows n/a and a line says why.
 """
 
 import argparse
@@ -36,6 +49,7 @@ import sys
 import time
 
 from etdmp_ros.dmp import builtin_demo, clearance, learn, nrmse
+from etdmp_ros.dmp._online import compare_goal_jump, goal_jump_case, GOAL_JUMP_WAYS
 import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -56,6 +70,8 @@ OBSTACLE_FRACTIONS = (0.3, 0.6)
 OBSTACLE_OFFSET = 0.02   # sideways offset from the path, as a fraction of |start - goal|
 
 PEERS = ('movement-primitives', 'pydmps')
+ONLINE_LIMIT_MS = 2.0
+ONLINE_SKILLS = ('G', 'W', 'stir')
 
 
 # --------------------------------------------------------------------------------------------
@@ -295,6 +311,289 @@ class _PyDMPs:
 
     def batch(self, starts, goal):
         return np.stack([self.rollout(s, goal) for s in starts])
+
+
+# --------------------------------------------------------------------------------------------
+# Online ET-DMP
+
+def _online_steps(skill, start, goal, runs, kind):
+    """
+    Wall-clock time of every ``OnlineRun.step`` of ``runs`` runs of N_STEPS steps.
+
+    ``kind``: 'still' (the goal stands still), 'goal' (a new goal at every step, on a circle of
+    10 % of |start - goal| about the goal) or 'actual' (phase stopping: the measured position
+    lags the plan by 1 % of |start - goal|). The first run is a warm-up and is not counted.
+    """
+    samples = []
+    radius = 0.1 * np.linalg.norm(start - goal)
+    for r in range(runs + 1):
+        run = skill.online(start, goal, dt=DT, tau=TAU)
+        times = []
+        for i in range(N_STEPS):
+            kwargs = {}
+            if kind == 'goal':
+                angle = 2.0 * np.pi * i / N_STEPS
+                kwargs['goal'] = goal + radius * np.array([np.cos(angle) - 1.0, np.sin(angle)])
+            elif kind == 'actual':
+                kwargs['actual'] = run.x + np.array([radius * 0.1, 0.0])
+            t0 = time.perf_counter()
+            run.step(**kwargs)
+            times.append(time.perf_counter() - t0)
+        if r:
+            samples.extend(times)
+    ms = np.asarray(samples) * 1e3
+    return {'p50_ms': float(np.percentile(ms, 50)), 'p99_ms': float(np.percentile(ms, 99)),
+            'max_ms': float(ms.max()), 'n': int(ms.size)}
+
+
+def _online_table(rows):
+    lines = ['| online step (ours; G, dt = 1 ms) | p50 (ms) | p99 (ms) | max (ms) | target '
+             '| pass/fail |', '|---|---|---|---|---|---|']
+    for r in rows:
+        s = r['stats']
+        lines.append(f"| {r['name']} | {s['p50_ms']:.3f} | {s['p99_ms']:.3f} "
+                     f"| {s['max_ms']:.3f} | p50 and p99 <= {ONLINE_LIMIT_MS:g} ms "
+                     f"| {'pass' if r['pass'] else 'FAIL'} |")
+    return '\n'.join(lines)
+
+
+def goal_jump_rows(names=ONLINE_SKILLS):
+    """Run the goal-jump comparison (docs/design.md#online-goal) for the built-in ``names``."""
+    rows = []
+    for name in names:
+        skill = learn(builtin_demo(name))
+        start, goal, new_goal = goal_jump_case(skill)
+        results, reference = compare_goal_jump(skill, start, goal, new_goal)
+        top_speed = float(np.max(np.linalg.norm(reference.v, axis=1)))
+        top_acc = float(np.max(np.linalg.norm(reference.a, axis=1)))
+        for way, r in results.items():
+            rows.append({'skill': name, 'way': way, 'size': skill.size,
+                         'velocity_step': r.velocity_step, 'top_speed': top_speed,
+                         'acceleration_step': r.acceleration_step, 'top_acceleration': top_acc,
+                         'final_distance': r.final_distance, 'shape_nrmse': r.shape_nrmse,
+                         'shape_error': r.shape_error, 'end_time': r.end_time})
+    return rows
+
+
+def goal_jump_table(rows):
+    """Markdown table of :func:`goal_jump_rows`; steps relative to the top speed/acceleration."""
+    lines = ['| skill | way | velocity step | acceleration step | final distance '
+             '| nRMSE of the rest | distance to placed demo (RMS) | end |',
+             '|---|---|---|---|---|---|---|---|']
+    for r in rows:
+        dv, da = r['velocity_step'], r['acceleration_step']
+        lines.append(
+            f"| {r['skill']} | {GOAL_JUMP_WAYS[r['way']]} "
+            f"| {dv:.3g} ({dv / r['top_speed']:.1%}) "
+            f"| {da:.3g} ({da / r['top_acceleration']:.1%})"
+            f" | {r['final_distance'] / r['size']:.2e} L | {r['shape_nrmse']:.3f} "
+            f"| {r['shape_error']:.3f} | {r['end_time']:.2f} s |")
+    return '\n'.join(lines)
+
+
+GOAL_JUMP_NOTES = """\
+Goal jump at 40 % of the movement (compare_goal_jump, goal_jump_case: start = the demo's turned by
+25 degrees about the goal and 1.2 times as far; the goal jumps sideways by 30 % of |start - goal|).
+Steps: the largest change over one sample in the 3 samples after the switch beyond the unperturbed
+movement's change, in units/s and units/s^2 (in brackets: relative to the top speed and
+acceleration of the demo placed at the new goal); the acceleration is (v_k+1 - v_k) / dt, so (b)'s
+velocity jump shows as the impulse it is. Final distance: |x - g_new| at each way's own nominal end
+(tau; for (b) the switch + tau), in units of the demo's size L. nRMSE of the rest: conventional
+nRMSE (Eq. 15-16) of the samples after the switch against the same phases of the demo placed at the
+new goal (the ET-DMP from the start to the new goal); distance to placed demo: the RMS distance
+between the two by phase, without nRMSE's alignment, over the placed demo's size."""
+
+
+# --------------------------------------------------------------------------------------------
+# Orientation (docs/orientation.md)
+
+ORIENTATION_SKILL = 'stir'
+ORIENTATION_STEPS = 1000
+#: The goal orientation of the "goal" rows: the demo's goal turned 60 degrees about x.
+ORIENTATION_GOAL_TURN = np.radians(60.0)
+
+
+def _wxyz(q):
+    """ROS order (x, y, z, w) to pytransform3d's (w, x, y, z)."""
+    return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+
+
+def _xyzw(q):
+    """Pytransform3d's (w, x, y, z) to ROS order (x, y, z, w)."""
+    return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
+
+
+def _orientation_error_deg(q, reference):
+    """Max and RMS rotation angle (deg) between quaternions q and reference (n, 4), by sample."""
+    from etdmp_ros.dmp._quaternion import angle_between
+    angle = np.degrees(angle_between(q, reference))
+    return float(angle.max()), float(np.sqrt(np.mean(angle ** 2)))
+
+
+class _MPCartesian:
+    """movement-primitives ``CartesianDMP`` (Ude et al. 2014's quaternion DMP) on the same demo."""
+
+    name = 'movement-primitives CartesianDMP'
+
+    def __init__(self, t, positions, q, dt):
+        from movement_primitives.dmp import CartesianDMP
+        self._class = CartesianDMP
+        self.t, self.dt = t, dt
+        self.y = np.hstack([positions, _wxyz(q)])
+        self.dmp = None
+
+    def learn(self):
+        dmp = self._class(execution_time=float(self.t[-1]), dt=self.dt, n_weights_per_dim=N_BASIS,
+                          int_dt=self.dt, alpha_y=D, beta_y=K / D)
+        dmp.imitate(self.t, self.y)
+        self.dmp = dmp
+        return dmp
+
+    def rollout(self, goal_q=None):
+        goal = self.y[-1].copy()
+        if goal_q is not None:
+            goal[3:] = _wxyz(goal_q)
+        self.dmp.configure(start_y=self.y[0], goal_y=goal)
+        return _xyzw(self.dmp.open_loop()[1][:, 3:])
+
+
+def orientation_section(repeats, batch_repeats):
+    """
+    Learn + generalize with orientation vs position only, and vs movement-primitives.
+
+    Workload: the built-in stir (500 samples over 5 s, with orientations), rollouts of
+    ORIENTATION_STEPS steps over its 5 s; ET-DMP from a start turned 90 degrees about z and 1.2
+    times as far; the goal-orientation rows ask for the demo's goal turned 60 degrees about x.
+    Returns (rows, errors, note): timing rows for :func:`_table`, orientation errors (deg), and a
+    line saying why movement-primitives is missing, if it is.
+    """
+    from etdmp_ros.dmp._quaternion import about_axis, from_matrix, multiply
+    demo = builtin_demo(ORIENTATION_SKILL)
+    t, x, q = np.array(demo.t), np.array(demo.positions), np.array(demo.orientations)
+    tau = float(t[-1])
+    dt = tau / ORIENTATION_STEPS
+    i_d = x[0] - x[-1]
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    start, goal = x[-1] + 1.2 * turn @ i_d, x[-1]
+    goal_q = multiply(about_axis([1.0, 0.0, 0.0], ORIENTATION_GOAL_TURN), q[-1])
+    starts = _batch_starts_3d(start, goal, N_BATCH)
+    note = None
+    try:
+        peer = _MPCartesian(t, x, q, dt)
+    except ImportError as error:
+        peer, note = None, (f'movement-primitives: NOT AVAILABLE ({error}); its '
+                            'CartesianDMP column shows n/a')
+
+    def ours_learn(with_q):
+        return learn(x, q if with_q else None, t=t, n_basis=N_BASIS, K=K, D=D, alpha=ALPHA)
+
+    position_only, oriented = ours_learn(False), ours_learn(True)
+    rows = [{'name': f'learn ({ORIENTATION_SKILL}, {len(t)} samples; ours: with orientation)',
+             'limit_ms': None, 'ours': _time(lambda: ours_learn(True), repeats),
+             'peers': {'movement-primitives': peer and _time(peer.learn, repeats)}},
+            {'name': f'learn ({ORIENTATION_SKILL}; ours: position only)', 'limit_ms': None,
+             'ours': _time(lambda: ours_learn(False), repeats), 'peers': {}}]
+    if peer is not None:
+        peer.learn()
+    peer_rollout = peer and _time(peer.rollout, repeats)
+    peer_goal = peer and _time(lambda: peer.rollout(goal_q), repeats)
+    for label, skill, kwargs, peer_stat in (
+            ('position only', position_only, {}, None),
+            ('with orientation', oriented, {}, peer_rollout),
+            ('with a goal orientation', oriented, {'goal_orientation': goal_q}, peer_goal)):
+        rows.append({'name': f'rollout {ORIENTATION_STEPS} steps ({ORIENTATION_SKILL}, ours: '
+                             f'ET-DMP {label})', 'limit_ms': None,
+                     'ours': _time(lambda s=skill, k=kwargs: s.generalize(
+                         start, goal, dt=dt, tau=tau, **k), repeats),
+                     'peers': {'movement-primitives': peer_stat}})
+    for label, skill in (('position only', position_only), ('with orientation', oriented)):
+        rows.append({'name': f'batch {N_BATCH} starts x {ORIENTATION_STEPS} steps '
+                             f'({ORIENTATION_SKILL}, ours: {label})', 'limit_ms': None,
+                     'ours': _time(lambda s=skill: s.generalize(starts, goal, dt=dt, tau=tau),
+                                   max(batch_repeats, 5)),
+                     'peers': {}})
+    for row in rows:
+        row['peers'] = {k: v for k, v in row['peers'].items() if v}
+        _evaluate(row)
+
+    # Orientation errors (deg): reproduction against the demo (by phase: same sample times),
+    # the end of a goal-orientation rollout against that goal, and ET-DMP's turned path
+    # against the reproduction turned by the transform.
+    times = np.linspace(0.0, tau, ORIENTATION_STEPS + 1)
+    demo_q = _resample_quaternions(t, q, times)
+    rep = oriented.generalize(x[0], x[-1], method='dmp', dt=dt, tau=tau)
+    reached = oriented.generalize(x[0], x[-1], method='dmp', dt=dt, tau=tau,
+                                  goal_orientation=goal_q)
+    et = oriented.generalize(start, goal, dt=dt, tau=tau)
+    turned = multiply(from_matrix(et.rotation.T), rep.q)
+    errors = {'ours': {'reproduction_max_deg': _orientation_error_deg(rep.q, demo_q)[0],
+                       'reproduction_rms_deg': _orientation_error_deg(rep.q, demo_q)[1],
+                       'goal_end_deg': _orientation_error_deg(reached.q[-1:], goal_q[None])[0],
+                       'etdmp_turned_residual_deg': _orientation_error_deg(et.q, turned)[0]}}
+    if peer is not None:
+        peer_q = peer.rollout()
+        peer_goal_q = peer.rollout(goal_q)
+        n = min(len(peer_q), len(demo_q))
+        errors['movement-primitives CartesianDMP'] = {
+            'reproduction_max_deg': _orientation_error_deg(peer_q[:n], demo_q[:n])[0],
+            'reproduction_rms_deg': _orientation_error_deg(peer_q[:n], demo_q[:n])[1],
+            'goal_end_deg': _orientation_error_deg(peer_goal_q[-1:], goal_q[None])[0],
+            'etdmp_turned_residual_deg': None}
+    return rows, errors, note
+
+
+def _batch_starts_3d(start, goal, n):
+    """``n`` starts around ``goal`` in every direction, at 0.5-1.5 times |start - goal|."""
+    rng = np.random.default_rng(0)
+    direction = rng.normal(size=(n, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    radius = np.linalg.norm(start - goal) * rng.uniform(0.5, 1.5, n)
+    return goal + radius[:, None] * direction
+
+
+def _resample_quaternions(t, q, times):
+    """Quaternions (n, 4) at ``times`` by normalised linear interpolation (sign-continuous q)."""
+    out = np.column_stack([np.interp(times, t, q[:, i]) for i in range(4)])
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def orientation_tables(rows, errors, note):
+    """Markdown tables of :func:`orientation_section`."""
+    lines = ['| row | ours (ms) | movement-primitives CartesianDMP (ms) | ratio (peer / ours) |',
+             '|---|---|---|---|']
+    for r in rows:
+        ratio = 'n/a' if r['ratio'] is None else f"{r['ratio']:.1f}x"
+        lines.append(f"| {r['name']} | {_cell(r['ours'])} "
+                     f"| {_cell(r['peers'].get('movement-primitives'))} | {ratio} |")
+    lines += ['', '| orientation error (deg) | reproduction max | reproduction RMS '
+              '| goal orientation, at the end | ET-DMP turned vs reproduction turned |',
+              '|---|---|---|---|---|']
+    for lib, e in errors.items():
+        cells = ['n/a' if e[k] is None else f'{e[k]:.3g}' for k in
+                 ('reproduction_max_deg', 'reproduction_rms_deg', 'goal_end_deg',
+                  'etdmp_turned_residual_deg')]
+        lines.append(f"| {lib} | {' | '.join(cells)} |")
+    if 'movement-primitives CartesianDMP' not in errors:
+        lines.append(f"| movement-primitives CartesianDMP | n/a ({note or 'not run'}) "
+                     '| n/a | n/a | n/a |')
+    if note:
+        lines.append('\n' + note)
+    return '\n'.join(lines)
+
+
+ORIENTATION_NOTES = """\
+Orientation workload: built-in stir (500 samples over 5 s, tilted circling stirrer), K = 156.25,
+D = 25, 100 basis functions, 1000 steps of 5 ms over tau = 5 s. ours: learn(positions,
+orientations) (the quaternion DMP on e = 2 log(q q_g^-1), docs/orientation.md) vs learn(positions);
+generalize from a start turned 90 degrees about z (ET-DMP, mode 1) without / with a goal
+orientation (the demo's goal turned 60 degrees about x); a batch of 256 starts around the goal.
+movement-primitives CartesianDMP (Ude et al. 2014, alpha_y = 25, beta_y = 6.25, 100 weights per
+dimension, dt = int_dt = 5 ms): imitate; open_loop from the demo's start pose to its goal pose (or
+to the goal orientation); it has no Euclidean transform, so its rollout rows are reproductions
+(same step count) and its batch rows are not run. Errors: rotation angle per sample against the
+demo resampled at the rollout's times (by phase, same duration), the goal error at the last
+sample (t = tau), and the residual of ET-DMP's orientation against the reproduction turned by the
+transform (the method's claim: round-off)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -540,18 +839,45 @@ def main(argv=None):
           + ', '.join(f'{k} {v:.1f}' for k, v in cold.items()))
     _print_sanity(sanity)
     print('\n' + NOTES)
-    failed = [r['name'] for r in rows if not r['pass']]
+
+    # Online: the cost of one step, and the goal-jump comparison.
+    online_skill = learn(positions, t=t, n_basis=N_BASIS, K=K, D=D, alpha=ALPHA)
+    online_runs = 1 if args.quick else 5
+    online_rows = []
+    for kind, label in (('still', 'step, goal standing still'),
+                        ('goal', 'step with a goal change (new goal every step)'),
+                        ('actual', 'step with phase stopping (actual given, lagging)')):
+        stats = _online_steps(online_skill, start, goal, online_runs, kind)
+        online_rows.append({'name': label, 'stats': stats,
+                            'pass': bool(stats['p99_ms'] <= ONLINE_LIMIT_MS)})
+    jump_rows = goal_jump_rows()
+    print('\n## Online ET-DMP\n')
+    print(_online_table(online_rows))
+    print(f'\n({online_runs} runs of {N_STEPS} steps per row after one warm-up run.)\n')
+    print(goal_jump_table(jump_rows))
+    print('\n' + GOAL_JUMP_NOTES)
+
+    # Orientation: learn + generalize with and without it, and movement-primitives' CartesianDMP.
+    ori_rows, ori_errors, ori_note = orientation_section(args.repeats, args.batch_repeats)
+    print('\n## Orientation\n')
+    print(orientation_tables(ori_rows, ori_errors, ori_note))
+    print('\n' + ORIENTATION_NOTES)
+
+    failed = [r['name'] for r in rows + online_rows if not r['pass']]
     wall = time.perf_counter() - wall0
     missed = ('; missed: ' + '; '.join(failed)) if failed else ''
-    print(f'\n{len(rows) - len(failed)} of {len(rows)} rows meet their target{missed} '
+    total = len(rows) + len(online_rows)
+    print(f'\n{total - len(failed)} of {total} rows meet their target{missed} '
           f'(wall time {wall:.0f} s)')
 
     if args.json:
         result = {'environment': env, 'demo': demo_source, 'start': start.tolist(),
                   'goal': goal.tolist(), 'obstacles': obstacles.tolist(),
                   'missing_peers': missing, 'rows': rows, 'cold_ms': cold,
-                  'sanity': sanity, 'repeats': args.repeats,
+                  'sanity': sanity, 'online': online_rows, 'goal_jump': jump_rows,
+                  'repeats': args.repeats,
                   'batch_repeats': args.batch_repeats, 'wall_s': wall}
+        result['orientation'] = {'rows': ori_rows, 'errors': ori_errors, 'note': ori_note}
         Path(args.json).write_text(json.dumps(result, indent=2, default=_json_default) + '\n')
         print(f'results written to {args.json}')
     return 1 if (args.strict and failed) else 0

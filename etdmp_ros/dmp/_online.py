@@ -1,0 +1,568 @@
+"""
+Online ET-DMP: the rollout advanced one step at a time while the goal and obstacles may move.
+
+The method and its convergence argument: docs/design.md#online-goal. In short, with ``x0`` the
+movement's start (fixed), ``g`` the goal as last given and ``g_f`` the filtered goal:
+
+    tau dg_f/dt = alpha_goal (g - g_f)                               goal filter (Ijspeert 2013)
+    R, c, A, M  = the placement of the skill between x0 and g_f       as Skill.generalize does
+    tau dv/dt   = K (g_f - x) - D v + R^T (A s + M f(s)) + lambda      real situation
+    tau dx/dt   = v
+    rate        = 1 / (1 + alpha_err (|x_actual - x| / l)^2)          phase stopping: the whole
+                                                                      system runs at this rate
+
+Written in the real situation, the Euclidean transform acts on the forcing term only (``K`` and
+``D`` are scalars, so ``R^T K (g - x') = K (g - x)``): when ``R`` changes, the state does not
+jump. The code integrates each step in the virtual situation of that step's transform (the real
+state mapped in with ``x' = R (x - g_f) + g_f``, ``v' = R v``) with the one integrator of
+``_integrate.py``, and maps the result back; with a goal that never changes this is exactly the
+offline rollout. Phase stopping scales the rate of the whole system, phase and transformation
+system alike: a time warp, so a slowed or waiting plan stays on its path and resumes from where
+it waits.
+"""
+
+import copy
+from dataclasses import dataclass
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ._errors import GeneralizationError
+from ._integrate import chain, discretize, numba, rollout
+from ._similarity import nrmse
+from ._skill import _finite_array, MAX_SUBSTEP
+from ._transform import EPS
+
+
+#: Length, in durations tau, of the forcing table that :meth:`OnlineRun.run` reads its rows
+#: from (a remainder reaching past it is computed instead).
+RUN_TABLE_TAUS = 4.0
+#: Lowest rate phase stopping may set (a measured position absurdly far from the plan would
+#: otherwise give 0 and stop the run for good).
+MIN_RATE = 1e-9
+
+
+@dataclass(frozen=True)
+class OnlineGains:
+    """
+    Gains of the online rollout (docs/design.md#online-goal).
+
+    ``alpha_goal``: rate of the goal filter, ``tau dg_f/dt = alpha_goal (g - g_f)``; ``inf``
+    turns the filter off (the goal jumps, as in the plain DMP's goal change). ``alpha_err``:
+    phase stopping, the rate of the whole system (phase and transformation system) is divided
+    by ``1 + alpha_err e^2`` with ``e`` the distance from the measured position to the plan
+    relative to the size ``l`` of the placed movement (its largest distance from the goal); 0
+    turns it off. ``done_tolerance``: the run is done when the phase has ended (phase time
+    ``>= tau``) and both ``|x - g|`` and the DMP's own ``|v|`` (``tau |dx/dt|`` at full rate)
+    are below this fraction of ``l``.
+
+    The defaults: alpha_goal = 25 = D makes the filter twice as fast as the critically damped
+    spring (whose rate is sqrt(K) = 12.5), so it adds little lag to the spring's own while it
+    spreads the acceleration of a goal jump over about tau / 25 (docs/design.md#online-goal has
+    the scan behind this choice); alpha_err = 1000 halves the rate at a tracking error of 3 % of
+    the movement's size and leaves it above 97 % below 0.5 %, and a plan waiting for a held
+    tool creeps ahead by at most ``(3 V T / (alpha_err l))^(1/3) l`` in a hold of ``T`` seconds
+    (V: the plan's top speed), 24 % of the letter G's size in 1 s.
+    """
+
+    alpha_goal: float = 25.0
+    alpha_err: float = 1000.0
+    done_tolerance: float = 1e-3
+
+    def validate(self):
+        """Raise ValueError unless the gains are usable (alpha_goal may be inf)."""
+        values = {}
+        for name in ('alpha_goal', 'alpha_err', 'done_tolerance'):
+            try:
+                values[name] = float(getattr(self, name))
+            except (TypeError, ValueError):
+                raise ValueError(f'{name} must be a number, got {getattr(self, name)!r}') from None
+        if not values['alpha_goal'] > 0.0:      # also refuses NaN
+            raise ValueError(f'alpha_goal must be > 0 (inf: no goal filter), got '
+                             f'{self.alpha_goal!r}')
+        if not (math.isfinite(values['alpha_err']) and values['alpha_err'] >= 0.0):
+            raise ValueError(f'alpha_err must be finite and >= 0, got {self.alpha_err!r}')
+        tolerance = values['done_tolerance']
+        if not (math.isfinite(tolerance) and tolerance > 0.0):
+            raise ValueError(f'done_tolerance must be finite and > 0, got '
+                             f'{self.done_tolerance!r}')
+
+
+class OnlineRun:
+    """
+    One movement rolled out step by step (made by :meth:`Skill.online`).
+
+    ``step(goal=None, obstacles=None, actual=None)`` advances by ``dt`` and returns
+    ``(x, v, a)``: position, velocity dx/dt and acceleration d2x/dt2, each (d,), in the real
+    situation. A new ``goal`` or obstacle set may be given at any step; ``actual`` is the
+    measured position of the tool, for phase stopping. A bad argument raises GeneralizationError
+    and leaves the run as it was. ``t``, ``phase`` (s), ``done``, ``x``, ``v``, ``a`` describe
+    the current sample. Positions only: a skill's orientations are not rolled out online.
+    """
+
+    def __init__(self, skill, start, goal, obstacles, method, mode, independent_axis, dt, tau,
+                 gains, online, fast):
+        online = OnlineGains() if online is None else online
+        if not isinstance(online, OnlineGains):
+            raise GeneralizationError(f'online must be an OnlineGains, got {online!r}')
+        try:
+            online.validate()
+        except ValueError as exc:
+            raise GeneralizationError(str(exc)) from None
+        d = skill.dim
+        for name, value in (('start', start), ('goal', goal)):
+            if _finite_array(value, name).shape != (d,):
+                raise GeneralizationError(f'an online run is one movement: {name} must have '
+                                          f'shape ({d},), got {np.shape(value)}')
+        r = skill._check_request(start, goal, obstacles, method, dt, tau, 0.0, gains)
+        self._skill, self._method = skill, method
+        self._mode, self._axis = mode, independent_axis
+        self._fast = fast
+        self.online = online
+        self.gains = r.gains
+        self.tau, self.dt = r.tau, r.dt
+        self._substeps = max(1, int(np.ceil(r.dt / (MAX_SUBSTEP * r.tau))))
+        self._h = r.dt / self._substeps
+        self._x0 = r.starts[0].copy()
+        self._goal = r.goals[0].copy()
+        self._goal_f = self._goal.copy()
+        self._obstacles = r.obstacles
+        n_demo = float(np.linalg.norm(skill.start - skill.goal))
+        # Size of the placed movement per unit of |x0 - g| (the ET-DMP's uniform scale).
+        self._size_ratio = skill.size / n_demo if n_demo > EPS * skill.size else 1.0
+        self._place(self._goal)
+        self._steps = {}
+        self._n = 0
+        self._theta = 0.0           # phase time: s = exp(-alpha theta / tau)
+        self._rate = 1.0
+        self._x = self._x0.copy()
+        self._v = np.zeros(d)       # scaled velocity tau dx/dt of the DMP, real situation
+        self._xd = np.zeros(d)
+        self._a = self._advance(1.0, 0)
+
+    def __repr__(self):
+        return (f'OnlineRun(method={self._method!r}, t={self.t:.3g}, phase={self.phase:.3g}, '
+                f'done={self.done})')
+
+    # -- state ------------------------------------------------------------------------------
+
+    @property
+    def t(self):
+        """Return the time since the start in seconds (``dt`` times the number of steps)."""
+        return self._n * self.dt
+
+    @property
+    def phase(self):
+        """Return the phase ``s`` (1 at the start, ``exp(-alpha)`` at t = tau without stopping)."""
+        return math.exp(-self._skill.alpha * self._theta / self.tau)
+
+    @property
+    def rate(self):
+        """Return the rate of the last step (1, or below 1 while phase stopping slowed it)."""
+        return self._rate
+
+    @property
+    def done(self):
+        """Return whether the phase has ended and the plan rests at the goal (done_tolerance)."""
+        tol = self.online.done_tolerance * self._length(self._goal)
+        return bool(self._theta >= self.tau * (1.0 - 1e-12)
+                    and np.linalg.norm(self._x - self._goal) <= tol
+                    and np.linalg.norm(self._v) <= tol)
+
+    @property
+    def x(self):
+        """Return the position of the current sample (d,)."""
+        return self._x.copy()
+
+    @property
+    def v(self):
+        """Return the velocity dx/dt of the current sample (d,)."""
+        return self._xd.copy()
+
+    @property
+    def a(self):
+        """Return the acceleration d2x/dt2 of the current sample (d,)."""
+        return self._a.copy()
+
+    @property
+    def start(self):
+        """Return the movement's start ``x0`` (fixed; the transform is taken from it)."""
+        return self._x0.copy()
+
+    @property
+    def goal(self):
+        """Return the goal as last given."""
+        return self._goal.copy()
+
+    @property
+    def filtered_goal(self):
+        """Return the filtered goal ``g_f`` the system is attracted to now."""
+        return self._goal_f.copy()
+
+    @property
+    def obstacles(self):
+        """Return the obstacle points in force, (n_obs, d)."""
+        return self._obstacles.copy()
+
+    @property
+    def rotation(self):
+        """Return the Euclidean transform R in force (the identity for the plain DMP)."""
+        return self._R.copy()
+
+    @property
+    def virtual_start(self):
+        """Return the virtual start ``x0' = R (x0 - g_f) + g_f`` of the transform in force."""
+        return self._vstart.copy()
+
+    # -- stepping ---------------------------------------------------------------------------
+
+    def step(self, goal=None, obstacles=None, actual=None):
+        """
+        Advance by ``dt``; return ``(x, v, a)`` of the new sample.
+
+        ``goal`` (d,): a new goal, reached through the goal filter. ``obstacles`` (n, d): the
+        obstacle set from now on (replaces the previous one). ``actual`` (d,): the measured
+        position of the tool now; the farther it is from the plan's current sample, the slower
+        this step runs (phase stopping). Raises GeneralizationError for a bad argument
+        (NaN, wrong shape, goal at the start, obstacle on the goal, ...); the run is then as it
+        was.
+        """
+        skill = self._skill
+        target = self._goal if goal is None else self._point(goal, 'goal')
+        new_goal = not np.array_equal(target, self._goal)
+        obstacles = self._obstacles if obstacles is None else self._obstacle_set(obstacles)
+        measured = None if actual is None else self._point(actual, 'actual')
+        if new_goal:
+            gap = np.linalg.norm(self._x0 - target)
+            if not gap > EPS * skill.size:
+                raise GeneralizationError(
+                    f"goal equals the movement's start (|x0 - g| = {gap:.3g}): the transform "
+                    'is undefined and there is no movement to make')
+            # Raises where the placement is undefined (e.g. the plain DMP's division by ~0).
+            skill._placement(self._x0[None], target[None], self._method, self._mode,
+                             self._axis)
+        if len(obstacles) and (new_goal or obstacles is not self._obstacles):
+            if np.any(np.linalg.norm(obstacles - target, axis=1) <= EPS * skill.size):
+                raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
+        # Checked: from here on the run changes.
+        self._goal, self._obstacles = target, obstacles
+        rate = 1.0
+        if measured is not None:
+            with np.errstate(over='ignore'):    # an absurd measurement: rate MIN_RATE
+                error = np.linalg.norm(measured - self._x) / self._length(self._goal)
+                rate = max(MIN_RATE, 1.0 / (1.0 + self.online.alpha_err * error ** 2))
+        if not np.array_equal(self._goal_f, self._goal):
+            keep = math.exp(-self.online.alpha_goal * self.dt / self.tau)
+            goal_f = self._goal + (self._goal_f - self._goal) * keep
+            if np.linalg.norm(goal_f - self._goal) <= EPS * skill.size:
+                goal_f = self._goal.copy()
+            self._goal_f = goal_f
+            try:
+                self._place(goal_f)
+            except GeneralizationError:
+                pass    # g_f passing within EPS of x0: the previous transform stays in force
+        self._rate = rate
+        self._a = self._advance(rate, 1)
+        self._n += 1
+        self._theta += rate * self.dt
+        return self._x.copy(), self._xd.copy(), self._a.copy()
+
+    def copy(self):
+        """Return an independent copy of the run (for a what-if rollout; the skill is shared)."""
+        return copy.copy(self)      # every step replaces the state arrays, never edits them
+
+    def run(self, t_max, fast=True):
+        """
+        Step with no new input until the run is done or ``t >= t_max``; return the samples.
+
+        Returns ``(t, x, v, a)``: (N,) times and (N, d) positions, velocities and accelerations
+        of the samples after each step, the same as N calls of :meth:`step` (to rounding), with
+        the run left where those calls leave it. The fast path computes the placements of all N
+        steps in one batch (the goal filter's course is known without input) and integrates
+        them in one numba loop (``_integrate.chain``): the remainder of a movement in about a
+        millisecond, where N calls of :meth:`step` while the filter moves take ~0.2 ms each.
+        """
+        n_max = int(math.floor((t_max - self.t) / self.dt + 0.5))
+        if n_max <= 0 or self.done:
+            d = self._skill.dim
+            return np.zeros(0), np.zeros((0, d)), np.zeros((0, d)), np.zeros((0, d))
+        if not fast or numba is None:
+            return self._run_by_steps(n_max)
+        skill = self._skill
+        g = self._goal
+        keep = math.exp(-self.online.alpha_goal * self.dt / self.tau)
+        # The goal filter as step() runs it (to rounding), snapping to g within EPS.
+        goal_f = g + (self._goal_f - g) * keep ** np.arange(1, n_max + 1)[:, None]
+        snapped = np.linalg.norm(goal_f - g, axis=1) <= EPS * skill.size
+        goal_f[snapped] = g
+        moving = 0 if np.array_equal(self._goal_f, g) else \
+            int(np.argmax(snapped)) + 1 if snapped.any() else n_max
+        R = np.broadcast_to(self._R, (n_max,) + self._R.shape).copy()
+        A = np.broadcast_to(self._A, goal_f.shape).copy()
+        M = np.broadcast_to(self._M, goal_f.shape).copy()
+        k = np.full(n_max, self._k)
+        vstart = np.broadcast_to(self._vstart, goal_f.shape).copy()
+        if moving:
+            try:
+                transform, vstart_m, A_m, M_m = skill._placement(
+                    np.broadcast_to(self._x0, (moving, skill.dim)), goal_f[:moving],
+                    self._method, self._mode, self._axis)
+            except GeneralizationError:     # g_f passes by x0: step() keeps the old placement
+                return self._run_by_steps(n_max)
+            R[:moving], A[:moving], M[:moving] = transform.R, A_m, M_m
+            R[moving:], A[moving:], M[moving:] = transform.R[-1], A_m[-1], M_m[-1]
+            vstart[:moving], vstart[moving:] = vstart_m, vstart_m[-1]
+            length = np.linalg.norm(self._x0 - goal_f, axis=1)
+            k[:] = self.gains.k if self.gains.k is not None else \
+                self.gains.k_relative / np.maximum(length, 1e-300)
+        sub = self._substeps
+        theta = self._theta + self.dt * np.arange(n_max)
+        s_mid, f_mid, s_out, f_out = self._forcing_rows(n_max)
+        X, V, Acc = chain(self._x, self._xd, goal_f, A, M, R, k, s_mid, f_mid, s_out, f_out,
+                          self._obstacles,
+                          (self.gains.gamma, self.gains.beta, self.gains.gamma2, None),
+                          skill.K, skill.D, self.tau, self._h, sub)
+        # Where step() would have said done: the phase ended and at rest at the goal.
+        tol = self.online.done_tolerance * self._length(g)
+        ended = theta + self.dt >= self.tau * (1.0 - 1e-12)
+        rest = (np.linalg.norm(X - g, axis=1) <= tol) & \
+            (np.linalg.norm(V * self.tau, axis=1) <= tol)
+        done = np.flatnonzero(ended & rest)
+        n = int(done[0]) + 1 if len(done) else n_max
+        t = self.t + self.dt * np.arange(1, n + 1)
+        last = n - 1
+        self._goal_f = goal_f[last].copy()
+        self._R, self._A, self._M, self._k = R[last].copy(), A[last].copy(), M[last].copy(), \
+            float(k[last])
+        self._vstart = vstart[last].copy()
+        self._x, self._xd, self._a = X[last].copy(), V[last].copy(), Acc[last].copy()
+        self._v = self._xd * self.tau
+        self._rate = 1.0
+        self._n += n
+        self._theta = float(theta[last] + self.dt)
+        return t, X[:n].copy(), V[:n].copy(), Acc[:n].copy()
+
+    def _forcing_rows(self, n):
+        """
+        Phase and forcing at the sub-step midpoints and samples of the next ``n`` full-rate steps.
+
+        While the phase has only run at full rate it is on the offline grid (``k dt``), and the
+        rows come from the skill's cached table of RUN_TABLE_TAUS durations (built once per
+        timing); after phase stopping they are computed.
+        """
+        skill, sub = self._skill, self._substeps
+        k0 = int(round(self._theta / self.dt))
+        n_table = int(math.ceil(RUN_TABLE_TAUS * self.tau / self.dt)) + 1
+        if abs(self._theta - k0 * self.dt) <= 1e-9 * self.dt and k0 + n + 1 <= n_table:
+            s_mid, f_mid, s_out, f_out = skill._forcing_table(self.tau, self.dt, n_table, sub)
+            rows = slice(k0 * sub, (k0 + n) * sub)
+            return s_mid[rows], f_mid[rows], s_out[k0 + 1:k0 + n + 1], f_out[k0 + 1:k0 + n + 1]
+        theta = self._theta + self.dt * np.arange(n)
+        theta_mid = (theta[:, None] + self._h * (np.arange(sub) + 0.5)).ravel()
+        s_mid = np.exp(-skill.alpha * theta_mid / self.tau)
+        s_out = np.exp(-skill.alpha * (theta + self.dt) / self.tau)
+        return s_mid, skill.forcing(s_mid), s_out, skill.forcing(s_out)
+
+    def warm(self):
+        """Build the forcing table :meth:`run` reads (~10 ms once per timing), so it is fast."""
+        self._forcing_rows(1)
+
+    def _run_by_steps(self, n_max):
+        """:meth:`run` by calls of :meth:`step` (the reference; no numba)."""
+        rows = []
+        for _ in range(n_max):
+            rows.append(self.step())
+            if self.done:
+                break
+        t = self.t - self.dt * np.arange(len(rows))[::-1]
+        x, v, a = (np.array([r[i] for r in rows]) for i in range(3))
+        return t, x, v, a
+
+    def _point(self, value, name):
+        """Check one point (d,) given to :meth:`step`."""
+        d = self._skill.dim
+        arr = _finite_array(value, name)
+        if arr.shape != (d,):
+            raise GeneralizationError(f'{name} must have shape ({d},), got {arr.shape}')
+        return arr.copy()
+
+    def _obstacle_set(self, value):
+        """Check an obstacle set (n, d) given to :meth:`step`; return it as (n, d)."""
+        d = self._skill.dim
+        obs = _finite_array(value, 'obstacles')
+        if obs.size == 0:
+            return np.zeros((0, d))
+        if obs.ndim > 2 or obs.shape[-1] != d:
+            raise GeneralizationError(f'obstacles must have shape (n, {d}), got {obs.shape}')
+        if d not in (2, 3):
+            raise GeneralizationError(f'obstacle avoidance needs 2 or 3 dimensions, skill has {d}')
+        return obs.reshape(-1, d).copy()
+
+    def _length(self, goal):
+        """Size ``l`` of the movement placed between x0 and ``goal``."""
+        return float(np.linalg.norm(self._x0 - goal)) * self._size_ratio
+
+    def _place(self, goal_f):
+        """Put the placement of the skill between x0 and ``goal_f`` in force."""
+        transform, vstart, A, M = self._skill._placement(
+            self._x0[None], goal_f[None], self._method, self._mode, self._axis)
+        self._R, self._vstart, self._A, self._M = transform.R[0], vstart[0], A[0], M[0]
+        self._k = self.gains.decay(np.linalg.norm(self._x0 - goal_f))
+
+    def _advance(self, rate, samples):
+        """
+        Integrate ``samples`` (0 or 1) steps at ``rate``; set x, v; return the acceleration.
+
+        One call of the offline integrator, in the virtual situation of the transform in force,
+        from the current state: its sample 0 is the current one, its sample 1 the next.
+        """
+        skill, g, R = self._skill, self._goal_f, self._R
+        tau = self.tau / rate
+        n_sub = self._substeps * samples
+        # Phase at the sub-step midpoints, then at the current and the next sample.
+        theta = np.concatenate([self._theta + rate * self._h * (np.arange(n_sub) + 0.5),
+                                self._theta + rate * self.dt * np.arange(samples + 1)])
+        s = np.exp(-skill.alpha * theta / self.tau)
+        f = skill.forcing(s)
+        step = self._steps.get(tau)
+        if step is None:
+            step = discretize(skill.K, skill.D, tau, self._h)
+            if rate == 1.0:
+                self._steps[tau] = step
+        x_virtual = R @ (self._x - g) + g
+        v_virtual = R @ self._v
+        obstacles = (self._obstacles - g) @ R.T + g
+        X, V, Acc = rollout(x_virtual[None], g[None], self._A[None], self._M[None], s[:n_sub],
+                            f[:n_sub], s[n_sub:], f[n_sub:], obstacles[None],
+                            (self.gains.gamma, self.gains.beta, self.gains.gamma2,
+                             np.array([self._k])),
+                            skill.K, skill.D, tau, self._h, self._substeps, R[None],
+                            fast=self._fast, v0=v_virtual[None], step=step)
+        self._x, self._xd = X[0, -1], V[0, -1]
+        self._v = self._xd * tau
+        return Acc[0, -1]
+
+
+# -- comparison of ways to handle a goal that jumps ----------------------------------------------
+
+#: The three ways :func:`compare_goal_jump` compares, in its order, with their labels.
+GOAL_JUMP_WAYS = {'online': '(a) online ET-DMP', 'replan': '(b) re-plan from rest',
+                  'dmp': '(c) plain DMP goal change'}
+
+
+class GoalJump(NamedTuple):
+    """
+    One way of handling a goal jump (:func:`compare_goal_jump`).
+
+    ``t``, ``x``, ``v``, ``a``: the executed movement from the start until ``end_time`` (its
+    own nominal end: tau, or for the re-plan the switch plus tau). ``velocity_step`` and
+    ``acceleration_step``: the largest change over one sample, in the samples just after the
+    switch, beyond what the same movement without a goal change did over that sample (units/s
+    and units/s^2); the acceleration is the one the samples imply, ``(v_(k+1) - v_k) / dt``, so
+    a velocity jump counts as the impulse it is. ``final_distance``: ``|x - g_new|`` at
+    ``end_time``. ``shape_nrmse``: the conventional nRMSE (:func:`nrmse`, Eq. 15-16) of the part
+    after the switch against the same phases of the demonstration placed at the new goal (the
+    ET-DMP from the start to the new goal). ``shape_error``: the RMS distance between the two,
+    by phase and without nRMSE's alignment, divided by the size of the placed demonstration.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    velocity_step: float
+    acceleration_step: float
+    final_distance: float
+    shape_nrmse: float
+    shape_error: float
+    end_time: float
+
+
+#: Samples after a switch in which :func:`compare_goal_jump` looks for the largest step.
+STEP_WINDOW = 3
+
+
+def _step_excess(series, nominal, k):
+    """Largest |change over one sample - the nominal change| over the STEP_WINDOW samples."""
+    ds = np.diff(series[k:k + STEP_WINDOW + 1], axis=0)
+    dn = np.diff(nominal[k:k + STEP_WINDOW + 1], axis=0)
+    return float(np.max(np.linalg.norm(ds - dn, axis=1)))
+
+
+def _by_phase(y, n):
+    """Resample (m, d) samples to n by linear interpolation in the sample index."""
+    src, dst = np.linspace(0.0, 1.0, len(y)), np.linspace(0.0, 1.0, n)
+    return np.stack([np.interp(dst, src, y[:, i]) for i in range(y.shape[1])], axis=1)
+
+
+def compare_goal_jump(skill, start, goal, new_goal, switch=0.4, dt=None, tau=None, mode=1,
+                      online=None):
+    """
+    Compare three ways to handle a goal that jumps at ``switch`` of the movement's duration.
+
+    (a) ``'online'``: the online ET-DMP (:class:`OnlineRun`, gains ``online``) told the new
+    goal; (b) ``'replan'``: a fresh ET-DMP from the position at the switch, at rest, to the new
+    goal; (c) ``'dmp'``: the plain DMP's goal change (the goal of Eq. 1 replaced at once, no
+    filter). Returns ``(results, reference)``: a dict of :class:`GoalJump` keyed as
+    :data:`GOAL_JUMP_WAYS`, and the demonstration placed at the new goal (the
+    :class:`Trajectory` of the ET-DMP from ``start`` to ``new_goal``).
+    """
+    online = OnlineGains() if online is None else online
+    base = skill.generalize(start, goal, method='etdmp', mode=mode, dt=dt, tau=tau)
+    plain = skill.generalize(start, goal, method='dmp', mode=mode, dt=dt, tau=tau)
+    reference = skill.generalize(start, new_goal, method='etdmp', mode=mode, dt=dt, tau=tau)
+    dt = base.t[1] - base.t[0]
+    n = len(base.t) - 1                     # samples to tau
+    k = int(round(switch * n))
+    ref_rest = reference.x[k:]
+    ref_size = float(np.max(np.linalg.norm(reference.x - reference.x[-1], axis=1)))
+    results = {}
+    for way in GOAL_JUMP_WAYS:
+        if way == 'replan':
+            fresh = skill.generalize(base.x[k], new_goal, method='etdmp', mode=mode, dt=dt,
+                                     tau=tau)
+            x, v, a = (np.concatenate([getattr(base, name)[:k + 1], getattr(fresh, name)[1:]])
+                       for name in ('x', 'v', 'a'))
+            nominal = base
+        else:
+            method = 'etdmp' if way == 'online' else 'dmp'
+            gains = online if way == 'online' else OnlineGains(alpha_goal=math.inf)
+            run = skill.online(start, goal, method=method, mode=mode, dt=dt, tau=tau,
+                               online=gains)
+            samples = [(run.x, run.v, run.a)]
+            for i in range(n):
+                samples.append(run.step(goal=new_goal if i == k else None))
+            x, v, a = (np.array(column) for column in zip(*samples))
+            nominal = base if way == 'online' else plain
+        t = np.arange(len(x)) * dt
+        implied, implied_nominal = np.diff(v, axis=0) / dt, np.diff(nominal.v, axis=0) / dt
+        rest = _by_phase(x[k:], len(ref_rest))
+        error = np.sqrt(np.mean(np.sum((rest - ref_rest) ** 2, axis=1))) / ref_size
+        results[way] = GoalJump(
+            t, x, v, a, _step_excess(v, nominal.v, k),
+            _step_excess(implied, implied_nominal, k - 1),
+            float(np.linalg.norm(x[-1] - new_goal)), float(nrmse(x[k:], ref_rest)),
+            float(error), float(t[-1]))
+    return results, reference
+
+
+def goal_jump_case(skill, turn=np.radians(25.0), distance=1.2, jump=0.3):
+    """
+    Return ``(start, goal, new_goal)``: the goal-jump scenario of docs/design.md#online-goal.
+
+    The goal is the demonstration's; the start is the demonstration's start turned about the
+    goal by ``turn`` (about z in 3D) and moved to ``distance`` times its distance; the new goal
+    lies ``jump`` times ``|start - goal|`` from the goal, perpendicular to ``start - goal`` (in
+    the x-y plane). 2D and 3D skills only.
+    """
+    if skill.dim not in (2, 3):
+        raise ValueError(f'the goal-jump scenario needs a 2D or 3D skill, got d={skill.dim}')
+    c, s = np.cos(turn), np.sin(turn)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])[:skill.dim, :skill.dim]
+    goal = skill.goal.copy()
+    offset = distance * rotation @ (skill.start - skill.goal)
+    side = np.zeros(skill.dim)
+    side[:2] = -offset[1], offset[0]
+    side /= np.linalg.norm(side)
+    return goal + offset, goal, goal + jump * np.linalg.norm(offset) * side
