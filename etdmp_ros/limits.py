@@ -62,11 +62,12 @@ MAX_GOAL_PLANE_DISTANCE = 0.2
 
 #: Requests /generalize holds waiting to be served: the depth of the middleware's request history
 #: (KEEP_LAST) and of the node's own queue, into which its service thread takes them with their
-#: receipt times. rclpy's default of 10 dropped 38 of a burst of 50 silently. A request whose
-#: turn comes after more than ``max_request_wait`` is answered at once with an empty plan
-#: (refused as busy), so the queues stay short under overload and none is dropped unanswered
-#: unless more than about twice this many arrive faster than ~1 ms apart.
-MAX_QUEUED_REQUESTS = 256
+#: receipt times. rclpy's default of 10 dropped 38 of a burst of 50 silently, and a history of
+#: 256 lost 31 of a burst of 356 on a loaded machine, before the thread could take them. A
+#: request whose turn comes after more than ``max_request_wait`` is answered at once with an
+#: empty plan (refused as busy), so the queues stay short under overload; a burst of more than
+#: this many at once can still lose the oldest in the middleware, unseen by the node.
+MAX_QUEUED_REQUESTS = 1024
 
 #: Poses of a plan at which the timing check solves the arm's IK (evenly spaced in time); joint
 #: velocities and accelerations are finite differences between them, so a peak shorter than

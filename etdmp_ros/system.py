@@ -358,6 +358,16 @@ DMP_SERVER = (
     P('check_timing', True, 'Refuse a plan whose joint velocities or accelerations (IK along '
       "the plan from the current joints, or initial_joint_positions) exceed the controller's "
       'UR10 limits; the reason gives the shortest feasible duration.', **_RUNTIME),
+    P('follow_goal', True, 'While a plan executes, follow the perceived goal (when the request '
+      'used it) and the obstacles: when one moves by more than follow_threshold, the rest of '
+      'the movement is re-planned online from where the controller is (online ET-DMP) and '
+      'published on /etdmp/path; false = a plan is fixed once published.',
+      section='Following', **_RUNTIME),
+    P('follow_threshold', 0.005, 'A goal or obstacle that moved less than this is not followed '
+      '(perception noise).', unit='m', value_range=(0.0005, 1.0), **_RUNTIME),
+    P('follow_lead', 0.1, 'A change takes effect this far ahead of where the controller is on '
+      'the path: the time to re-plan, publish and check the new path.', unit='s',
+      value_range=(0.0, 2.0), **_RUNTIME),
     P('execute', True, 'Publish each plan on /etdmp/path for the controller.',
       section='Outputs', **_RUNTIME),
     P('publish_markers', True, 'Publish /etdmp/markers (built only while someone subscribes).',

@@ -461,6 +461,52 @@ def write_mcap(path, positions, t):
         writer.finish()
 
 
+def test_a_plan_in_execution_follows_the_moved_goal(server, client):
+    # The plan of a request to the perceived goal is re-planned online when the goal moves: the
+    # remainder is published on the plan's own time base (header stamp, pose stamps), starts
+    # where the plan was (the tool here: its joint states do not move), ends at the new goal.
+    # One message is not enough (a frame rendered while the marker moves); with follow_goal
+    # false nothing is re-planned.
+    def stamps(path):
+        return np.array([p.header.stamp.sec * 10**9 + p.header.stamp.nanosec
+                         for p in path.poses])
+    client.publish('joint_states', joint_state_msg(Q_INIT))
+    perceived = np.array(SCENE['goal_position'])
+    client.publish('goal', PointStamped(header=BASE, point=point_msg(perceived)))
+    del client.paths[:]
+    _, x, _, plan = client.call(None, None, start_frame='', goal_frame='')
+    assert len(x) > 100
+    deadline = time.monotonic() + TIMEOUT
+    while not client.paths:
+        assert time.monotonic() < deadline, 'the plan was not published'
+        client.spin_for(0.05)
+    moved = perceived + [0.0, 0.04, 0.0]
+    client.publish('goal', PointStamped(header=BASE, point=point_msg(moved)), times=1)
+    client.spin_for(0.3)
+    assert len(client.paths) == 1, 'one goal message was followed'
+    client.publish('goal', PointStamped(header=BASE, point=point_msg(moved)), times=3)
+    deadline = time.monotonic() + TIMEOUT
+    while len(client.paths) < 2:
+        assert time.monotonic() < deadline, f'the moved goal was not followed:\n{server.log()}'
+        client.spin_for(0.05)
+    new = client.paths[-1]
+    assert new.header.stamp == plan.header.stamp
+    _, y, _ = path_to_numpy(new)
+    offset = (stamps(new)[0] - stamps(plan)[0]) / 1e9
+    k = int(round(offset / 0.01))
+    assert offset >= 0.0
+    np.testing.assert_allclose(y[:5], x[k:k + 5], atol=1e-9)   # the remainder, from the plan
+    assert np.linalg.norm(y[-1] - PLANE.from_plane(PLANE.to_plane(moved))) < 1e-3
+    assert 'following: goal moved to' in server.log()
+    assert client.set_parameters(follow_goal=False)[0].successful
+    try:
+        client.publish('goal', PointStamped(header=BASE, point=point_msg(perceived)), times=4)
+        client.spin_for(0.3)
+        assert len(client.paths) == 2, 'followed with follow_goal false'
+    finally:
+        assert client.set_parameters(follow_goal=True)[0].successful
+
+
 def test_teaching_at_runtime_survives_a_restart(colcon_install, ros_env, tmp_path):
     # Own domain (conftest's ros_env): the module's server must not answer here.
     skills_dir = tmp_path / 'skills'

@@ -38,7 +38,8 @@ from etdmp_ros.dmp import builtin_demo, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.nodes._parameters import declare, values as parameter_values
 from etdmp_ros.nodes._queued_service import QueuedService
 from etdmp_ros.nodes._spin import run
-from etdmp_ros.planning import place_demo, plan_path, PlanSettings, Workspace
+from etdmp_ros.planning import (FollowedPlan, place_demo, Plan, plan_path, PlanSettings,
+                                Workspace)
 from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
 from etdmp_ros.robot._timing import timing_violation
 from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_cdr, path_from_numpy,
@@ -123,6 +124,9 @@ class Settings:
     teach_overwrite: bool
     check_timing: bool
     max_request_wait: float
+    follow_goal: bool
+    follow_threshold: float
+    follow_lead: float
     initial_joints: np.ndarray
 
     @classmethod
@@ -161,6 +165,8 @@ class Settings:
             plane_tolerance=values['plane_tolerance'], execute=values['execute'],
             publish_markers=values['publish_markers'], teach_overwrite=values['teach_overwrite'],
             check_timing=values['check_timing'], max_request_wait=values['max_request_wait'],
+            follow_goal=values['follow_goal'], follow_threshold=values['follow_threshold'],
+            follow_lead=values['follow_lead'],
             initial_joints=_joints(values['initial_joint_positions']))
 
 
@@ -246,6 +252,8 @@ class DmpServer(Node):
         self._marker_thread = None   # builds markers after a call, off the service's path
         self._refused_busy, self._busy_log_time = 0, -float('inf')
         self._planned = 0   # requests answered with a plan
+        self._follow_lock = threading.Lock()
+        self._followed = None   # _Followed: the plan in execution, while it may still move
         self._generalize = QueuedService(self, GetPlan, 'generalize', self._on_generalize,
                                          self._refuse_busy, _SERVICE_QOS,
                                          settings.max_request_wait, limits.MAX_QUEUED_REQUESTS)
@@ -329,6 +337,10 @@ class DmpServer(Node):
             middle = (skill.start + skill.goal) / 2.0 + 0.1 * skill.size
             try:
                 skill.generalize(skill.start, skill.goal, obstacles=[middle])
+                # And the online rollout of a followed plan (its numba loop).
+                run = skill.online(skill.start, skill.goal, obstacles=[middle])
+                run.step(goal=skill.goal + 0.01 * skill.size)
+                run.run(run.t + 2 * run.dt)
             except ValueError:
                 pass
         path_from_numpy(np.zeros((2, 3)), np.zeros(2))
@@ -445,6 +457,7 @@ class DmpServer(Node):
                                    throttle_duration_sec=_THROTTLE)
         with self._state_lock:
             self._goal.update(p)
+        self._follow(goal=p)
 
     def _on_obstacles(self, msg):
         points = pose_array_to_numpy(msg)
@@ -456,6 +469,7 @@ class DmpServer(Node):
             return
         with self._state_lock:
             self._obstacles.update(points)
+        self._follow(obstacles=True)
 
     def _tool_position(self, settings):
         source = settings.tool_position_source
@@ -571,6 +585,8 @@ class DmpServer(Node):
                                         plan.orientation)
         self._planned += 1
         if settings.execute:
+            self._start_following(skill, plan, settings, stamp,
+                                  perceived_goal=request.goal.header.frame_id == '')
             self._path_pub.publish(response.plan)
             if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
                 self._request_markers((settings, skill, plan, response.plan.header))
@@ -608,6 +624,109 @@ class DmpServer(Node):
         """Stop the /generalize thread, then destroy the node."""
         self.stop()
         super().destroy_node()
+
+    # -- following a plan in execution (online ET-DMP) ------------------------------------------
+
+    def _start_following(self, skill, plan, settings, stamp, perceived_goal):
+        """Keep the plan just published, to re-plan its remainder when its inputs move."""
+        followed = None
+        if settings.follow_goal:
+            try:
+                with self._core_lock:
+                    followed = _Followed(FollowedPlan(skill, plan, settings.plan,
+                                                      settings.plane),
+                                         skill, stamp, perceived_goal)
+            except ValueError as err:   # e.g. a skill the online rollout cannot take
+                self.get_logger().warn(f'the plan will not follow its goal: {_short(err)}')
+        with self._follow_lock:
+            self._followed = followed
+
+    def _follow(self, goal=None, obstacles=False):
+        """Re-plan the remainder of the plan in execution if its goal or obstacles moved."""
+        settings = self._settings
+        with self._follow_lock:
+            f = self._followed
+            if f is None or not settings.follow_goal:
+                return
+            now = self.get_clock().now().nanoseconds
+            tau_now = (now - f.stamp) * 1e-9
+            if tau_now > f.plan.duration + _FOLLOW_AFTER_END:
+                self._followed = None           # done: nothing left to follow
+                return
+            threshold = settings.follow_threshold
+            new_goal = None
+            if goal is not None and f.perceived_goal:
+                placed = f.plan.placed(goal)
+                if f.goal_seen.confirm(placed, _goal_moved, threshold) and \
+                        _goal_moved(f.plan.goal, placed, threshold) and \
+                        _goal_moved(f.refused_goal, placed, threshold):
+                    new_goal = goal
+            new_obstacles = None
+            if obstacles:
+                merged = _merged_obstacles(f.plan.obstacles,
+                                           f.plan.placed(self._current_obstacles(settings)),
+                                           threshold)
+                if f.obstacles_seen.confirm(merged, _obstacles_moved, threshold) and \
+                        _obstacles_moved(f.plan.obstacles, merged, threshold) and \
+                        _obstacles_moved(f.refused_obstacles, merged, threshold):
+                    new_obstacles = merged
+            if new_goal is None and new_obstacles is None:
+                return
+            received = time.perf_counter()
+            tau_c = self._controller_path_time(f, tau_now, settings)
+            t_switch = tau_c + settings.follow_lead
+            try:
+                with self._core_lock, np.errstate(over='raise', invalid='raise',
+                                                  divide='raise'):
+                    if new_goal is not None:
+                        self._check_goal(new_goal, f.skill, settings)
+                    first = f.plan.update(t_switch, goal=new_goal, obstacles=new_obstacles)
+            except (ValueError, ArithmeticError) as err:
+                # Said once for this goal or obstacle set, not at every message that shows it.
+                f.refused_goal = f.goal_seen.candidate if new_goal is not None else None
+                f.refused_obstacles = (f.obstacles_seen.candidate if new_obstacles is not None
+                                       else None)
+                self.get_logger().error(f'the plan in execution does not follow: '
+                                        f'{_short(err)}; it goes on as it was')
+                return
+            p = f.plan
+            keep = p.index(max(0.0, tau_c - _FOLLOW_OVERLAP))
+            path = path_from_numpy(p.positions[keep:], p.t[keep:], f.stamp, 'base_link',
+                                   p.orientation)
+            self._path_pub.publish(path)
+            took = (time.perf_counter() - received) * 1e3
+            what = ' and '.join(
+                ([f'goal moved to ({new_goal[0]:.3f}, {new_goal[1]:.3f}, {new_goal[2]:.3f})']
+                 if new_goal is not None else []) +
+                ([f'obstacles moved to {np.round(new_obstacles, 3).tolist()}']
+                 if new_obstacles is not None else []))
+            self.get_logger().info(
+                f'following: {what}: re-planned from path time {p.t[first]:.2f} s (the '
+                f'controller at about {tau_c:.2f} s), {len(p.t) - keep} poses to '
+                f'{p.duration:.2f} s published in {took:.1f} ms (update {p.updates})')
+            if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
+                shown = Plan(p.t, p.positions, p.velocities, p.orientation, f.start, p.goal,
+                             p.obstacles, settings.plan.method, None)
+                self._request_markers((settings, f.skill, shown, path.header))
+
+    def _controller_path_time(self, f, tau_now, settings):
+        """
+        Estimate the path time the controller is at: where the tool is closest to the path.
+
+        Searched between the previous estimate and ``tau_now`` (the controller cannot be ahead
+        of the time since the plan's stamp); without a tool position, ``tau_now``.
+        """
+        try:
+            tool = self._tool_position(settings)
+        except ValueError:
+            return tau_now
+        p = f.plan
+        lo, hi = p.index(f.tau_c), p.index(tau_now) + 1
+        if hi <= lo:
+            return tau_now
+        i = lo + int(np.argmin(np.linalg.norm(p.positions[lo:hi] - tool, axis=1)))
+        f.tau_c = float(p.t[i])
+        return f.tau_c
 
     # -- markers --------------------------------------------------------------------------------
 
@@ -660,6 +779,91 @@ class DmpServer(Node):
                     (0.2, 0.4, 1.0, 1.0), 0.015),
         ])
         self._marker_pub.publish(markers)
+
+
+#: The remainder published on a change starts this far (path time, s) before the controller's
+#: estimated place, so that it covers where the controller is when it takes it over.
+_FOLLOW_OVERLAP = 0.1
+#: Consecutive perception messages that must agree on a moved goal or obstacle set before the
+#: plan follows it: a frame rendered while the marker moved can show it in between, or an
+#: obstacle hidden by the arm (about 0.1 s at the camera's 30 Hz).
+FOLLOW_CONFIRMATIONS = 3
+#: A perceived obstacle within this distance (m) of one the plan avoids is that one, moved.
+FOLLOW_MATCH_RADIUS = 0.05
+#: A plan is followed until this long (s) after its end.
+_FOLLOW_AFTER_END = 1.0
+
+
+class _Followed:
+    """A plan in execution: its FollowedPlan, its skill, stamp, and what it follows."""
+
+    def __init__(self, plan, skill, stamp, perceived_goal):
+        self.plan, self.skill, self.stamp = plan, skill, stamp
+        self.perceived_goal = perceived_goal    # the request used the perceived goal
+        self.refused_goal = self.refused_obstacles = None    # the last the plan could not take
+        self.start = plan.positions[0].copy()
+        self.tau_c = 0.0                        # the controller's path time, last estimate
+        self.goal_seen, self.obstacles_seen = _Confirmed(), _Confirmed()
+
+
+class _Confirmed:
+    """A perceived value taken as changed once FOLLOW_CONFIRMATIONS messages agree on it."""
+
+    def __init__(self):
+        self.candidate, self.count = None, 0
+
+    def confirm(self, value, differ, threshold):
+        """Note ``value``; return whether the last FOLLOW_CONFIRMATIONS agree (``differ``)."""
+        if differ(self.candidate, value, threshold):
+            self.count = 0
+        self.candidate, self.count = value, self.count + 1
+        return self.count >= FOLLOW_CONFIRMATIONS
+
+
+def _merged_obstacles(used, seen, threshold):
+    """
+    Return the obstacles a plan in execution follows: ``used`` updated by what is ``seen``.
+
+    A seen obstacle within FOLLOW_MATCH_RADIUS of a used one is that one (moved, if by more than
+    ``threshold``); the nearest such wins, others near it are the same obstacle seen twice. A
+    seen obstacle near none appeared. A used obstacle that is not seen is kept where it was:
+    the arm may be hiding it from the camera.
+    """
+    used, seen = np.asarray(used).reshape(-1, 3), np.asarray(seen).reshape(-1, 3)
+    merged, appeared = used.copy(), []
+    if len(used):
+        gaps = np.linalg.norm(seen[:, None] - used[None], axis=2)
+        nearest = gaps.argmin(axis=1) if len(seen) else np.zeros(0, int)
+        for j in range(len(used)):
+            mine = np.flatnonzero((nearest == j) & (gaps[:, j] <= FOLLOW_MATCH_RADIUS))
+            if len(mine):
+                best = mine[np.argmin(gaps[mine, j])]
+                if gaps[best, j] > threshold:
+                    merged[j] = seen[best]
+        appeared = [p for i, p in enumerate(seen) if gaps[i].min() > FOLLOW_MATCH_RADIUS]
+    else:
+        appeared = list(seen)
+    return np.vstack([merged] + [np.reshape(p, (1, 3)) for p in appeared]) \
+        if appeared else merged
+
+
+def _goal_moved(before, now, threshold):
+    """Return whether goal ``now`` is more than ``threshold`` from ``before`` (or no before)."""
+    return before is None or bool(np.linalg.norm(now - before) > threshold)
+
+
+def _obstacles_moved(used, seen, threshold):
+    """Return whether the obstacle set ``seen`` differs from ``used`` by more than threshold."""
+    if used is None:
+        return True
+    seen, used = np.asarray(seen).reshape(-1, 3), np.asarray(used).reshape(-1, 3)
+    if len(seen) != len(used):
+        return True
+    if not len(seen):
+        return False
+    # Each used obstacle's nearest seen one (sets are small and unordered).
+    gaps = np.linalg.norm(used[:, None] - seen[None], axis=2).min(axis=1)
+    return bool(gaps.max() > threshold)
 
 
 def _marker(header, ns, kind, points, rgba, size):
