@@ -372,7 +372,7 @@ DMP_SERVER = (
       section='Outputs', **_RUNTIME),
     P('publish_markers', True, 'Publish /etdmp/markers (built only while someone subscribes).',
       **_RUNTIME),
-    P('max_request_wait', 2.0, 'Longest time a /generalize request may wait for its turn '
+    P('max_request_wait', 5.0, 'Longest time a /generalize request may wait for its turn '
       'behind others; one that waited longer is answered with an empty plan (refused as busy), '
       'so that under overload every request is answered (docs/limits.md).', unit='s',
       value_range=(0.01, 60.0), **_RUNTIME),
