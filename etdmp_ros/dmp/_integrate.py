@@ -151,6 +151,30 @@ if numba is not None:
             out[2] += w * r2
 
     @numba.njit(cache=True, fastmath=False)
+    def _substep_nb(x, v, g, A, M, s, f, obstacles, gamma, beta, gamma2, k, K, phi, gam,
+                    angle_scale, d, om):
+        """One sub-step of one system in place: the exact linear update, then the turn of v."""
+        for i in range(d):
+            u = K * g[i] + A[i] * s + M[i] * f[i]
+            xi = x[i]
+            x[i] = phi[0, 0] * xi + phi[0, 1] * v[i] + gam[0] * u
+            v[i] = phi[1, 0] * xi + phi[1, 1] * v[i] + gam[1] * u
+        if obstacles.shape[0] > 0:
+            _omega_nb(x, v, obstacles, g, gamma, beta, gamma2, k, d, om)
+            norm = np.sqrt(om[0] ** 2 + om[1] ** 2 + om[2] ** 2)
+            if norm > 0.0:
+                k0, k1, k2 = om[0] / norm, om[1] / norm, om[2] / norm
+                ang = norm * angle_scale
+                ca, sa = np.cos(ang), np.sin(ang)
+                v0, v1 = v[0], v[1]
+                v2 = v[2] if d == 3 else 0.0
+                kv = k0 * v0 + k1 * v1 + k2 * v2
+                v[0] = v0 * ca + (k1 * v2 - k2 * v1) * sa + k0 * kv * (1.0 - ca)
+                v[1] = v1 * ca + (k2 * v0 - k0 * v2) * sa + k1 * kv * (1.0 - ca)
+                if d == 3:
+                    v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
+
+    @numba.njit(cache=True, fastmath=False)
     def _rollout_nb(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gamma, beta, gamma2,
                     k, K, D, tau, phi, gam, angle_scale, substeps, R, vel0, X, V, Acc):
         B, d = x0.shape
@@ -187,25 +211,8 @@ if numba is not None:
                 if step == n - 1:
                     break
                 for j in range(step * substeps, (step + 1) * substeps):
-                    for i in range(d):
-                        u = K * goal[b, i] + A[b, i] * s_mid[j] + M[b, i] * f_mid[j, i]
-                        xi = x[i]
-                        x[i] = phi[0, 0] * xi + phi[0, 1] * v[i] + gam[0] * u
-                        v[i] = phi[1, 0] * xi + phi[1, 1] * v[i] + gam[1] * u
-                    if n_obs > 0:
-                        _omega_nb(x, v, obstacles[b], goal[b], gamma, beta, gamma2, k[b], d, om)
-                        norm = np.sqrt(om[0] ** 2 + om[1] ** 2 + om[2] ** 2)
-                        if norm > 0.0:
-                            k0, k1, k2 = om[0] / norm, om[1] / norm, om[2] / norm
-                            ang = norm * angle_scale
-                            ca, sa = np.cos(ang), np.sin(ang)
-                            v0, v1 = v[0], v[1]
-                            v2 = v[2] if d == 3 else 0.0
-                            kv = k0 * v0 + k1 * v1 + k2 * v2
-                            v[0] = v0 * ca + (k1 * v2 - k2 * v1) * sa + k0 * kv * (1.0 - ca)
-                            v[1] = v1 * ca + (k2 * v0 - k0 * v2) * sa + k1 * kv * (1.0 - ca)
-                            if d == 3:
-                                v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
+                    _substep_nb(x, v, goal[b], A[b], M[b], s_mid[j], f_mid[j], obstacles[b],
+                                gamma, beta, gamma2, k[b], K, phi, gam, angle_scale, d, om)
 
     @numba.njit(cache=True, fastmath=False)
     def _chain_nb(x_real, xd_real, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles,
@@ -233,25 +240,8 @@ if numba is not None:
                     for j in range(d):
                         obs[m, i] += R[n, i, j] * (obstacles[m, j] - g[j])
             for jj in range(n * substeps, (n + 1) * substeps):
-                for i in range(d):
-                    u = K * g[i] + A[n, i] * s_mid[jj] + M[n, i] * f_mid[jj, i]
-                    xi = x[i]
-                    x[i] = phi[0, 0] * xi + phi[0, 1] * v[i] + gam[0] * u
-                    v[i] = phi[1, 0] * xi + phi[1, 1] * v[i] + gam[1] * u
-                if n_obs > 0:
-                    _omega_nb(x, v, obs[:n_obs], g, gamma, beta, gamma2, k[n], d, om)
-                    norm = np.sqrt(om[0] ** 2 + om[1] ** 2 + om[2] ** 2)
-                    if norm > 0.0:
-                        k0, k1, k2 = om[0] / norm, om[1] / norm, om[2] / norm
-                        ang = norm * angle_scale
-                        ca, sa = np.cos(ang), np.sin(ang)
-                        v0, v1 = v[0], v[1]
-                        v2 = v[2] if d == 3 else 0.0
-                        kv = k0 * v0 + k1 * v1 + k2 * v2
-                        v[0] = v0 * ca + (k1 * v2 - k2 * v1) * sa + k0 * kv * (1.0 - ca)
-                        v[1] = v1 * ca + (k2 * v0 - k0 * v2) * sa + k1 * kv * (1.0 - ca)
-                        if d == 3:
-                            v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
+                _substep_nb(x, v, g, A[n], M[n], s_mid[jj], f_mid[jj], obs[:n_obs], gamma, beta,
+                            gamma2, k[n], K, phi, gam, angle_scale, d, om)
             lam0 = lam1 = lam2 = 0.0
             if n_obs > 0:
                 _omega_nb(x, v, obs[:n_obs], g, gamma, beta, gamma2, k[n], d, om)
