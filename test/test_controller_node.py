@@ -21,7 +21,8 @@ from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.nodes.controller import InputWatch
 from etdmp_ros.robot import matrix_to_quaternion, PoseTrajectory, UR10Model
 from etdmp_ros.ros_conversions import (joint_state_from_cdr, joint_state_msg, ns_to_stamp,
-                                       path_from_cdr, serialize_path, stamp_to_ns)
+                                       path_from_cdr, path_from_numpy, serialize_path,
+                                       stamp_to_ns)
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
@@ -282,7 +283,8 @@ def test_path_bytes_are_read_like_rclpy_reads_them():
     np.testing.assert_array_equal(quat, [[0, 0, 0.6, 0.8]] * 7)
     t = np.arange(500) * 0.004
     positions = np.random.default_rng(0).normal(size=(500, 3))
-    data = serialize_path(positions, t, stamp=123, frame_id='base_link', orientation=(0, 0, 0, 1))
+    data = serialize_message(path_from_numpy(positions, t, stamp=123, frame_id='base_link',
+                                             orientation=(0, 0, 0, 1)))     # rclpy's bytes
     frame, frames, stamps, p, quat = path_from_cdr(data)
     np.testing.assert_array_equal(p, positions)
     np.testing.assert_array_equal(stamps, 123 + np.round(t * 1e9).astype(np.int64))

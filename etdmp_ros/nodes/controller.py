@@ -23,7 +23,11 @@ Idle, halted or refused, the controller keeps sending explicit zeros, because th
 ``forward_velocity_controller`` applies the last command forever. Path: pose ``k`` is
 timed at its stamp minus the first pose's stamp (the header stamp is ignored); a path whose
 stamps are all equal is timed by its length (``untimed_path_speed``); all-zero orientations
-mean "keep the tool's current orientation"; an empty path stops the arm (idle). Frames:
+mean "keep the tool's current orientation"; an empty path stops the arm (idle). A timed path
+whose first pose's stamp lies on the time base of the path being tracked, and which matches it
+at the current path time, continues it (dmp_server's re-plan of a remainder when the goal
+moves): it is taken over at once at that path time, without an approach, and checked while it
+is followed (a failed check stops it, as any path); any other path is checked first. Frames:
 ``base_link`` or empty only. Paths arrive as raw bytes and are parsed with numpy, so a long path
 never stalls the control loop (see :mod:`etdmp_ros.ros_conversions._path_cdr`).
 """
@@ -490,6 +494,21 @@ class ControllerNode(Node):
         except TrajectoryError as exc:
             self.get_logger().error(f'path ignored: {exc}')
             return
+        # Timed poses: the first one's stamp lets a re-planned remainder be spliced in.
+        timed = len(stamps) > 1 and stamps[-1] != stamps[0]
+        stamp = stamps[0] * 1e-9 if timed else None
+        # A continuation of the path being tracked (a re-plan of its remainder) is taken over at
+        # once and checked while it is followed: it differs from the tracked path only ahead of
+        # the current path time, and a failed check stops it as it would any path.
+        with self._lock:
+            if generation != self._path_generation:
+                return
+            spliced = self.controller.continues(path, stamp)
+            if spliced:
+                self.controller.follow(path, stamp)
+                self.get_logger().info(f'path continued: {len(stamps)} poses over '
+                                       f'{path.duration:.2f} s (taken over at once, checked '
+                                       'while followed)')
         with self._check_lock:      # one check at a time: the checker has one model
             reason = self.controller.check(path, q) if self.check_paths else ''
         with self._lock:
@@ -497,10 +516,8 @@ class ControllerNode(Node):
                 return              # a newer path arrived meanwhile
             if reason:
                 self.controller.reject(reason)
-            else:
-                # Timed poses: the first one's stamp lets a re-planned remainder be spliced in.
-                timed = len(stamps) > 1 and stamps[-1] != stamps[0]
-                self.controller.follow(path, stamps[0] * 1e-9 if timed else None)
+            elif not spliced:
+                self.controller.follow(path, stamp)
                 self.get_logger().info(f'new path: {len(stamps)} poses over '
                                        f'{path.duration:.2f} s')
             self._publish_status()

@@ -42,8 +42,9 @@ from etdmp_ros.planning import (FollowedPlan, place_demo, Plan, plan_path, PlanS
                                 Workspace)
 from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
 from etdmp_ros.robot._timing import timing_violation
-from etdmp_ros.ros_conversions import (joint_state_arrays, path_from_cdr, path_from_numpy,
-                                       point_to_numpy, points_from_numpy, pose_array_to_numpy)
+from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr,
+                                       path_from_numpy, point_to_numpy, points_from_numpy,
+                                       pose_array_to_numpy, serialize_path)
 from etdmp_ros.skill_library import (BASE_FRAMES, check_skill_name, default_skills_dir,
                                      RECORDED_DIMS, recorded_path_demo, save_skill_demo,
                                      SkillLibrary)
@@ -58,6 +59,7 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 NODE_NAME = 'dmp_server'
@@ -691,9 +693,9 @@ class DmpServer(Node):
                 return
             p = f.plan
             keep = p.index(max(0.0, tau_c - _FOLLOW_OVERLAP))
-            path = path_from_numpy(p.positions[keep:], p.t[keep:], f.stamp, 'base_link',
-                                   p.orientation)
-            self._path_pub.publish(path)
+            # Its bytes written with numpy: 0.2 ms where building the message takes ~8.
+            self._path_pub.publish(serialize_path(p.positions[keep:], p.t[keep:], f.stamp,
+                                                  'base_link', p.orientation))
             took = (time.perf_counter() - received) * 1e3
             what = ' and '.join(
                 ([f'goal moved to ({new_goal[0]:.3f}, {new_goal[1]:.3f}, {new_goal[2]:.3f})']
@@ -707,7 +709,8 @@ class DmpServer(Node):
             if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
                 shown = Plan(p.t, p.positions, p.velocities, p.orientation, f.start, p.goal,
                              p.obstacles, settings.plan.method, None)
-                self._request_markers((settings, f.skill, shown, path.header))
+                header = Header(stamp=ns_to_stamp(f.stamp), frame_id='base_link')
+                self._request_markers((settings, f.skill, shown, header))
 
     def _controller_path_time(self, f, tau_now, settings):
         """

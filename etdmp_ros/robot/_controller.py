@@ -387,32 +387,49 @@ class TrajectoryController:
         p, rot = self._path.pose(tau, self.fast)
         return p, rot, TRACKING if tau < self._path.duration else HOLDING, tau
 
-    def _splice(self, t, path, stamp):
+    def continues(self, path, stamp):
         """
-        Continue on ``path`` from the current path time if it continues the current path.
+        Return whether ``path`` stamped ``stamp`` would be spliced in now (see :meth:`follow`).
+
+        A node may hand such a path over at once and check it afterwards: it differs from the
+        tracked one only ahead of the current path time (a re-plan's switch lies ahead).
+        """
+        return self._t_last is not None and self._splice_time(self._t_last, path,
+                                                              stamp) is not None
+
+    def _splice_time(self, t, path, stamp):
+        """
+        Return the path time of ``path`` at which it continues the current path at ``t``, or None.
 
         It does when both have stamps, the schedule is on the path (not approaching, not in a
-        ramp-in), the new path covers the current time on the common clock, and its pose then
-        is within ``approach_tolerance`` (and ``approach_angle_tolerance``) of the current
-        reference. Return whether it was spliced in.
+        ramp-in, not holding its end), the new path covers the current time on the common
+        clock, and its pose then is within ``approach_tolerance`` (and
+        ``approach_angle_tolerance``) of the current reference.
         """
         c = self.config
-        if stamp is None or self._path_stamp is None or self._path is None:
-            return False
+        if stamp is None or self._path_stamp is None or self._path is None or self._paused:
+            return None
         theta = t - self._t_start
         t_app = self._approach.duration if self._approach is not None else 0.0
         if theta < t_app + self._ramp:
-            return False
+            return None
         tau_old = self._path_time(theta)
         if tau_old >= self._path.duration:
-            return False            # holding the end: a new path starts as any other
+            return None             # holding the end: a new path starts as any other
         tau_new = tau_old - (stamp - self._path_stamp)
         if not 0.0 <= tau_new < path.duration:
-            return False
+            return None
         p_old, rot_old = self._path.pose(tau_old)
         p_new, rot_new = path.pose(tau_new)
         if (np.linalg.norm(p_new - p_old) > c.approach_tolerance
                 or np.linalg.norm(pin.log3(rot_new @ rot_old.T)) > c.approach_angle_tolerance):
+            return None
+        return tau_new
+
+    def _splice(self, t, path, stamp):
+        """Continue on ``path`` from the current path time if it continues the current path."""
+        tau_new = self._splice_time(t, path, stamp)
+        if tau_new is None:
             return False
         self._path, self._path_start, self._t_start = path, tau_new, t
         self._path_stamp = stamp

