@@ -282,6 +282,12 @@ def place_demo(skill, start, goal, plane=None):
     return space.outward(goal_s + ratio * (skill.demo - skill.goal) @ transform.R)
 
 
+#: Consecutive perception messages that must agree on a moved goal or obstacle set before a
+#: plan in execution follows it (dmp_server): a frame rendered while the marker moved can show
+#: it in between, or an obstacle hidden by the arm (about 0.1 s at the camera's 30 Hz).
+FOLLOW_CONFIRMATIONS = 3
+
+
 class FollowedPlan:
     """
     A plan being executed whose goal and obstacles may still move (online ET-DMP, issue 14).

@@ -38,8 +38,8 @@ from etdmp_ros.dmp import builtin_demo, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.nodes._parameters import declare, values as parameter_values
 from etdmp_ros.nodes._queued_service import QueuedService
 from etdmp_ros.nodes._spin import run
-from etdmp_ros.planning import (FollowedPlan, place_demo, Plan, plan_path, PlanSettings,
-                                Workspace)
+from etdmp_ros.planning import (FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo, Plan,
+                                plan_path, PlanSettings, Workspace)
 from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
 from etdmp_ros.robot._timing import timing_violation
 from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr,
@@ -787,10 +787,6 @@ class DmpServer(Node):
 #: The remainder published on a change starts this far (path time, s) before the controller's
 #: estimated place, so that it covers where the controller is when it takes it over.
 _FOLLOW_OVERLAP = 0.1
-#: Consecutive perception messages that must agree on a moved goal or obstacle set before the
-#: plan follows it: a frame rendered while the marker moved can show it in between, or an
-#: obstacle hidden by the arm (about 0.1 s at the camera's 30 Hz).
-FOLLOW_CONFIRMATIONS = 3
 #: A perceived obstacle within this distance (m) of one the plan avoids is that one, moved.
 FOLLOW_MATCH_RADIUS = 0.05
 #: A plan is followed until this long (s) after its end.
