@@ -18,7 +18,7 @@ ROS_STAMP   := $(VENV)/.ros-tools
 .DEFAULT_GOAL := help
 
 help:
-	@echo "make demo       headless closed-loop demo: the UR10 writes a G (SKILL=W|P|R|wipe|stir, METHOD=dmp)"
+	@echo "make demo       headless closed-loop demo: the UR10 writes a G (SKILL=W|P|R|wipe|stir, METHOD=dmp, MOVE_GOAL=1)"
 	@echo "make reproduce  the paper's letter experiments, offline -> out/reproduce/"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
 	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
@@ -60,10 +60,13 @@ test-fast: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -m unit test
 
 # The closed loop: camera -> perception -> /generalize -> controller -> MuJoCo UR10 (out/demo/).
-SKILL  ?= G
-METHOD ?= etdmp
+# MOVE_GOAL=1: the goal marker moves by 4 cm while the pen writes (online ET-DMP, --move-goal).
+SKILL     ?= G
+METHOD    ?= etdmp
+MOVE_GOAL ?=
 demo: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo --skill $(SKILL) --method $(METHOD) --out out/demo
+	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo --skill $(SKILL) --method $(METHOD) --out out/demo \
+	  $(if $(filter 1 yes true,$(MOVE_GOAL)),--move-goal)
 
 # config/*.yaml and the parameter tables of docs/<node>.md are written from the system description.
 config: $(STAMP)

@@ -1,8 +1,8 @@
 """
 The closed-loop demo (``make demo``): see, plan, write, measure.
 
-``python -m etdmp_ros.demo [--skill G|P|R|W|wipe|stir] [--method etdmp|dmp] [--out out/demo]``
-starts the four nodes as separate processes, exactly as ``ros2 run`` starts them
+``python -m etdmp_ros.demo [--skill G|P|R|W|wipe|stir] [--method etdmp|dmp] [--out out/demo]
+[--move-goal]`` starts the four nodes as separate processes, exactly as ``ros2 run`` starts them
 (:mod:`etdmp_ros.processes`; ``ur10_sim``, ``perception``, ``dmp_server``, ``controller``;
 parameters: config/scene.yaml, then the node's own file, then a small overrides file), on a DDS
 domain of its own with localhost-only discovery, dmp_server and the controller on simulated time
@@ -23,6 +23,12 @@ simulation's time; the others stamp with their inputs' stamps). Then it
    comes from the summary it logs) and writes ``plot.png``, ``camera_start.png``,
    ``camera_middle.png``, ``camera_end.png``, ``animation.gif`` (:mod:`etdmp_ros.pictures`),
    ``metrics.json`` and ``recording.npz`` to the output folder, node logs to ``<out>/logs/``.
+
+With ``--move-goal`` (``make demo MOVE_GOAL=1``) the demo moves the goal marker
+(:data:`etdmp_ros.scenario.MOVE_GOAL_BY`, 4 cm) at :data:`~etdmp_ros.scenario.MOVE_GOAL_AT` of
+the letter's duration after tracking began, as ``ros2 param set /ur10_sim goal_position`` would;
+dmp_server follows it (online ET-DMP) and the metrics measure the run against the moved marker
+and the plan as executed (:mod:`etdmp_ros.metrics`).
 
 The goal, obstacles and start of each skill: :mod:`etdmp_ros.scenario`.
 """
@@ -45,7 +51,7 @@ from etdmp_ros.processes import (DISCOVERY_VARIABLES, isolated_environment, modu
 from etdmp_ros.recording import (read_streams, Recorder, RecorderError, save_recording,
                                  write_bag)
 from etdmp_ros.robot import CameraIntrinsics
-from etdmp_ros.scenario import Scenario, ScenarioError, SKILLS
+from etdmp_ros.scenario import MOVE_GOAL_AT, Scenario, ScenarioError, SKILLS
 import numpy as np
 
 STARTUP_TIMEOUT = 150.0
@@ -78,6 +84,8 @@ class Options:
     quiet: bool = False
     #: Extra node parameters, {node: {name: value}}, after the scene's (e.g. control_rate).
     parameters: dict = field(default_factory=dict)
+    #: Move the goal marker by MOVE_GOAL_BY at MOVE_GOAL_AT of the movement (online ET-DMP).
+    move_goal: bool = False
 
 
 @dataclass
@@ -98,6 +106,8 @@ class _Live:
     goal: np.ndarray = None
     end_ns: int = None
     failure: str = None
+    #: (sim ns, marker before, marker after) of the goal move (``--move-goal``).
+    goal_move: tuple = None
 
 
 class _Progress:
@@ -196,19 +206,41 @@ def _plan_and_execute(recorder, nodes, scenario, method, live, progress):
              f' published on /etdmp/path; the controller executes it')
 
 
-def _follow_the_controller(recorder, nodes, live, timeout, progress):
-    """Report the controller's status until it is idle after the plan, or has failed."""
+def _move_goal(recorder, move, live, progress):
+    """Move the goal marker in the simulation, as ``ros2 param set /ur10_sim goal_position``."""
+    before = np.asarray(recorder.goal_truth, dtype=float)
+    after = before + move
+    recorder.set_parameters('ur10_sim', goal_position=after.tolist())
+    live.goal_move = (recorder.sim_ns, before, after)
+    progress(f'goal marker moved by {np.linalg.norm(after - before) * 1e3:.0f} mm to '
+             f'{np.round(after, 3).tolist()}')
+
+
+def _follow_the_controller(recorder, nodes, live, timeout, progress, move=None, tau=None):
+    """
+    Report the controller's status until it is idle after the plan, or has failed.
+
+    ``move`` (3,): move the goal marker by this at MOVE_GOAL_AT of the letter's duration
+    ``tau`` (s; the plan's without its obstacle margin) after tracking began (``--move-goal``).
+    """
     duration = live.plan[0][-1]
+    tau = duration if tau is None else tau
     deadline = time.monotonic() + duration + timeout
     seen = 0
+    move_at = None
     while live.end_ns is None:
         nodes.check_alive()
+        if move_at is not None and live.goal_move is None and recorder.sim_ns >= move_at:
+            _move_goal(recorder, move, live, progress)
+            deadline += duration
         news = recorder.state(live.n_status)
         for ns, text in news[seen:]:
             word = text.split(':')[0]
             progress(f'controller: {text} (t = {(ns - live.call_ns) * 1e-9:.2f} s simulated)')
-            if word == 'tracking':
+            if word == 'tracking' and move_at is None:
                 recorder.request_snapshot('middle', ns + int(duration * 0.5e9))
+                if move is not None:
+                    move_at = ns + int(MOVE_GOAL_AT * tau * 1e9)
             if word in STATUS_FAILURES:
                 live.failure, live.end_ns = text, ns
             elif word == 'idle' and any(t.split(':')[0] in ('holding', 'tracking')
@@ -233,10 +265,12 @@ def _last_frame(recorder, live):
 def _drive(options, scenario, recorder, nodes, live, progress):
     """Run the demo's steps against the running system, filling in ``live``."""
     other = 'dmp' if options.method == 'etdmp' else 'etdmp'
+    move = scenario.goal_move if options.move_goal else None   # ScenarioError if it cannot
     _wait_for_the_system(recorder, nodes, scenario, live, progress)
     _plan_for_comparison(recorder, nodes, scenario, other, live, progress)
     _plan_and_execute(recorder, nodes, scenario, options.method, live, progress)
-    _follow_the_controller(recorder, nodes, live, options.timeout, progress)
+    tau = float(scenario.server['duration']) or float(scenario.demo.duration)
+    _follow_the_controller(recorder, nodes, live, options.timeout, progress, move, tau)
     _last_frame(recorder, live)
 
 
@@ -251,7 +285,8 @@ def _measure(scenario, options, live, rec, status, out):
     """
     run = Run(scenario, options.method, np.asarray(live.start), np.asarray(live.goal),
               live.plan, live.other_plan, rec, status, live.call_ns, live.stamp, live.end_ns,
-              live.goal_truth, live.goal_seen, live.obstacles_truth, live.obstacles_seen)
+              live.goal_truth, live.goal_seen, live.obstacles_truth, live.obstacles_seen,
+              goal_move=live.goal_move)
     try:
         metrics, extra = compute_metrics(run)
     except MeasurementError as err:
@@ -299,7 +334,8 @@ def _write_outputs(out, run, metrics, extra, recorder, rec, options):
     snapshots = {name: recorder.snapshot(name) for name in ('start', 'middle', 'end')}
     written += write_pictures(out, run, rec, snapshots, recorder.frames, intrinsics,
                               options.animation)
-    save_recording(out / 'recording.npz', rec, run.plan, run.other, extra['t0'])
+    save_recording(out / 'recording.npz', rec, run.plan, run.other, extra['t0'],
+                   extra['executed'] if run.goal_move is not None else None)
     return written
 
 
@@ -361,6 +397,32 @@ def _run_demo(options, env):
 # ---------------------------------------------------------------------------- command line
 
 
+def _ms(value, scale=1.0):
+    return 'n/a' if value is None else f'{value * scale:.0f} ms'
+
+
+def _move_summary(m):
+    """Return the summary's lines about a goal that moved (``--move-goal``)."""
+    follow = m.get('goal_follow', {})
+    if m['switch_path_time_s'] is None:
+        return [f'  goal marker moved by {m["goal_moved_by_mm"]:.0f} mm at path time '
+                f'{follow.get("goal_moved_at_path_time_s", float("nan")):.2f} s: the plan was '
+                'NOT re-planned (goal error above is to the moved marker)']
+    ratio = m['switch_speed_ratio_min']
+    return [
+        f'  goal marker moved by {m["goal_moved_by_mm"]:.0f} mm at path time '
+        f'{follow["goal_moved_at_path_time_s"]:.2f} s; re-planned online from '
+        f'{m["switch_path_time_s"]:.2f} s ({m["plan_updates"]} update(s)); first plan nRMSE '
+        f'{format_nrmse(m["nrmse_original_plan"])}; tool speed after the switch >= '
+        + ('n/a' if ratio is None else f'{100 * ratio:.0f} %') + " of the plan's",
+        f'  following: marker moved -> first command on the new path '
+        f'{_ms(follow["goal_change_to_first_command_s"], 1e3)} simulated (perception '
+        f'{_ms(follow["perception_latency_s"], 1e3)}, confirmation '
+        f'{_ms(follow["confirmation_wait_ms"])}); dmp_server {_ms(follow["dmp_server_ms"])}, '
+        f'goal seen by dmp_server -> first command {_ms(follow["end_to_end_ms"])}',
+    ]
+
+
 def summary(metrics, written):
     """Return the short summary printed at the end."""
     m = metrics
@@ -383,6 +445,8 @@ def summary(metrics, written):
         f'  motion {m["duration_s"]:.2f} s simulated (approach {m["approach_duration_s"]:.2f} s,'
         f' plan {m["plan_duration_s"]:.2f} s); demo took {m["wall_time_s"]:.0f} s',
     ]
+    if 'goal_moved_by_mm' in m:
+        lines += _move_summary(m)
     system = m.get('system', {})
     if 'cpu_cores' in system and 'moving_commands_per_s' in system:
         cpu = ', '.join(f'{name} {value:.2f}' for name, value in system['cpu_cores'].items())
@@ -418,6 +482,9 @@ def parse_args(argv=None):
                              "config/scene.yaml's as they are (G's layout)")
     parser.add_argument('--timeout', default=60.0, type=float,
                         help='s allowed beyond the plan duration for the execution')
+    parser.add_argument('--move-goal', action='store_true',
+                        help='move the goal marker (ur10_sim goal_position) while the robot '
+                             'moves: dmp_server follows it with the online ET-DMP')
     parser.add_argument('--domain-id', default=None, type=int,
                         help='ROS_DOMAIN_ID of the demo (default: derived from the process id)')
     return parser.parse_args(argv)
@@ -431,7 +498,8 @@ def main(argv=None):
     for name in DISCOVERY_VARIABLES:
         os.environ.pop(name, None)
     options = Options(skill=args.skill, method=args.method, out=args.out,
-                      animation=args.animation, layout=args.layout, timeout=args.timeout)
+                      animation=args.animation, layout=args.layout, timeout=args.timeout,
+                      move_goal=args.move_goal)
     try:
         metrics, written = run_demo(options, env)
     except DemoError as err:

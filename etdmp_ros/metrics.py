@@ -23,6 +23,35 @@ How the numbers are measured (``metrics.json`` repeats this under ``definitions`
   controller's ``velocity_scale``) and ``|qd_j[k] - qd_j[k-1]| * control_rate / a_j``
   (the controller's ``joint_acceleration_limits``) over every command received.
 
+A run whose goal marker moved while the pen wrote (``Run.goal_move``, the demo's
+``--move-goal``; dmp_server re-plans the remainder online and publishes it on /etdmp/path on the
+plan's time base) is measured against what was executed (:func:`executed_plan`): the plan as
+/generalize returned it with each later /etdmp/path of the same stamp laid over it from that
+path's first pose on. The tracking start is fitted to that plan, the nRMSEs of the plan and of
+the trace are the same measure as above on it, the trace's with the marker's final position
+(projected) appended as its last point: the nRMSE takes a path relative to its last point, so
+this places the demonstration at the new goal (``nrmse_trace_own_end``: without it). The goal
+error is taken to the marker's final position (projected). Besides (:func:`goal_move_figures`):
+
+- switch: the path time at which the executed plan first departs from the original one (by
+  more than 1 nm): where dmp_server re-planned from.
+- switch speed: over the window from the new path's publication (or the switch, if earlier) to
+  the switch + :data:`SWITCH_WINDOW` s, the true tip's speed (finite differences of its 125 Hz
+  samples) divided by the executed plan's speed at the same path time
+  (``switch_speed_ratio_min``), and divided by the plan's speed at the switch
+  (``switch_tool_speed_min_fraction``); samples where the plan itself is slower than
+  :data:`SLOW_PLAN` of its speed at the switch are left out. No stop-and-go: both >= 0.2.
+- latencies (``goal_follow``): the marker moved (simulated time of the parameter change) to
+  the first /etdmp/goal showing it (more than dmp_server's ``follow_threshold`` from where it
+  was) as this process received it; to the message that confirmed it
+  (:data:`FOLLOW_CONFIRMATIONS`-th); dmp_server's own figure (its log line: from that message
+  to the remainder published); the controller's take-over (its "path continued" or "new
+  path" log line) and the first command after it (received here), the end-to-end figure from
+  the confirming message (as this process received it, which dmp_server does at about the same
+  time; a /rosout stamp can lag the event it reports by tens of milliseconds) to that command.
+  Wall clock (the nodes' log stamps, this process's receipt times) except where said
+  simulated.
+
 :func:`system_figures` adds what the closed loop cost (CPU, rates) from a :class:`CpuMonitor`
 window and the nodes' logs.
 """
@@ -32,6 +61,7 @@ import math
 import re
 
 from etdmp_ros.dmp import nrmse
+from etdmp_ros.planning import FOLLOW_CONFIRMATIONS
 from etdmp_ros.robot import PEN_TIP_RADIUS, UR10Model
 from etdmp_ros.task_plane import quadrant
 import numpy as np
@@ -57,6 +87,40 @@ DEFINITIONS = {
                              'the /generalize call to the first is '
                              'first_moving_command_after_call_s',
 }
+#: Added to ``definitions`` when the goal marker moved during the run.
+MOVE_DEFINITIONS = {
+    'executed_plan': 'the /generalize plan with each later /etdmp/path of the same stamp laid '
+                     "over it from that path's first pose on (path time = pose stamp - plan "
+                     'stamp); nrmse_plan, nrmse_trace, tracking, clearance are taken on it, '
+                     'nrmse_original_plan on the plan as /generalize returned it',
+    'nrmse_trace_moved': "nrmse_trace: the trace over tau with the marker's final position "
+                         '(projected) appended as its last point, i.e. against the '
+                         'demonstration placed at the new goal; nrmse_trace_own_end: without',
+    'goal_error_moved': "goal_error_mm: pen tip after the hold to the marker's final position "
+                        'projected onto the task plane; goal_error_vs_first_marker_mm: to '
+                        'where it was when the plan was requested',
+    'goal_moved_by_mm': 'distance between the marker before and after the move (true positions)',
+    'switch': 'switch_path_time_s: first path time at which the executed plan departs from the '
+              'original plan (> 1 nm); switch_time_s: that, simulated s after the /generalize '
+              'call',
+    'switch_speed': 'over [min(new path published, switch), switch + 0.5 s] in path time: '
+                    'switch_speed_ratio_min = min true tip speed / executed plan speed at the '
+                    'same path time; switch_tool_speed_min_fraction = min tip speed / plan '
+                    'speed at the switch; samples where the plan is slower than 0.2 of its '
+                    'speed at the switch left out',
+    'goal_follow': 'latencies of the first update: marker moved (simulated time of the '
+                   'parameter change) -> first /etdmp/goal showing it (received here, '
+                   'simulated s) -> the 3rd (confirming) one; dmp_server_ms: its own log figure '
+                   '(confirming message -> remainder published); controller: path received '
+                   'here -> its "path continued" / "new path" log line -> first command after '
+                   'it; end_to_end_ms: the confirming message received here -> that first '
+                   'command received here (wall clock)',
+}
+#: The end of the window of the switch speed check after the switch (s of path time).
+SWITCH_WINDOW = 0.5
+#: Plan speeds below this fraction of the plan's speed at the switch are the plan slowing down
+#: itself: left out of the switch speed check.
+SLOW_PLAN = 0.2
 
 
 class MeasurementError(ValueError):
@@ -89,6 +153,9 @@ class Run:
     obstacles_truth: np.ndarray
     obstacles_seen: np.ndarray
     wall_time: float = 0.0
+    #: (sim ns, marker before (3,), marker after (3,)) when the goal marker moved during the
+    #: run (the demo's ``--move-goal``), else None.
+    goal_move: tuple = None
 
 
 def format_nrmse(value):
@@ -148,10 +215,17 @@ def fit_tracking_start(reference, plan_t, plan_x, rough_s, window=0.3):
     return best[1]
 
 
-def nrmse_over_tau(points, tau, t, scene):
-    """Return the nRMSE against the demonstration of ``points`` at times ``t`` up to ``tau``."""
+def nrmse_over_tau(points, tau, t, scene, end=None):
+    """
+    Return the nRMSE against the demonstration of ``points`` at times ``t`` up to ``tau``.
+
+    ``end`` (3,): the goal to place the demonstration at, appended as the last point (the
+    nRMSE takes a path relative to its last point); None: the points' own last one.
+    """
     keep = t <= tau + 1e-9
     x = points[keep]
+    if end is not None:
+        x = np.vstack([x, np.reshape(end, (1, 3))])
     if scene.planar:
         x = scene.plane.to_plane(x)
     return float(nrmse(x, scene.demo.positions))
@@ -212,22 +286,120 @@ class _Trace:
     goal: np.ndarray       # the goal the pen is measured against
 
 
-def _trace(run):
-    scene, rec = run.scene, run.rec
+def executed_plan(plan_t, plan_x, stamp_ns, paths):
+    """
+    Return (t, positions, updates): the plan as executed, and how many re-plans changed it.
+
+    ``plan_t``, ``plan_x``: the plan /generalize returned, stamped ``stamp_ns``; ``paths``: the
+    recorded /etdmp/path messages (``read_streams``'s ``paths``). Each path with the same
+    header stamp is a re-planned remainder on the plan's time base (path time = pose stamp -
+    plan stamp): it replaces the plan from its first pose on.
+    """
+    t, x = np.asarray(plan_t, dtype=float), np.asarray(plan_x, dtype=float)
+    updates = 0
+    for _, _, header, stamps, positions in paths:
+        if int(header) != int(stamp_ns) or not len(stamps):
+            continue
+        path_t = (np.asarray(stamps, dtype=np.int64) - int(stamp_ns)) * 1e-9
+        keep = t < path_t[0] - 1e-6
+        new_t = np.concatenate([t[keep], path_t])
+        new_x = np.concatenate([x[keep], np.asarray(positions, dtype=float)])
+        if len(new_t) != len(t) or not (np.array_equal(new_x, x) and np.allclose(new_t, t)):
+            updates += 1
+        t, x = new_t, new_x
+    return t, x, updates
+
+
+def switch_index(original_x, executed_x, tolerance=1e-9):
+    """Return the index of the first pose where the executed plan departs (None: it never does)."""
+    n = min(len(original_x), len(executed_x))
+    apart = np.flatnonzero(np.linalg.norm(np.asarray(executed_x[:n]) - original_x[:n], axis=1)
+                           > tolerance)
+    if len(apart):
+        return int(apart[0])
+    return n if len(original_x) != len(executed_x) else None
+
+
+def path_speed(t, x):
+    """Return the speed (n,) of a sampled path (central differences)."""
+    t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+    if len(t) < 2:
+        return np.zeros(len(t))
+    return np.linalg.norm(np.gradient(x, t, axis=0), axis=1)
+
+
+def switch_speeds(tip_t, tip_x, t0, plan_t, plan_x, t_switch, t_from=None,
+                  window=SWITCH_WINDOW, slow=SLOW_PLAN):
+    """
+    Return the speed figures around a switch of plans (the module docstring defines them).
+
+    ``tip_t`` (s, simulated), ``tip_x``: the true pen tip; ``t0``: when path time 0 was;
+    ``plan_t``, ``plan_x``: the executed plan; ``t_switch``: path time of the switch;
+    ``t_from``: path time from which the window starts when earlier than the switch (the new
+    path's publication). Return {'switch_speed_ratio_min', 'switch_tool_speed_min_fraction',
+    'switch_plan_speed_m_s', 'switch_window_s', 'switch_speed_samples'}; the two minima are
+    None when no sample is left.
+    """
+    tip_t, tip_x = np.asarray(tip_t, dtype=float), np.asarray(tip_x, dtype=float)
+    start = t_switch if t_from is None else min(t_from, t_switch)
+    plan_v = path_speed(plan_t, plan_x)
+    v_switch = float(np.interp(t_switch, plan_t, plan_v))
+    mid = 0.5 * (tip_t[1:] + tip_t[:-1]) - t0
+    dt = np.diff(tip_t)
+    v_tip = np.linalg.norm(np.diff(tip_x, axis=0), axis=1) / np.where(dt > 0, dt, np.inf)
+    inside = (mid >= start) & (mid <= t_switch + window) & (dt > 0)
+    v_plan = np.interp(mid[inside], plan_t, plan_v)
+    kept = v_plan >= slow * v_switch
+    if kept.any() and v_switch > 0.0:
+        ratio = float(np.min(v_tip[inside][kept] / v_plan[kept]))
+        fraction = float(np.min(v_tip[inside][kept]) / v_switch)
+    else:
+        ratio = fraction = None
+    return {'switch_speed_ratio_min': ratio, 'switch_tool_speed_min_fraction': fraction,
+            'switch_plan_speed_m_s': v_switch, 'switch_window_s': [float(start),
+                                                                   float(t_switch + window)],
+            'switch_speed_samples': int(kept.sum())}
+
+
+@dataclass
+class _Executed:
+    """The plan as executed (a moved goal: with its re-planned remainders) and the original."""
+
+    t: np.ndarray
+    x: np.ndarray
+    updates: int = 0
+    switch: int = None      # index of the first pose that departs from the original plan
+
+
+def _executed(run):
     plan_t, plan_x, _ = run.plan
+    if run.goal_move is None:
+        return _Executed(np.asarray(plan_t), np.asarray(plan_x))
+    t, x, updates = executed_plan(plan_t, plan_x, run.plan_stamp_ns, run.rec.get('paths', []))
+    return _Executed(t, x, updates, switch_index(plan_x, x))
+
+
+def _goal(run):
+    """Return the goal the pen is measured against: the true marker projected (2D)."""
+    scene = run.scene
+    if not scene.planar:
+        return run.goal
+    marker = run.goal_truth if run.goal_move is None else run.goal_move[2]
+    return scene.plane.from_plane(scene.plane.to_plane(np.asarray(marker, dtype=float)))
+
+
+def _trace(run, ex):
+    scene, rec = run.scene, run.rec
     tip_t, tip_x = rec['tip'][:, 0] * 1e-9, rec['tip'][:, 1:]
     tracking = [ns for ns, text in run.status if text.split(':')[0] == 'tracking']
     rough = tracking[0] * 1e-9 if tracking else run.call_ns * 1e-9
-    t0 = fit_tracking_start(rec['reference'], plan_t, plan_x, rough)
+    t0 = fit_tracking_start(rec['reference'], ex.t, ex.x, rough)
     span = tip_t - t0
     moving = tip_t >= run.call_ns * 1e-9
     trace = tip_x[moving & (tip_t <= run.end_ns * 1e-9 + 1e-9)]
-    # Goal: the true marker projected onto the task plane (2D); the requested goal (3D).
-    goal = (scene.plane.from_plane(scene.plane.to_plane(run.goal_truth)) if scene.planar
-            else run.goal)
     return _Trace(t0, float(scene.server['duration']) or float(scene.demo.duration), tip_t,
-                  tip_x, span, (span >= -1e-6) & (span <= plan_t[-1] + 1e-6), trace,
-                  trace[-1] if len(trace) else tip_x[-1], goal)
+                  tip_x, span, (span >= -1e-6) & (span <= ex.t[-1] + 1e-6), trace,
+                  trace[-1] if len(trace) else tip_x[-1], _goal(run))
 
 
 def _dmp_plan(run):
@@ -239,16 +411,17 @@ def _dmp_plan(run):
     return (other_t, other_x) if other_method == 'dmp' and other_t is not None else None
 
 
-def _headline(run, tr):
+def _headline(run, tr, ex):
     scene, radius = run.scene, float(run.scene.scene['obstacle.radius'])
-    plan_t, plan_x, _ = run.plan
+    plan_t, plan_x = ex.t, ex.x
     dmp = _dmp_plan(run)
     errors = tracking_errors(run.rec, tr.t0, plan_t[-1])
     return {
         'skill': scene.skill,
         'method': run.method,
         'nrmse_plan': nrmse_over_tau(plan_x, tr.tau, plan_t, scene),
-        'nrmse_trace': nrmse_over_tau(tr.tip_x[tr.in_plan], tr.tau, tr.span[tr.in_plan], scene),
+        'nrmse_trace': nrmse_over_tau(tr.tip_x[tr.in_plan], tr.tau, tr.span[tr.in_plan], scene,
+                                      end=tr.goal if run.goal_move is not None else None),
         'nrmse_dmp_baseline': (nrmse_over_tau(dmp[1], tr.tau, dmp[0], scene)
                                if dmp is not None else None),
         'tracking_rms_mm': float(np.sqrt(np.mean(errors ** 2)) * 1e3),
@@ -260,9 +433,9 @@ def _headline(run, tr):
     }
 
 
-def _plan_details(run, tr):
+def _plan_details(run, tr, ex):
     radius = float(run.scene.scene['obstacle.radius'])
-    plan_t, plan_x, _ = run.plan
+    plan_t, plan_x = ex.t, ex.x
     dmp = _dmp_plan(run)
     return {
         'plan_duration_s': float(plan_t[-1]),
@@ -343,24 +516,188 @@ def _other_plan(run, tau):
     return out
 
 
+#: dmp_server's log line when it re-planned a followed plan (etdmp_ros.nodes.dmp_server).
+_FOLLOWING = re.compile(r'following: goal moved to \(([-\d.]+), ([-\d.]+), ([-\d.]+)\)'
+                        r'(?: and obstacles moved to .*?)?: re-planned from path time ([-\d.]+) s '
+                        r'\(the controller at about ([-\d.]+) s\), (\d+) poses to ([-\d.]+) s '
+                        r'published in ([\d.]+) ms \(update (\d+)\)')
+#: The controller's log line when it accepted a path (etdmp_ros.nodes.controller).
+_NEW_PATH = re.compile(r'(?:new path|path continued): (\d+) poses over ([\d.]+) s')
+
+
+def _node_lines(logs, node, pattern, after_ns=-math.inf):
+    """Return [(stamp ns, match)] of ``node``'s /rosout lines matching ``pattern``."""
+    found = []
+    for stamp, name, text in logs:
+        if name.split('.')[-1] == node and stamp > after_ns:
+            match = pattern.search(text)
+            if match:
+                found.append((stamp, match))
+    return found
+
+
+def _placed(scene, points):
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    return scene.plane.from_plane(scene.plane.to_plane(points)) if scene.planar else points
+
+
+def goal_seen_after_move(scene, goal_seen, plan_goal, since_ns, threshold,
+                         confirmations=FOLLOW_CONFIRMATIONS):
+    """
+    Return the indices (first showing, confirming) of the /etdmp/goal rows that saw a move.
+
+    ``goal_seen``: ``read_streams``'s rows (simulated ns at receipt, receipt ns, stamp ns, x, y,
+    z), from ``since_ns`` (simulated) on; as dmp_server takes them: placed (projected onto the
+    task plane), a candidate restarted by any message more than ``threshold`` from the previous
+    one, confirmed when ``confirmations`` agree and lie more than ``threshold`` from
+    ``plan_goal``. None for what did not happen.
+    """
+    rows = np.flatnonzero(goal_seen[:, 0] >= since_ns) if len(goal_seen) else []
+    placed = _placed(scene, goal_seen[:, 3:6]) if len(goal_seen) else np.zeros((0, 3))
+    first = confirming = None
+    candidate, count = None, 0
+    for i in rows:
+        moved = bool(np.linalg.norm(placed[i] - plan_goal) > threshold)
+        if first is None and moved:
+            first = int(i)
+        if candidate is None or np.linalg.norm(placed[i] - candidate) > threshold:
+            count = 0
+        candidate, count = placed[i], count + 1
+        if count >= confirmations and moved:
+            confirming = int(i)
+            break
+    return first, confirming
+
+
+def follow_latencies(run, ex, t0):
+    """
+    Return the latencies of the first re-plan after the goal moved (``goal_follow``).
+
+    Read from the recording alone: /etdmp/goal, /etdmp/path, the commands' receipt times and
+    the nodes' /rosout lines (dmp_server's "following: ..." and the controller's "new path:
+    ..."); the module docstring defines them. A figure is None when its event is missing.
+    """
+    rec, scene = run.rec, run.scene
+    move_ns = int(run.goal_move[0])
+    threshold = float(scene.server.get('follow_threshold', 0.005))
+    seen = rec.get('goal_seen', np.zeros((0, 6)))
+    first, confirming = goal_seen_after_move(scene, seen, run.plan[1][-1], run.call_ns,
+                                             threshold)
+    out = dict.fromkeys((
+        'perception_latency_s', 'perception_image_delay_s', 'confirmation_wait_ms',
+        'dmp_server_ms', 'dmp_server_recorded_ms', 'controller_accept_ms',
+        'controller_first_command_ms', 'end_to_end_ms', 'goal_change_to_first_command_s',
+        'replanned_from_path_time_s', 'controller_path_time_estimate_s'))
+    out['goal_moved_at_path_time_s'] = float(move_ns * 1e-9 - t0)
+    out['updates'] = ex.updates
+    if first is not None:
+        out['perception_latency_s'] = float((seen[first, 0] - move_ns) * 1e-9)
+        out['perception_image_delay_s'] = float((seen[first, 2] - move_ns) * 1e-9)
+    if confirming is not None and first is not None:
+        out['confirmation_wait_ms'] = float((seen[confirming, 1] - seen[first, 1]) * 1e-6)
+    logs = rec.get('logs', [])
+    after = seen[first, 1] - 1e9 if first is not None else -math.inf
+    following = _node_lines(logs, 'dmp_server', _FOLLOWING, after)
+    if not following:
+        return out
+    stamp, match = following[0]
+    took_ms, poses = float(match.group(8)), int(match.group(6))
+    # When dmp_server had the confirming message: its receipt here (a /rosout stamp can come
+    # tens of milliseconds after the event it reports), else its own log line's account.
+    server_seen_ns = (seen[confirming, 1] if confirming is not None
+                      else stamp - took_ms * 1e6)
+    out.update(dmp_server_ms=took_ms, replanned_from_path_time_s=float(match.group(4)),
+               controller_path_time_estimate_s=float(match.group(5)))
+    path = next((p for p in rec.get('paths', []) if int(p[2]) == int(run.plan_stamp_ns)
+                 and len(p[3]) == poses and p[1] >= server_seen_ns - 1e9), None)
+    if path is not None and confirming is not None:
+        out['dmp_server_recorded_ms'] = float((path[1] - seen[confirming, 1]) * 1e-6)
+    accepted = [(ns, m) for ns, m in _node_lines(logs, 'controller', _NEW_PATH, server_seen_ns)
+                if int(m.group(1)) == poses]
+    if not accepted:
+        return out
+    accepted_ns = accepted[0][0]
+    wall = rec['command_wall_time'] * 1e9
+    later = np.flatnonzero(wall > accepted_ns)
+    if path is not None:
+        out['controller_accept_ms'] = float((accepted_ns - path[1]) * 1e-6)
+    if len(later):
+        command_ns = wall[later[0]]
+        out['end_to_end_ms'] = float((command_ns - server_seen_ns) * 1e-6)
+        out['goal_change_to_first_command_s'] = float(
+            (rec['command_time'][later[0]] - move_ns) * 1e-9)
+        if path is not None:
+            out['controller_first_command_ms'] = float((command_ns - path[1]) * 1e-6)
+    return out
+
+
+def goal_move_figures(run, tr, ex):
+    """Return the figures of a run whose goal marker moved (the module docstring)."""
+    scene = run.scene
+    _, before, after = run.goal_move
+    radius = float(scene.scene['obstacle.radius'])
+    first_goal = _placed(scene, before)[0] if scene.planar else run.goal
+    figures = {
+        'goal_moved_by_mm': float(np.linalg.norm(np.asarray(after) - before) * 1e3),
+        'goal_marker_before': np.asarray(before, dtype=float).tolist(),
+        'goal_marker_after': np.asarray(after, dtype=float).tolist(),
+        'goal_error_vs_first_marker_mm': float(np.linalg.norm(tr.final - first_goal) * 1e3),
+        'nrmse_original_plan': nrmse_over_tau(run.plan[1], tr.tau, run.plan[0], scene),
+        'nrmse_trace_own_end': nrmse_over_tau(tr.tip_x[tr.in_plan], tr.tau,
+                                              tr.span[tr.in_plan], scene),
+        'min_clearance_original_plan_mm': clearance_mm(run.plan[1], run.obstacles_truth,
+                                                       radius),
+        'original_plan_duration_s': float(run.plan[0][-1]),
+        'executed_plan_end': ex.x[-1].tolist(),
+        'plan_updates': ex.updates,
+        'switch_path_time_s': None, 'switch_time_s': None, 'switch_point': None,
+        'switch_speed_ratio_min': None, 'switch_tool_speed_min_fraction': None,
+    }
+    seen = run.rec.get('goal_seen', np.zeros((0, 6)))
+    if len(seen):
+        figures['perceived_goal_final'] = seen[-1, 3:6].tolist()
+        figures['perceived_goal_final_error_mm'] = float(
+            np.linalg.norm(seen[-1, 3:6] - after) * 1e3)
+    if ex.switch is not None:
+        t_switch = float(ex.t[ex.switch])
+        published = [p[0] * 1e-9 - tr.t0 for p in run.rec.get('paths', [])
+                     if int(p[2]) == int(run.plan_stamp_ns) and p[0] * 1e-9 - tr.t0 > 0.0]
+        figures.update(switch_path_time_s=t_switch,
+                       switch_time_s=float(tr.t0 + t_switch - run.call_ns * 1e-9),
+                       switch_point=ex.x[ex.switch].tolist())
+        figures.update(switch_speeds(tr.tip_t, tr.tip_x, tr.t0, ex.t, ex.x, t_switch,
+                                     min(published) if published else None))
+    figures['goal_follow'] = follow_latencies(run, ex, tr.t0)
+    return figures
+
+
 def compute_metrics(run):
     """
     Return (metrics, extra) of a run (the module docstring defines them).
 
-    ``extra``: what the figures need besides, ``{'t0', 'tau', 'trace', 'goal'}``. Raises
-    MeasurementError when the run tracked nothing that could be measured.
+    ``extra``: what the figures need besides, ``{'t0', 'tau', 'trace', 'goal', 'executed'}``
+    (``executed``: (t, positions) of the plan as executed; with a moved goal also ``switch``,
+    the index of its first re-planned pose or None). Raises MeasurementError when the run
+    tracked nothing that could be measured.
     """
-    tr = _trace(run)
-    metrics = {**_headline(run, tr), **_plan_details(run, tr), **_positions(run, tr),
+    ex = _executed(run)
+    tr = _trace(run, ex)
+    metrics = {**_headline(run, tr, ex), **_plan_details(run, tr, ex), **_positions(run, tr),
                **_perception(run), **command_ratios(run.scene, run.rec['commands']),
                'plan_stamp_minus_sim_time_s': float((run.plan_stamp_ns - run.call_ns) * 1e-9),
                'controller_status': [text for _, text in run.status],
                'wall_time_s': float(run.wall_time),
                'definitions': DEFINITIONS}
     if not run.scene.planar:
-        metrics.update(bottle_clearances(run.scene, tr.trace, run.plan[1]))
+        metrics.update(bottle_clearances(run.scene, tr.trace, ex.x))
     metrics.update(_other_plan(run, tr.tau))
-    return metrics, {'t0': tr.t0, 'tau': tr.tau, 'trace': tr.trace, 'goal': tr.goal}
+    extra = {'t0': tr.t0, 'tau': tr.tau, 'trace': tr.trace, 'goal': tr.goal,
+             'executed': (ex.t, ex.x)}
+    if run.goal_move is not None:
+        metrics.update(goal_move_figures(run, tr, ex))
+        metrics['definitions'] = {**DEFINITIONS, **MOVE_DEFINITIONS}
+        extra['switch'] = ex.switch
+    return metrics, extra
 
 
 # -------------------------------------------------------------------------- system budget

@@ -2,7 +2,9 @@
 Pictures of a closed-loop run: the plot of plans and trace, the camera frames with ink, the GIF.
 
 :func:`plot_run` draws the top view (2D skills) or the top and side views (stir) of a
-:class:`etdmp_ros.metrics.Run` with its metrics; :func:`write_pictures` writes the camera's
+:class:`etdmp_ros.metrics.Run` with its metrics; when the goal marker moved during the run, the
+plan as first planned (dashed), the plan as executed (re-planned online), the marker before
+(grey ring) and after, and the switch between the plans. :func:`write_pictures` writes the camera's
 frames (PNG) and the animation (GIF) with the pen's trace drawn in as ink (:func:`draw_ink`;
 the simulation leaves none). matplotlib, OpenCV and Pillow are imported when a picture is made.
 """
@@ -10,7 +12,7 @@ the simulation leaves none). matplotlib, OpenCV and Pillow are imported when a p
 from etdmp_ros.dmp import learn, METHOD_LABELS
 from etdmp_ros.metrics import format_nrmse
 from etdmp_ros.planning import place_demo
-from etdmp_ros.plotting import DEMO_STYLE, METHOD_STYLE
+from etdmp_ros.plotting import DEMO_STYLE, METHOD_STYLE, REPLACED_STYLE
 from etdmp_ros.robot import CameraPose, PEN_TIP_RADIUS
 import numpy as np
 
@@ -25,14 +27,22 @@ PLAN_LABELS = {'etdmp': 'ET-DMP plan', 'dmp': 'DMP plan'}
 def _curves(run, metrics, extra):
     """Return (curves drawn first, executed curves drawn last): (points, style, label)."""
     scene = run.scene
-    placed = place_demo(learn(scene.demo), run.start, run.goal,
+    moved = run.goal_move is not None
+    goal = np.asarray(metrics['executed_plan_end']) if moved else run.goal
+    placed = place_demo(learn(scene.demo), run.start, goal,
                         scene.plane if scene.planar else None)
-    curves = [(placed, DEMO_STYLE, 'demonstration, turned and scaled into place')]
-    executed = [(run.plan[1], dict(METHOD_STYLE[run.method], linewidth=3.5, alpha=0.5),
-                 f'{PLAN_LABELS[run.method]} (executed), nRMSE '
-                 f'{format_nrmse(metrics["nrmse_plan"])}'),
+    curves = [(placed, DEMO_STYLE, 'demonstration, turned and scaled into place'
+               + (' (at the moved goal)' if moved else ''))]
+    executed = [(extra['executed'][1], dict(METHOD_STYLE[run.method], linewidth=3.5, alpha=0.5),
+                 f'{PLAN_LABELS[run.method]} ' + ('re-planned online (executed)' if moved
+                                                  else '(executed)')
+                 + f', nRMSE {format_nrmse(metrics["nrmse_plan"])}'),
                 (extra['trace'], {'color': 'k', 'linewidth': 0.9},
                  f'pen tip, true (MuJoCo), nRMSE {format_nrmse(metrics["nrmse_trace"])}')]
+    if moved:
+        curves.append((run.plan[1], dict(METHOD_STYLE[run.method], **REPLACED_STYLE),
+                       f'{PLAN_LABELS[run.method]} as first planned (goal before the move), '
+                       f'nRMSE {format_nrmse(metrics["nrmse_original_plan"])}'))
     return curves, executed
 
 
@@ -62,7 +72,7 @@ def _other_curve(run, metrics, low, high):
             + (', leaves the view' if out_of_view else ''))
 
 
-def _figure(scene, views, low, high):
+def _figure(scene, views, low, high, legend_rows=4):
     """Return a figure sized to the data, so that equal axes leave no empty band."""
     from matplotlib.figure import Figure
 
@@ -72,7 +82,8 @@ def _figure(scene, views, low, high):
                                                     else [])
     panel = 6.0 if scene.planar else 5.0
     return Figure(figsize=(panel * len(views) + 0.8,
-                           min(max(panel * max(heights) / abs(width), 3.0), 9.0) + 2.2),
+                           min(max(panel * max(heights) / abs(width), 3.0), 9.0) + 1.4
+                           + 0.2 * legend_rows),
                   layout='constrained')
 
 
@@ -119,16 +130,47 @@ def _draw_obstacles(ax, run, view, xy, low, high):
             ax.add_patch(Rectangle((h - radius, 0.0), 2 * radius, o[2], **kind))
 
 
-def _draw_markers(ax, run, extra, xy):
+def _draw_markers(ax, run, metrics, extra, xy):
     planar = run.scene.planar
+    moved = run.goal_move is not None
     ax.plot(*xy(run.start), marker='*', markersize=14, color='gold', markeredgecolor='k',
             linestyle='none', label='start (tool)', zorder=6)
+    if moved:
+        _draw_goal_move(ax, run, metrics, extra, xy)
     ax.plot(*xy(extra['goal']), marker='o', markersize=12, markerfacecolor='none',
             markeredgecolor='k', markeredgewidth=1.8, linestyle='none',
-            label='goal (true marker)' if planar else 'goal (requested)', zorder=6)
+            label=('goal (true marker, after the move)' if moved else 'goal (true marker)')
+            if planar else 'goal (requested)', zorder=6)
     if planar:
-        ax.plot(*xy(run.goal), marker='x', markersize=8, color='tab:green',
-                linestyle='none', label='goal as perceived', zorder=7)
+        seen = metrics.get('perceived_goal_final') if moved else None
+        ax.plot(*xy(run.goal if seen is None else seen), marker='x', markersize=8,
+                color='tab:green', linestyle='none', label='goal as perceived', zorder=7)
+
+
+def _draw_goal_move(ax, run, metrics, extra, xy):
+    """Draw the marker before the move (grey ring), the move, and the switch of plans."""
+    plane = run.scene.plane
+    before = plane.from_plane(plane.to_plane(np.asarray(run.goal_move[1], dtype=float)))
+    (h0,), (v0,) = xy(before)
+    (h1,), (v1,) = xy(extra['goal'])
+    ax.plot(h0, v0, marker='o', markersize=12, markerfacecolor='none', markeredgecolor='0.5',
+            markeredgewidth=1.5, linestyle='none', zorder=6,
+            label=f'goal marker before the move ({metrics["goal_moved_by_mm"]:.0f} mm)')
+    ax.annotate('', xy=(h1, v1), xytext=(h0, v0), zorder=6,
+                arrowprops={'arrowstyle': '->', 'color': '0.4', 'linewidth': 1.2,
+                            'shrinkA': 7, 'shrinkB': 7})
+    if metrics.get('switch_point') is None:
+        return
+    (h,), (v,) = xy(metrics['switch_point'])
+    moved_at = metrics['goal_follow']['goal_moved_at_path_time_s']
+    ax.plot(h, v, marker='D', markersize=7, color='tab:orange', markeredgecolor='k',
+            linestyle='none', zorder=8,
+            label=f'switch: marker moved at {moved_at:.2f} s, re-planned from '
+                  f'{metrics["switch_path_time_s"]:.2f} s (path time)')
+    ratio = metrics.get('switch_speed_ratio_min')
+    if ratio is not None:
+        ax.annotate(f"switch: tool speed\n>= {ratio:.0%} of the plan's", (h, v), fontsize=8,
+                    xytext=(10, -4), textcoords='offset points', zorder=8)
 
 
 def _frame_axes(ax, plane, view, name, xy, focus, pad):
@@ -154,13 +196,17 @@ def _legend_and_title(fig, run, metrics):
             handles.setdefault(text, handle)
     fig.legend(handles.values(), handles.keys(), loc='outside lower center', ncol=2,
                fontsize=8, frameon=False)
+    moved = run.goal_move is not None
     fig.suptitle(
-        f'{run.scene.skill}: {METHOD_LABELS[run.method]} executed by the simulated UR10\n'
+        f'{run.scene.skill}: {METHOD_LABELS[run.method]} executed by the simulated UR10'
+        + (f', the goal marker moved by {metrics["goal_moved_by_mm"]:.0f} mm while it wrote'
+           if moved else '') + '\n'
         f'start direction {metrics["start_turn_deg"]:+.0f} deg from the demonstration\'s '
         f'(quadrant {metrics["start_quadrant"]} of the goal; demonstration: '
         f'{metrics["demo_quadrant"]})\ntracking error RMS {metrics["tracking_rms_mm"]:.2f} mm, '
-        f'goal error {metrics["goal_error_mm"]:.1f} mm, min obstacle clearance '
-        f'{metrics["min_clearance_mm"]:.1f} mm', fontsize=10)
+        f'goal error {metrics["goal_error_mm"]:.1f} mm'
+        + (' (to the moved marker)' if moved else '')
+        + f', min obstacle clearance {metrics["min_clearance_mm"]:.1f} mm', fontsize=10)
 
 
 def plot_run(path, run, metrics, extra):
@@ -175,7 +221,8 @@ def plot_run(path, run, metrics, extra):
     views = [('top', 'top view (robot base at the top)')]
     if not scene.planar:
         views.append(('side', 'side view (as the camera sees it)'))
-    fig = _figure(scene, views, low, high)
+    # The legend's rows below the view: a moved goal adds three entries.
+    fig = _figure(scene, views, low, high, legend_rows=6 if run.goal_move is not None else 4)
     for i, (view, name) in enumerate(views):
         ax = fig.add_subplot(1, len(views), i + 1)
         xy = _projection(scene.plane, view)
@@ -184,7 +231,7 @@ def plot_run(path, run, metrics, extra):
         _draw_obstacles(ax, run, view, xy, low, high)
         for points, style, text in curves:
             ax.plot(*xy(points), label=text, **style)
-        _draw_markers(ax, run, extra, xy)
+        _draw_markers(ax, run, metrics, extra, xy)
         _frame_axes(ax, scene.plane, view, name, xy, focus, pad)
     _legend_and_title(fig, run, metrics)
     fig.savefig(path, dpi=110, bbox_inches='tight')
@@ -234,7 +281,8 @@ def write_pictures(out, run, rec, snapshots, frames, intrinsics, animation=True)
     Write the camera frames (PNG) and the animation (GIF), the pen's trace drawn in as ink.
 
     Returns the paths written. Frames are captioned with the simulated time since the
-    ``/generalize`` call and the controller's status.
+    ``/generalize`` call and the controller's status (and "goal moved" once the goal marker,
+    which the frames show where the simulation has it, has moved).
     """
     from PIL import Image as PilImage
 
@@ -247,8 +295,10 @@ def write_pictures(out, run, rec, snapshots, frames, intrinsics, animation=True)
         draw_ink(frame, depth, tip[tip[:, 0] <= stamp, 1:], camera, intrinsics, scale,
                  thickness=1 if scale < 1 else 2)
         state = [text.split(':')[0] for ns, text in run.status if ns <= stamp]
+        moved = run.goal_move is not None and stamp >= run.goal_move[0]
         _caption(frame, f't = {(stamp - run.call_ns) * 1e-9:+.2f} s  '
-                        f'{state[-1] if state else "perceiving, planning"}', scale * 2)
+                        f'{state[-1] if state else "perceiving, planning"}'
+                        + ('  (goal moved)' if moved else ''), scale * 2)
         return frame
 
     written = []

@@ -21,6 +21,8 @@ DPI = 110
 METHOD_STYLE = {'etdmp': {'color': 'tab:green', 'linestyle': '-'},
                 'dmp': {'color': 'tab:blue', 'linestyle': '--'}}
 DEMO_STYLE = {'color': '0.55', 'linewidth': 4.0, 'alpha': 0.45, 'solid_capstyle': 'round'}
+#: A plan that was replaced while it executed (a goal that moved): light and dashed.
+REPLACED_STYLE = {'linewidth': 1.8, 'linestyle': (0, (4, 2)), 'alpha': 0.55}
 
 
 class PlottingUnavailable(RuntimeError):

@@ -28,8 +28,10 @@ from etdmp_ros.ros_conversions import (compress_image_cdr, COMPRESSED_IMAGE_TYPE
                                        intrinsics_from_camera_info, message_class, path_to_numpy,
                                        point_to_numpy, pose_array_to_numpy, stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
+from nav_msgs.msg import Path as PathMessage
 from nav_msgs.srv import GetPlan
 import numpy as np
+from rcl_interfaces.msg import Log
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -52,13 +54,17 @@ REFERENCE_TOPIC = '/etdmp/controller/reference'
 STATUS_TOPIC = '/etdmp/controller/status'
 COLOR_TOPIC = '/camera/camera/color/image_raw'
 DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
+PATH_TOPIC = '/etdmp/path'
+GOAL_SEEN_TOPIC = '/etdmp/goal'
+ROSOUT_TOPIC = '/rosout'
 #: Topics left out of the recording, with the reason (metrics.json ``recording.not_recorded``).
 NOT_RECORDED = {
     '/etdmp/detections/image': 'a view of the recorded camera images that perception draws '
                                'only while someone subscribes (recording it costs the drawing)',
 }
 #: The streams :func:`read_streams` returns for the metrics.
-MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC)
+MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC, PATH_TOPIC,
+                   GOAL_SEEN_TOPIC, ROSOUT_TOPIC)
 
 
 class Stream:
@@ -118,8 +124,8 @@ class Recorder(BackgroundNode):
         self._last_receipt = 0
         self._subscribe()
         self.generalize = self.node.create_client(GetPlan, '/generalize')
-        self.server_parameters = self.node.create_client(SetParameters,
-                                                         '/dmp_server/set_parameters')
+        self._parameter_clients = {
+            'dmp_server': self.node.create_client(SetParameters, '/dmp_server/set_parameters')}
         self.node.create_timer(DISCOVERY_PERIOD, self._discover)
         self.start()
 
@@ -134,7 +140,7 @@ class Recorder(BackgroundNode):
                 (TIP_TOPIC, PointStamped, STREAM, self._on_tip),
                 ('/ur10_sim/ground_truth/goal', PointStamped, 10, self._on_goal_truth),
                 ('/ur10_sim/ground_truth/obstacles', PoseArray, 10, self._on_obstacles_truth),
-                ('/etdmp/goal', PointStamped, 10, self._on_goal_seen),
+                (GOAL_SEEN_TOPIC, PointStamped, 10, self._on_goal_seen),
                 ('/etdmp/obstacles', PoseArray, 10, self._on_obstacles_seen),
                 (COMMAND_TOPIC, Float64MultiArray, STREAM, None),
                 (STATUS_TOPIC, String, LATCHED, self._on_status),
@@ -298,15 +304,22 @@ class Recorder(BackgroundNode):
 
     def set_server_parameters(self, timeout=10.0, **values):
         """Set dmp_server parameters (as ``ros2 param set``); raise RecorderError if refused."""
-        if not self.server_parameters.wait_for_service(timeout_sec=timeout):
-            raise RecorderError('/dmp_server/set_parameters is not available')
+        self.set_parameters('dmp_server', timeout, **values)
+
+    def set_parameters(self, node, timeout=10.0, **values):
+        """Set parameters of ``node`` (as ``ros2 param set``); raise RecorderError if refused."""
+        client = self._parameter_clients.get(node)
+        if client is None:
+            client = self.node.create_client(SetParameters, f'/{node}/set_parameters')
+            self._parameter_clients[node] = client
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise RecorderError(f'/{node}/set_parameters is not available')
         request = SetParameters.Request(
             parameters=[Parameter(k, value=v).to_parameter_msg() for k, v in values.items()])
-        result = self._wait(self.server_parameters.call_async(request), timeout,
-                            '/dmp_server/set_parameters')
+        result = self._wait(client.call_async(request), timeout, f'/{node}/set_parameters')
         for name, r in zip(values, result.results):
             if not r.successful:
-                raise RecorderError(f'dmp_server refused {name} = {values[name]!r}: {r.reason}')
+                raise RecorderError(f'{node} refused {name} = {values[name]!r}: {r.reason}')
 
     def call_generalize(self, goal=None, timeout=30.0):
         """
@@ -373,9 +386,14 @@ def read_streams(path):
     ``tip``, ``reference``: (n, 4) header stamps (ns) and positions, sorted by stamp;
     ``commands`` (n, 6) and ``command_time``: the simulated time when each arrived (the stamp
     of the latest pen tip received before it), ``command_wall_time``: its receipt time (s);
-    ``status``: [(simulated ns at receipt, text)].
+    ``status``: [(simulated ns at receipt, text)]. Also, in order of arrival: ``paths``, every
+    /etdmp/path as (simulated ns at receipt, receipt ns, header stamp ns, pose stamps ns (n,),
+    positions (n, 3)); ``goal_seen``: /etdmp/goal as (m, 6) rows of simulated ns at receipt,
+    receipt ns, header stamp ns, x, y, z; ``logs``: /rosout as [(stamp ns, node, text)] (the
+    nodes stamp their log lines with the wall clock, the clock of the receipt times).
     """
     tip, reference, commands, command_time, wall, status = [], [], [], [], [], []
+    paths, goal_seen, logs = [], [], []
     sim_ns = 0
     for topic, _, log_ns, data in bag.read_messages(path, MEASURED_TOPICS):
         if topic == TIP_TOPIC:
@@ -391,29 +409,47 @@ def read_streams(path):
             commands.append(deserialize_message(data, Float64MultiArray).data)
             command_time.append(sim_ns)
             wall.append(log_ns * 1e-9)
-        else:
+        elif topic == STATUS_TOPIC:
             status.append((sim_ns, deserialize_message(data, String).data))
+        elif topic == PATH_TOPIC:
+            msg = deserialize_message(data, PathMessage)
+            _, positions, _ = path_to_numpy(msg)
+            stamps = np.array([stamp_to_ns(p.header.stamp) for p in msg.poses], dtype=np.int64)
+            paths.append((sim_ns, log_ns, stamp_to_ns(msg.header.stamp), stamps, positions))
+        elif topic == GOAL_SEEN_TOPIC:
+            msg = deserialize_message(data, PointStamped)
+            goal_seen.append((sim_ns, log_ns, stamp_to_ns(msg.header.stamp), msg.point.x,
+                              msg.point.y, msg.point.z))
+        else:
+            msg = deserialize_message(data, Log)
+            logs.append((stamp_to_ns(msg.stamp), msg.name, msg.msg))
     tip, reference = np.array(tip).reshape(-1, 4), np.array(reference).reshape(-1, 4)
     return {'tip': tip[np.argsort(tip[:, 0], kind='stable')],
             'reference': reference[np.argsort(reference[:, 0], kind='stable')],
             'command_time': np.array(command_time, dtype=float),
             'command_wall_time': np.array(wall, dtype=float),
             'commands': np.array(commands, dtype=float).reshape(-1, 6),
-            'status': status}
+            'status': status,
+            'paths': paths,
+            'goal_seen': np.array(goal_seen, dtype=float).reshape(-1, 6),
+            'logs': logs}
 
 
-def save_recording(path, rec, plan, other, tracking_start):
+def save_recording(path, rec, plan, other, tracking_start, executed=None):
     """
     Write the recorded streams and the plans to ``path`` (``.npz``).
 
-    ``rec``: :func:`read_streams`; ``plan``: (t, positions, ...) executed; ``other``:
-    (method, t, positions), t None when that plan was refused; ``tracking_start``: simulated s.
+    ``rec``: :func:`read_streams`; ``plan``: (t, positions, ...) returned by /generalize;
+    ``other``: (method, t, positions), t None when that plan was refused; ``tracking_start``:
+    simulated s; ``executed``: (t, positions) of the plan as executed when dmp_server re-planned
+    its remainder (a goal that moved), saved as ``executed_t`` and ``executed_x``.
     """
     _, other_t, other_x = other
     refused = other_t is None
+    extra = {} if executed is None else {'executed_t': executed[0], 'executed_x': executed[1]}
     np.savez_compressed(path, tip=rec['tip'], reference=rec['reference'],
                         commands=rec['commands'], command_time=rec['command_time'],
                         plan_t=plan[0], plan_x=plan[1],
                         other_t=np.zeros(0) if refused else other_t,
                         other_x=np.zeros(0) if refused else other_x,
-                        tracking_start=tracking_start)
+                        tracking_start=tracking_start, **extra)

@@ -54,6 +54,16 @@ STIR_START_TURN_DEG = 30.0
 STIR_START_SCALE = 0.9
 
 
+#: ``--move-goal``: the goal marker moves by this much (base_link, m) per skill, at
+#: MOVE_GOAL_AT of the movement: 4 cm along the task plane, away from the skill's obstacles.
+MOVE_GOAL_BY = {'G': [0.0, 0.04, 0.0], 'P': [0.0, 0.04, 0.0], 'R': [0.04, 0.0, 0.0],
+                'W': [0.0, 0.04, 0.0], 'wipe': [0.0, -0.04, 0.0]}
+#: When the goal moves (``--move-goal``): this fraction of the letter's duration (dmp_server's
+#: ``duration``, the plan's without its obstacle margin) after tracking began; for G about 35 %
+#: of the letter's length is written by then.
+MOVE_GOAL_AT = 0.4
+
+
 class ScenarioError(ValueError):
     """The scenario cannot be set up (an unknown node, a start pose out of reach)."""
 
@@ -116,6 +126,14 @@ class Scenario:
             self.explicit_goal = self.bottle_mouth + self.demo.positions[-1]
             sim['initial_joint_positions'] = stir_start_joints(self).tolist()
         return sim
+
+    @property
+    def goal_move(self):
+        """How the goal marker moves with ``--move-goal`` (base_link, m)."""
+        if self.skill not in MOVE_GOAL_BY:
+            raise ScenarioError(f'--move-goal moves the perceived goal marker; the goal of '
+                                f'{self.skill!r} is explicit (skills: {", ".join(MOVE_GOAL_BY)})')
+        return np.array(MOVE_GOAL_BY[self.skill], dtype=float)
 
     @property
     def planar(self):

@@ -267,7 +267,7 @@ if numba is not None:
 
 
 def chain(x, xd, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau, h,
-          substeps):
+          substeps, step=None):
     """
     Advance one system N output steps, each in the virtual situation of its own placement.
 
@@ -277,9 +277,10 @@ def chain(x, xd, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles, gains,
     N * substeps rows) and maps the new sample (forcing ``s_out[n]``, ``f_out[n]``) back: what
     N calls of :func:`rollout` with two output samples do, in one numba loop (the online
     rollout's remainder, ``OnlineRun.run``). ``obstacles`` (n_obs, d) in the real situation.
-    Returns X, Xd, Acc (N, d): the samples after each step. Needs numba.
+    Returns X, Xd, Acc (N, d): the samples after each step. Needs numba. ``step`` may give
+    ``discretize(K, D, tau, h)`` already computed.
     """
-    phi, gam = discretize(K, D, tau, h)
+    phi, gam = discretize(K, D, tau, h) if step is None else step
     N, d = goal.shape
     X, Xd, Acc = (np.empty((N, d)) for _ in range(3))
     gamma, beta, gamma2, _ = gains

@@ -319,10 +319,13 @@ class OnlineRun:
         sub = self._substeps
         theta = self._theta + self.dt * np.arange(n_max)
         s_mid, f_mid, s_out, f_out = self._forcing_rows(n_max)
+        step = self._steps.get(self.tau)
+        if step is None:
+            step = self._steps[self.tau] = discretize(skill.K, skill.D, self.tau, self._h)
         X, V, Acc = chain(self._x, self._xd, goal_f, A, M, R, k, s_mid, f_mid, s_out, f_out,
                           self._obstacles,
                           (self.gains.gamma, self.gains.beta, self.gains.gamma2, None),
-                          skill.K, skill.D, self.tau, self._h, sub)
+                          skill.K, skill.D, self.tau, self._h, sub, step=step)
         # Where step() would have said done: the phase ended and at rest at the goal.
         tol = self.online.done_tolerance * self._length(g)
         ended = theta + self.dt >= self.tau * (1.0 - 1e-12)
@@ -367,6 +370,8 @@ class OnlineRun:
     def warm(self):
         """Build the forcing table :meth:`run` reads (~10 ms once per timing), so it is fast."""
         self._forcing_rows(1)
+        if self.tau not in self._steps:
+            self._steps[self.tau] = discretize(self._skill.K, self._skill.D, self.tau, self._h)
 
     def _run_by_steps(self, n_max):
         """:meth:`run` by calls of :meth:`step` (the reference; no numba)."""
