@@ -14,11 +14,12 @@ LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 ROS_TOOLS   ?= ../shared/ros
 ROS_STAMP   := $(VENV)/.ros-tools
 
-.PHONY: venv ros-tools test test-fast demo reproduce docs config bench clean distclean help
+.PHONY: venv ros-tools browser test test-fast demo teach reproduce docs config bench clean distclean help
 .DEFAULT_GOAL := help
 
 help:
 	@echo "make demo       headless closed-loop demo: the UR10 writes a G (SKILL=W|P|R|wipe|stir, METHOD=dmp, MOVE_GOAL=1)"
+	@echo "make teach      the simulated system and the teaching page: draw a letter on http://localhost:8080"
 	@echo "make reproduce  the paper's letter experiments, offline -> out/reproduce/"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
 	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
@@ -28,6 +29,7 @@ help:
 	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
+	@echo "make browser    headless Chromium + chromedriver for the teaching page's test (apt, as root; make test does it)"
 	@echo "make clean      remove build outputs and caches; make distclean also removes .venv*/"
 
 venv: $(STAMP)
@@ -52,7 +54,20 @@ ros-tools: $(STAMP)
 	@test -f $(ROS_STAMP) -a $(ROS_STAMP) -nt requirements-ros.txt -a $(ROS_STAMP) -nt tools/ros_tools.py \
 	  || $(VENV_PY) tools/ros_tools.py --from "$(ROS_TOOLS)" --stamp $(ROS_STAMP)
 
-test: $(STAMP) ros-tools
+# Headless Chromium and its WebDriver for test/test_teach_page.py: Debian's chromium and
+# chromium-driver, installed with apt-get when missing and this is root; otherwise (or when apt
+# fails) the test skips and says why.
+BROWSER_PACKAGES := chromium chromium-driver
+browser:
+	@if command -v chromium >/dev/null 2>&1 && command -v chromedriver >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "Installing $(BROWSER_PACKAGES) for the teaching page's browser test (apt-get)..."; \
+	  { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	    $(BROWSER_PACKAGES) >/dev/null; } || \
+	  echo "note: $(BROWSER_PACKAGES) not installed: test_teach_page.py will skip"; \
+	else echo "note: no chromium + chromedriver and not root: test_teach_page.py will skip"; fi
+
+test: $(STAMP) ros-tools browser
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
 
 # The suites are markers (test/conftest.py SUITES): unit, nodes, system.
@@ -67,6 +82,11 @@ MOVE_GOAL ?=
 demo: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo --skill $(SKILL) --method $(METHOD) --out out/demo \
 	  $(if $(filter 1 yes true,$(MOVE_GOAL)),--move-goal)
+
+# The four nodes and the teaching page (etdmp_ros/teach_session.py); Ctrl-C stops them.
+TEACH_PORT ?= 8080
+teach: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.teach_session --port $(TEACH_PORT)
 
 # config/*.yaml and the parameter tables of docs/<node>.md are written from the system description.
 config: $(STAMP)

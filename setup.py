@@ -14,7 +14,9 @@ setup(
     packages=find_packages(exclude=['test', 'test.*']),
     # The built-in demonstrations ship inside the Python package and are read with
     # importlib.resources, so they work from a source tree, a venv and a colcon install.
-    package_data={'etdmp_ros.dmp': ['data/*.csv']},
+    package_data={'etdmp_ros.dmp': ['data/*.csv'],
+                  # The teaching page (etdmp_ros/nodes/teach.py serves it).
+                  'etdmp_ros': ['teach_page/*.html', 'teach_page/*.js', 'teach_page/*.css']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (os.path.join('share', package_name), ['package.xml']),
@@ -43,6 +45,7 @@ setup(
             'controller = etdmp_ros.nodes.controller:main',
             'bringup = etdmp_ros.nodes.bringup:main',
             'perception = etdmp_ros.nodes.perception:main',
+            'teach = etdmp_ros.nodes.teach:main',
         ],
     },
 )

@@ -229,7 +229,7 @@ def generated_files(root):
     """Return ``{path: text}`` of every file written from the system description."""
     root = Path(root)
     files = {root / 'config' / system.SCENE_FILE: scene_file_text()}
-    for spec in system.NODES:
+    for spec in system.ALL_NODES:
         files[root / 'config' / f'{spec.name}.yaml'] = node_file_text(spec)
         docs = root / 'docs' / f'{spec.name}.md'
         files[docs] = docs_text(spec, docs.read_text(encoding='utf-8'))

@@ -146,3 +146,17 @@ JOINT_STATE_QUEUE = 1000
 #: Most joints one JointState may name (a whole robot with grippers and sensors: generous);
 #: bounds reading a forged message.
 MAX_JOINT_STATE_JOINTS = 256
+
+# teach, the teaching page ----------------------------------------------------------------------
+
+#: Largest request body the teaching page's server reads (bytes): a bigger one is refused with
+#: HTTP 413 before it is parsed. A drawing of MAX_DRAWN_POINTS points sent as JSON [x, y, t]
+#: rows takes at most about 0.8 MB; 10^6 points take 8-30 MB.
+MAX_TEACH_REQUEST_BYTES = 2 * 1024 * 1024
+
+#: Most points of one drawing: its strokes' points and those joining them, as many as a
+#: demonstration may have (MAX_DEMO_SAMPLES).
+MAX_DRAWN_POINTS = MAX_DEMO_SAMPLES
+
+#: Most strokes of one drawing (each pen-up starts a new one; they are joined in order).
+MAX_STROKES = 100

@@ -467,6 +467,36 @@ CONTROLLER = (
       dynamic=True),
 )
 
+# ------------------------------------------------------------------------------------ teach
+TEACH_SCENE = _scene('camera.position', 'camera.orientation')
+TEACH = (
+    P('port', 8080, 'TCP port of the teaching page (http://localhost:<port>/); 0 = any free port '
+      '(the log names it).', value_range=(0, 65535), section='Web server'),
+    P('address', '127.0.0.1', 'Address the page is served on: 127.0.0.1 = this machine only; '
+      '0.0.0.0 = every network interface (whoever reaches it can teach skills and move the '
+      'robot).'),
+    P('canvas_width', 0.4, 'Width of the task plane the drawing canvas shows (4:3, centred on '
+      'task_plane.origin, robot base at the top as the camera sees it).', unit='m',
+      value_range=(0.01, 10.0), section='Teaching'),
+    P('dmp_server', 'dmp_server', "The DMP server node (relative to this node's namespace) whose "
+      'parameters the page reads (task plane, formulation, n_basis) and sets (teach_skill_name, '
+      'skill, duration, execute).'),
+    P('report_timeout', 10.0, "Longest wait for dmp_server's answer: a service call, or its "
+      'report on /rosout of a taught demonstration or a refused plan.', unit='s',
+      value_range=(0.1, 120.0)),
+    P('camera_rate', 5.0, 'Camera images per second a page gets at most (JPEG).', unit='Hz',
+      value_range=(0.1, 30.0), section='Camera view'),
+    P('jpeg_quality', 80, 'JPEG quality of the camera images sent to the page.',
+      value_range=(10, 100)),
+    P('watch_timeout', 3.0, 'A page that asked for no image for this long no longer watches: '
+      'the camera image and the pen trace are unsubscribed until one asks again.', unit='s',
+      value_range=(0.5, 60.0)),
+    P('trace_source', 'ground_truth', 'The pen trace drawn over the camera image: ground_truth '
+      '(/ur10_sim/ground_truth/tool_tip, the simulation) or tool_pose (/etdmp/tool_pose, the '
+      "controller's forward kinematics, as on a real robot).",
+      choices=('ground_truth', 'tool_pose')),
+)
+
 
 # ----------------------------------------------------------------------------------- wiring
 @dataclass(frozen=True)
@@ -533,15 +563,24 @@ NODES = (
              sim_time=True),
 )
 NODE_NAMES = tuple(n.name for n in NODES)
+#: The teaching page (docs/teach.md): started beside the system on demand (``make teach``, the
+#: launch file's ``teach:=true``), not by ``make demo``, ``bringup`` or the launch file's default.
+TEACH_NODE = NodeSpec('teach', 'the teaching page: draw a movement in a browser, teach it to '
+                      'dmp_server, watch the UR10 write it', TEACH_SCENE, TEACH,
+                      'etdmp_ros.nodes.teach:TeachNode',
+                      config_header='The page is served to this machine only unless address '
+                      'says otherwise.')
+#: Every node of the package: the system's, then the teaching page's.
+ALL_NODES = NODES + (TEACH_NODE,)
 SCENE_FILE = 'scene.yaml'
 
 
 def node(name):
     """Return the :class:`NodeSpec` called ``name``; KeyError naming the nodes if none."""
-    for spec in NODES:
+    for spec in ALL_NODES:
         if spec.name == name:
             return spec
-    raise KeyError(f'no node {name!r} (nodes: {", ".join(NODE_NAMES)})')
+    raise KeyError(f'no node {name!r} (nodes: {", ".join(n.name for n in ALL_NODES)})')
 
 
 def defaults(name):
@@ -584,7 +623,7 @@ def wiring_overrides(name):
 
 
 def _check_names():
-    for spec in NODES:
+    for spec in ALL_NODES:
         names = [p.name for p in spec.all_parameters]
         if len(names) != len(set(names)):
             raise ValueError(f'{spec.name}: a parameter is declared twice')

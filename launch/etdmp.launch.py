@@ -9,6 +9,7 @@ system's overrides (use_sim_time for the nodes that follow /clock), exactly as
     ros2 launch etdmp_ros etdmp.launch.py
     ros2 launch etdmp_ros etdmp.launch.py skill:=W method:=dmp
     ros2 launch etdmp_ros etdmp.launch.py namespace:=robot2     # a second robot, /robot2/...
+    ros2 launch etdmp_ros etdmp.launch.py teach:=true           # and the teaching page
 
 Every topic and service name of the nodes is relative, so ``namespace`` moves all of them
 (``/robot2/joint_states``, ``/robot2/generalize``, ...). Two things follow the namespace here
@@ -26,12 +27,13 @@ from ament_index_python.packages import get_package_share_directory
 from etdmp_ros import config_files, system
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 
 def generate_launch_description():
-    """Describe the four nodes, each with scene.yaml then its own parameter file."""
+    """Describe the four nodes (and teach), each with scene.yaml then its own parameter file."""
     config = os.path.join(get_package_share_directory('etdmp_ros'), 'config')
     arguments = [
         DeclareLaunchArgument('skill', default_value='G',
@@ -39,9 +41,12 @@ def generate_launch_description():
         DeclareLaunchArgument('method', default_value='etdmp', description='etdmp or dmp'),
         DeclareLaunchArgument('namespace', default_value='',
                               description='namespace of every node, topic and service'),
+        DeclareLaunchArgument('teach', default_value='false',
+                              description='also serve the teaching page (node teach, '
+                              'http://localhost:8080)'),
     ]
     nodes = []
-    for spec in system.NODES:
+    for spec in system.ALL_NODES:
         files = system.parameter_files(spec.name, config)
         parameters = [str(f) for f in files]
         parameters.append(config_files.read_parameter_file(files[-1], spec.name))
@@ -54,5 +59,7 @@ def generate_launch_description():
         nodes.append(Node(package='etdmp_ros', executable=spec.executable, name=spec.name,
                           namespace=LaunchConfiguration('namespace'), output='screen',
                           emulate_tty=True, parameters=parameters,
-                          ros_arguments=['-r', '/clock:=clock']))
+                          ros_arguments=['-r', '/clock:=clock'],
+                          condition=IfCondition(LaunchConfiguration('teach'))
+                          if spec is system.TEACH_NODE else None))
     return LaunchDescription(arguments + nodes)

@@ -39,13 +39,13 @@ SUITES = {
              'test_readme', 'test_robot_model', 'test_ros_conversions_geometry',
              'test_ros_conversions_image', 'test_ros_conversions_sim',
              'test_ros_conversions_tf', 'test_sim',
-             'test_skill_library', 'test_system', 'test_vision'),
+             'test_skill_library', 'test_system', 'test_teaching', 'test_vision'),
     'nodes': ('test_adversarial_controller', 'test_adversarial_dmp_server',
               'test_adversarial_perception',
               'test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
               'test_install_layout', 'test_namespaces', 'test_perception_node',
               'test_ros2_cli', 'test_ur10_sim_node', 'test_ur10_sim_tf'),
-    'system': ('test_end_to_end',),
+    'system': ('test_end_to_end', 'test_teach_page'),
 }
 _SUITE_OF = {module: suite for suite, modules in SUITES.items() for module in modules}
 

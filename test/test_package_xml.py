@@ -16,6 +16,7 @@ REPO = Path(__file__).resolve().parents[1]
 CODE = ('etdmp_ros', 'launch')
 #: Python libraries that are not ROS packages: import name -> rosdep key.
 PYTHON_KEYS = {
+    'aiohttp': 'python3-aiohttp',
     'cv2': 'python3-opencv',
     'matplotlib': 'python3-matplotlib',
     'mcap': 'python3-mcap-pip',
