@@ -139,7 +139,8 @@ def path_at_the_limit(rig):
     """Send the letter again as 20000 poses, replacing the one being written (accepted)."""
     yield
     rig.client.path_pub.publish(rig.at_limit)
-    return f'new path: {MAX_PATH_POSES} poses'
+    # Stamped like the letter being written, it continues it: taken over at its path time.
+    return f'path continued: {MAX_PATH_POSES} poses'
 
 
 ATTACKS = (future_stamps, past_stamps, joint_state_flood, oversized_path, path_at_the_limit)
