@@ -9,7 +9,12 @@ The phase decays as ``tau ds/dt = -alpha s`` so ``s(t) = exp(-alpha t / tau)``. 
 exponentially in s) and whose widths follow from the spacing of neighbours.
 """
 
+from collections import OrderedDict
+
 import numpy as np
+
+#: Timings whose forcing tables a ForcingTerm keeps (least recently made dropped first).
+TABLE_CACHE_SIZE = 8
 
 
 def phase(t, tau, alpha):
@@ -36,6 +41,7 @@ class ForcingTerm:
         # A kernel drops to exp(-1) at its neighbour's centre: enough overlap for a smooth fit.
         self.widths = 1.0 / np.append(gaps, gaps[-1]) ** 2
         self.weights = np.zeros((self.n_basis, 0))
+        self._tables = OrderedDict()    # timing -> (s_mid, f(s_mid), s_out, f(s_out))
 
     def design_matrix(self, s):
         """Regressors ``s * psi_i(s) / sum_j psi_j(s)`` for phases ``s`` (shape (n, n_basis))."""
@@ -55,7 +61,29 @@ class ForcingTerm:
         gram = phi.T @ phi
         ridge = regularization * np.trace(gram) / self.n_basis
         self.weights = np.linalg.solve(gram + ridge * np.eye(self.n_basis), phi.T @ f_target)
+        self._tables = OrderedDict()
         return self.weights
+
+    def table(self, tau, dt, n_out, substeps):
+        """
+        Return (s_mid, f(s_mid), s_out, f(s_out)) of a rollout's timing, cached per timing.
+
+        ``s_mid``: the phase at the midpoints of the ``(n_out - 1) * substeps`` sub-steps of
+        ``dt / substeps``; ``s_out``: at the ``n_out`` samples, ``dt`` apart, from t = 0. Refit
+        weights clear the cache.
+        """
+        key = (tau, dt, n_out, substeps)
+        tables = self._tables
+        table = tables.get(key)
+        if table is None:
+            h = dt / substeps
+            s_mid = phase((np.arange((n_out - 1) * substeps) + 0.5) * h, tau, self.alpha)
+            s_out = phase(np.arange(n_out) * dt, tau, self.alpha)
+            table = (s_mid, self(s_mid), s_out, self(s_out))
+            tables[key] = table
+            if len(tables) > TABLE_CACHE_SIZE:
+                tables.popitem(last=False)
+        return table
 
     def __call__(self, s):
         """Evaluate f(s) for phases ``s`` (shape (n,)); returns shape (n, d)."""

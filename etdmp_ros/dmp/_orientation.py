@@ -116,24 +116,13 @@ class OrientationDMP:
         self.forcing = ForcingTerm(n_basis, alpha)
         with np.errstate(all='ignore'):
             self.forcing.fit(s, target, regularization)
-        self._tables = OrderedDict()
         self._reproductions = OrderedDict()
 
     # -- rollout in the virtual situation ---------------------------------------------------
 
     def _table(self, tau, dt, n_out, substeps):
         """Phase and f_q(s) at every sub-step midpoint and output sample, cached per timing."""
-        key = (tau, dt, n_out, substeps)
-        table = self._tables.get(key)
-        if table is None:
-            h = dt / substeps
-            s_mid = phase((np.arange((n_out - 1) * substeps) + 0.5) * h, tau, self.alpha)
-            s_out = phase(np.arange(n_out) * dt, tau, self.alpha)
-            table = (s_mid, self.forcing(s_mid), s_out, self.forcing(s_out))
-            self._tables[key] = table
-            if len(self._tables) > _CACHE_SIZE:
-                self._tables.popitem(last=False)
-        return table
+        return self.forcing.table(tau, dt, n_out, substeps)
 
     def _rollout(self, e0, tau, dt, n_out, substeps, fast):
         """Integrate the DMP on ``e`` from ``e0`` (B, 3) at rest; return e, de/dt (B, n, 3)."""

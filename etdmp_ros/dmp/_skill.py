@@ -1,6 +1,5 @@
 """Learning a skill from one demonstration and generalizing it with DMP or ET-DMP."""
 
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -154,7 +153,6 @@ class Skill:
         if not finite:
             raise DemonstrationError('learning this demonstration overflows (its coordinates or '
                                      'accelerations are too large to be represented)')
-        self._tables = OrderedDict()
         #: The orientation DMP (docs/orientation.md), or None for a position-only skill.
         self.orientation = None if orientations is None else OrientationDMP(
             orientations, t, self.tau, K, D, alpha, n_basis, regularization)
@@ -352,14 +350,4 @@ class Skill:
 
     def _forcing_table(self, tau, dt, n_out, substeps):
         """Phase and f(s) at every sub-step midpoint and output sample, cached per timing."""
-        key = (tau, dt, n_out, substeps)
-        table = self._tables.get(key)
-        if table is None:
-            h = dt / substeps
-            s_mid = phase((np.arange((n_out - 1) * substeps) + 0.5) * h, tau, self.alpha)
-            s_out = phase(np.arange(n_out) * dt, tau, self.alpha)
-            table = (s_mid, self.forcing(s_mid), s_out, self.forcing(s_out))
-            self._tables[key] = table
-            if len(self._tables) > 8:
-                self._tables.popitem(last=False)
-        return table
+        return self.forcing.table(tau, dt, n_out, substeps)
