@@ -19,6 +19,7 @@ import subprocess
 import sys
 import time
 
+from etdmp_ros.nodes._spin import DDS_PROFILE_VARIABLES
 from etdmp_ros.processes import isolated_environment, NodeProcess, sourced
 import numpy as np
 
@@ -64,7 +65,14 @@ class Ros2:
         # on the host shares. Twice in three fresh-clone runs, every node froze for 2.0 s this
         # way, and ros2 param then timed out. The nodes, started by ros2 launch with this
         # environment, keep their profile (config/fastdds.xml: shared memory between them).
+        # The package's profile would bring shared memory back (its transports are the
+        # profile's, whatever FASTDDS_BUILTIN_TRANSPORTS says): this test process has it set
+        # once a BackgroundNode ran here, and a fresh clone's CLI tests then printed
+        # "RTPS_TRANSPORT_SHM Error ... open_and_lock_file failed" into ros2 param's output.
+        # The nodes set it again themselves (etdmp_ros.nodes._spin.use_dds_profile).
         env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+        for name in DDS_PROFILE_VARIABLES:
+            env.pop(name, None)
         self.env = env
         self._count = 0
 
