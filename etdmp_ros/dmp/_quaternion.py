@@ -86,15 +86,7 @@ def canonical(q):
 
 def rotation_vector(q):
     """Return the shortest rotation vectors ``r`` (|r| <= pi) (..., 3) of quaternions (..., 4)."""
-    q = canonical(q)
-    v, w = q[..., :3], q[..., 3:]
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
-    angle = 2.0 * np.arctan2(norm, w)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        # angle / |v|; near the identity its series 2/w (1 - |v|^2 / (3 w^2)) is exact enough.
-        exact = angle / norm
-        series = 2.0 / w * (1.0 - norm ** 2 / (3.0 * w ** 2))
-    return np.where(norm > SMALL_ANGLE, exact, series) * v
+    return log_map(canonical(q))     # w >= 0: the shorter way round
 
 
 def log_map(q):
@@ -110,6 +102,7 @@ def log_map(q):
     norm = np.linalg.norm(v, axis=-1, keepdims=True)
     angle = 2.0 * np.arctan2(norm, w)
     with np.errstate(divide='ignore', invalid='ignore'):
+        # angle / |v|; near the identity its series 2/w (1 - |v|^2 / (3 w^2)) is exact enough.
         exact = angle / norm
         series = 2.0 / w * (1.0 - norm ** 2 / (3.0 * w ** 2))
     return np.where((norm > SMALL_ANGLE) | (w <= 0.0), exact, series) * v

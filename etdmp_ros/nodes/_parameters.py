@@ -16,7 +16,8 @@ import math
 
 from etdmp_ros.system import DOUBLE_ARRAY, STRING_ARRAY
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterUninitializedException)
 from rclpy.parameter import Parameter
 
 _ARRAY_TYPES = {STRING_ARRAY: Parameter.Type.STRING_ARRAY,
@@ -129,3 +130,21 @@ def plain(value):
     if value is None or isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
         return value
     return list(value)
+
+
+class InvalidConfiguration(Exception):
+    """A node's start-up configuration is unusable (the reason has been logged as FATAL)."""
+
+
+def declared_settings(node, spec, build):
+    """
+    Declare ``spec``'s parameters on ``node`` and return ``build({name: value})``.
+
+    A value out of range or of the wrong type, or one ``build`` refuses with ValueError, is
+    logged as FATAL and raised as InvalidConfiguration (the node program exits with 1).
+    """
+    try:
+        return build(declare(node, spec))
+    except (InvalidParameterValueException, InvalidParameterTypeException, ValueError) as err:
+        node.get_logger().fatal(f'invalid parameter: {err}')
+        raise InvalidConfiguration(str(err)) from None

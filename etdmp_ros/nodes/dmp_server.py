@@ -35,7 +35,8 @@ import time
 
 from etdmp_ros import limits, system
 from etdmp_ros.dmp import builtin_demo, FORMULATIONS, METHODS, ObstacleGains
-from etdmp_ros.nodes._parameters import declare, values as parameter_values
+from etdmp_ros.nodes._parameters import (declared_settings, InvalidConfiguration,
+                                         values as parameter_values)
 from etdmp_ros.nodes._queued_service import QueuedService
 from etdmp_ros.nodes._spin import run
 from etdmp_ros.planning import (FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo, Plan,
@@ -55,7 +56,6 @@ from nav_msgs.srv import GetPlan
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -179,10 +179,6 @@ def _joints(values):
     return q
 
 
-class InvalidConfiguration(Exception):
-    """The node's start-up parameters are unusable (the reason has been logged)."""
-
-
 class _Latest:
     """A value received on a topic and when (time.monotonic), or nothing yet."""
 
@@ -211,11 +207,7 @@ class DmpServer(Node):
         """Declare parameters, learn the skills, warm up, then start serving."""
         super().__init__(NODE_NAME, **kwargs)
         log = self.get_logger()
-        try:
-            self._settings = Settings.from_values(declare(self, DESCRIPTION))
-        except (InvalidParameterValueException, InvalidParameterTypeException, ValueError) as err:
-            log.fatal(f'invalid parameter: {err}')
-            raise InvalidConfiguration(str(err)) from None
+        self._settings = declared_settings(self, DESCRIPTION, Settings.from_values)
         settings = self._settings
         self._state_lock = threading.Lock()
         self._core_lock = threading.Lock()

@@ -44,7 +44,7 @@ from aiohttp import web
 import cv2
 from etdmp_ros import limits, system
 from etdmp_ros.dmp import builtin_demo, learn
-from etdmp_ros.nodes._parameters import declare
+from etdmp_ros.nodes._parameters import declared_settings, InvalidConfiguration
 from etdmp_ros.nodes._spin import run
 from etdmp_ros.nodes._web import WebServer
 from etdmp_ros.robot import CameraPose
@@ -61,7 +61,6 @@ from nav_msgs.srv import GetPlan
 import numpy as np
 from rcl_interfaces.msg import Log
 from rcl_interfaces.srv import GetParameters, SetParameters
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -89,10 +88,6 @@ _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _VIEW = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 TRACE_TYPES = {'ground_truth': PointStamped, 'tool_pose': PoseStamped}
-
-
-class InvalidConfiguration(Exception):
-    """The node's parameters are unusable or its port cannot be had (the reason is logged)."""
 
 
 class Unavailable(Exception):
@@ -215,11 +210,7 @@ class TeachNode(Node):
         """Declare the parameters, subscribe, start the web server."""
         super().__init__(NODE_NAME, **kwargs)
         log = self.get_logger()
-        try:
-            self._settings = Settings.from_values(declare(self, DESCRIPTION))
-        except (InvalidParameterValueException, InvalidParameterTypeException, ValueError) as err:
-            log.fatal(f'invalid parameter: {err}')
-            raise InvalidConfiguration(str(err)) from None
+        self._settings = declared_settings(self, DESCRIPTION, Settings.from_values)
         settings = self._settings
         namespace = self.get_namespace().strip('/').replace('/', '.')
         server_logger = settings.dmp_server.replace('/', '.')
