@@ -16,6 +16,11 @@ MAX_DEMO_FILE_BYTES = 16 * 1024 * 1024
 #: a taught Path): bounds learning time and memory. 20 000 samples are 200 s at 100 Hz.
 MAX_DEMO_SAMPLES = 20_000
 
+#: Most joint states read from one ``.mcap`` recording (kinesthetic teaching): a UR driver
+#: publishes them at 500 Hz, so this is 200 s of teaching; the motion, once trimmed, is
+#: decimated to at most MAX_DEMO_SAMPLES samples.
+MAX_RECORDED_JOINT_STATES = 100_000
+
 #: Most coordinates per sample of a demonstration file (skills use 2 or 3).
 MAX_DEMO_COORDINATES = 16
 

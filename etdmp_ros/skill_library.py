@@ -7,7 +7,10 @@ Where demonstrations come from:
 - files: ``.csv``, ``.npy``, ``.npz`` (``etdmp_ros.dmp.load_demo``) and rosbag2 ``.mcap``
   recordings of a ``geometry_msgs/msg/PoseStamped`` topic (one sample per message, timed by the
   header stamps, or by the recording times when the stamps are unset) or a ``nav_msgs/msg/Path``
-  topic (the last Path in the file, timed by its poses' stamps);
+  topic (the last Path in the file, timed by its poses' stamps), or of a
+  ``sensor_msgs/msg/JointState`` topic (kinesthetic teaching: the arm moved by hand in freedrive
+  while ``ros2 bag record /joint_states`` ran): the tool tip's poses by the forward kinematics
+  the controller uses (:func:`joint_state_path`), trimmed to where the tool moves;
 - paths taught at runtime (the DMP server's ``/etdmp/demonstrations`` topic), persisted as CSV.
 
 What a demonstration's coordinates mean is given by its dimension, one rule for every source:
@@ -52,6 +55,13 @@ RECORDED_DIMS = ('auto', '2d', '3d')
 #: rosbag2 schema names of the message types a demonstration can be recorded as.
 POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
 PATH = 'nav_msgs/msg/Path'
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+RECORDED_TYPES = (POSE_STAMPED, PATH, JOINT_STATE)
+_TYPES_TEXT = f'{POSE_STAMPED}, {PATH} or {JOINT_STATE}'
+#: A joint-state recording starts and ends with the arm at rest (the user takes hold of it, lets
+#: go): it is trimmed to the motion, from the last sample whose tool tip is within this distance
+#: (m) of the first sample's to the first within it of the last sample's.
+MOTION_THRESHOLD = 1e-3
 BASE_FRAMES = ('', 'base_link')
 #: Orientations that mean "none recorded" when every pose carries one of them.
 UNSET_ORIENTATIONS = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
@@ -176,13 +186,14 @@ def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tol
     return Demonstration(name, positions, t, orientations)
 
 
-def read_mcap_path(path, topic=None):
+def read_mcap_path(path, topic=None, kinematics=None):
     """
-    Read the base_link positions of a PoseStamped or Path topic from a rosbag2 ``.mcap`` file.
+    Read the base_link path of a PoseStamped, Path or JointState topic from a ``.mcap`` file.
 
-    ``topic`` may be None when the file holds exactly one such topic. Raises
-    DemonstrationError (missing reader package, unreadable file, no or ambiguous topic, wrong
-    frame, no samples).
+    ``topic`` may be None when the file holds exactly one such topic. ``kinematics``: the
+    :class:`etdmp_ros.robot.UR10Model` (with the controller's tool offset) that turns joint
+    states into tool poses; a JointState topic needs it. Raises DemonstrationError (missing
+    reader package, unreadable file, no or ambiguous topic, wrong frame, no samples).
     """
     path = Path(path)
     try:
@@ -198,9 +209,10 @@ def read_mcap_path(path, topic=None):
             topics = _mcap_topics(reader)
             chosen = _choose_topic(path, topics, topic)
             kind = topics[chosen]
+            most = (limits.MAX_RECORDED_JOINT_STATES if kind == JOINT_STATE
+                    else limits.MAX_DEMO_SAMPLES) + 1
             records = [(message.log_time, decoded) for _, _, message, decoded in
-                       itertools.islice(reader.iter_decoded_messages(topics=[chosen]),
-                                        limits.MAX_DEMO_SAMPLES + 1)]
+                       itertools.islice(reader.iter_decoded_messages(topics=[chosen]), most)]
     except DemonstrationError:
         raise
     except MemoryError:
@@ -212,6 +224,8 @@ def read_mcap_path(path, topic=None):
                                  f'({type(err).__name__}: {err})') from None
     if not records:
         raise DemonstrationError(f'{path}: topic {chosen!r} holds no messages')
+    if kind == JOINT_STATE:
+        return joint_state_path(records, kinematics, f'{path}: topic {chosen!r}', chosen)
     if len(records) > limits.MAX_DEMO_SAMPLES and kind == POSE_STAMPED:
         raise DemonstrationError(f'{path}: topic {chosen!r} holds more than MAX_DEMO_SAMPLES = '
                                  f'{limits.MAX_DEMO_SAMPLES} messages; not learned')
@@ -250,21 +264,85 @@ def _mcap_topics(reader):
     else:   # no summary section (e.g. an interrupted recording): scan the records once
         pairs = {channel.topic: schema for schema, channel, _ in reader.iter_messages()}.items()
     return {topic: schema.name for topic, schema in pairs
-            if schema is not None and schema.name in (POSE_STAMPED, PATH)}
+            if schema is not None and schema.name in RECORDED_TYPES}
 
 
 def _choose_topic(path, topics, topic):
     if topic:
         if topic not in topics:
-            raise DemonstrationError(f'{path}: no {POSE_STAMPED} or {PATH} topic named '
+            raise DemonstrationError(f'{path}: no {_TYPES_TEXT} topic named '
                                      f'{topic!r} (found: {", ".join(sorted(topics)) or "none"})')
         return topic
     if len(topics) != 1:
         found = ', '.join(sorted(topics)) or 'none'
         raise DemonstrationError(f'{path}: cannot tell which topic to learn from: the file holds '
-                                 f'{len(topics)} {POSE_STAMPED} or {PATH} topics ({found}); '
+                                 f'{len(topics)} {_TYPES_TEXT} topics ({found}); '
                                  'name one (parameter mcap_topic)')
     return next(iter(topics))
+
+
+def joint_state_path(records, kinematics, where, topic='joint_states'):
+    """
+    Turn recorded joint states into the tool tip's base_link path (kinesthetic teaching).
+
+    ``records``: [(log time ns, sensor_msgs/JointState)] in order of recording. Joints are
+    matched by name (any order, extra joints such as a gripper's ignored); every message must
+    give the six UR10 joints' positions, finite. Times: the header stamps, or the recording
+    times when the stamps are unset. The tool poses are ``kinematics``'s forward kinematics
+    (the controller's tool tip), trimmed to the motion (:data:`MOTION_THRESHOLD`) and, beyond
+    MAX_DEMO_SAMPLES samples, decimated evenly. Return a :class:`RecordedPath` with the
+    orientations. Raises DemonstrationError saying which message is wrong.
+    """
+    from etdmp_ros.robot import JOINT_NAMES, matrix_to_quaternion
+    if kinematics is None:
+        raise DemonstrationError(f'{where}: joint states need the UR10 model (forward '
+                                 'kinematics) to become tool positions; none is available')
+    if len(records) > limits.MAX_RECORDED_JOINT_STATES:
+        raise DemonstrationError(f'{where}: more than MAX_RECORDED_JOINT_STATES = '
+                                 f'{limits.MAX_RECORDED_JOINT_STATES} joint states; not learned')
+    joints = np.empty((len(records), len(JOINT_NAMES)))
+    columns, names = None, None
+    for row, (_, msg) in enumerate(records):
+        if names != list(msg.name):
+            names = list(msg.name)
+            missing = [j for j in JOINT_NAMES if j not in names]
+            if missing:
+                raise DemonstrationError(f'{where}: message {row} has no position of '
+                                         f'{", ".join(missing)} (it names {names})')
+            columns = [names.index(j) for j in JOINT_NAMES]
+        if len(msg.position) != len(names):
+            raise DemonstrationError(f'{where}: message {row} names {len(names)} joints but '
+                                     f'gives {len(msg.position)} positions')
+        joints[row] = [msg.position[c] for c in columns]
+    bad = np.flatnonzero(~np.all(np.isfinite(joints), axis=1))
+    if bad.size:
+        raise DemonstrationError(f'{where}: message {bad[0]} has a NaN or inf joint position')
+    stamps = np.array([_stamp(msg.header.stamp) for _, msg in records])
+    if np.all(stamps == stamps[0]):   # unset header stamps: use the recording times
+        stamps = np.array([log_time * 1e-9 for log_time, _ in records])
+    positions = np.array([kinematics.tool_position(q) for q in joints])
+    first, last = _motion_span(positions)
+    if first is None:
+        raise DemonstrationError(f'{where}: the tool never moves more than MOTION_THRESHOLD = '
+                                 f'{MOTION_THRESHOLD * 1e3:g} mm from where it starts: nothing '
+                                 'to learn')
+    keep = np.arange(first, last + 1)
+    if len(keep) > limits.MAX_DEMO_SAMPLES:
+        keep = keep[np.linspace(0, len(keep) - 1, limits.MAX_DEMO_SAMPLES).round().astype(int)]
+    rotations = [kinematics.frame_pose(q)[1] for q in joints[keep]]
+    orientations = np.array([matrix_to_quaternion(r) for r in rotations])
+    return RecordedPath(positions[keep], stamps[keep], topic, orientations)
+
+
+def _motion_span(positions):
+    """Return (first, last) indices of the motion in ``positions``, or (None, None) if none."""
+    away_from_start = np.linalg.norm(positions - positions[0], axis=1) > MOTION_THRESHOLD
+    away_from_end = np.linalg.norm(positions - positions[-1], axis=1) > MOTION_THRESHOLD
+    if not away_from_start.any():
+        return None, None
+    first = max(int(np.argmax(away_from_start)) - 1, 0)
+    last = min(len(positions) - 1 - int(np.argmax(away_from_end[::-1])) + 1, len(positions) - 1)
+    return first, last
 
 
 def _xyz(point):
@@ -280,19 +358,20 @@ def _stamp(stamp):
 
 
 def load_demonstration(path, plane, name=None, mcap_topic=None, recorded_dim='auto',
-                       plane_tolerance=0.01):
+                       plane_tolerance=0.01, kinematics=None):
     """
     Read one demonstration file (``.csv``, ``.npy``, ``.npz`` or ``.mcap``).
 
-    The name defaults to the file's stem. ``.mcap`` recordings are base_link paths turned into
-    2D or 3D demonstrations by :func:`recorded_path_demo` (``plane``, ``recorded_dim``,
-    ``plane_tolerance``). Raises DemonstrationError.
+    The name defaults to the file's stem. ``.mcap`` recordings are base_link paths (joint
+    states through ``kinematics``: :func:`read_mcap_path`) turned into 2D or 3D demonstrations
+    by :func:`recorded_path_demo` (``plane``, ``recorded_dim``, ``plane_tolerance``). Raises
+    DemonstrationError.
     """
     path = Path(path)
     name = path.stem if name is None else name
     if path.suffix.lower() != '.mcap':
         return load_demo(path, name=name)
-    recorded = read_mcap_path(path, mcap_topic)
+    recorded = read_mcap_path(path, mcap_topic, kinematics)
     try:
         return recorded_path_demo(name, recorded.positions, recorded.t, plane, recorded_dim,
                                   plane_tolerance, recorded.orientations)
@@ -418,9 +497,12 @@ class SkillLibrary:
                 entry._learned[key] = learned
             return learned
 
-    def add_files(self, paths, plane, mcap_topic=None, recorded_dim='auto', plane_tolerance=0.01):
+    def add_files(self, paths, plane, mcap_topic=None, recorded_dim='auto', plane_tolerance=0.01,
+                  kinematics=None):
         """
         Learn every demonstration file in ``paths`` (files or folders), named by file stem.
+
+        ``kinematics``: the UR10Model that turns recorded joint states into tool poses.
 
         Returns (added SkillEntries, error messages); a bad file is reported and skipped, the
         others are still learned.
@@ -436,7 +518,8 @@ class SkillLibrary:
                 try:
                     demo = load_demonstration(path, plane, mcap_topic=mcap_topic,
                                               recorded_dim=recorded_dim,
-                                              plane_tolerance=plane_tolerance)
+                                              plane_tolerance=plane_tolerance,
+                                              kinematics=kinematics)
                     added.append(self.add(path.stem, demo, str(path)))
                 except ValueError as err:   # DemonstrationError, or a stem that is no name
                     errors.append(str(err) if str(path) in str(err) else f'{path}: {err}')

@@ -282,10 +282,12 @@ DMP_SERVER = (
     P('builtin_skills', builtin_demo_names(), 'Built-in demonstrations learned at start-up.'),
     P('demo_files', [], 'Demonstration files or folders learned at start-up (.csv .npy .npz: '
       '2 columns = task-plane skill in demo units, 3 = base_link metres; rosbag2 .mcap: a '
-      'PoseStamped or Path topic in base_link); the skill is named after the file stem.',
+      'PoseStamped or Path topic in base_link, or a JointState topic (kinesthetic teaching: '
+      'the tool tip by forward kinematics, trimmed to the motion)); the skill is named after '
+      'the file stem.',
       array_type=STRING_ARRAY, example=['/path/to/my_demo.csv', '/path/to/recordings/']),
-    P('mcap_topic', '', 'Topic (PoseStamped or Path) to learn from in .mcap files; empty = the '
-      'only such topic.'),
+    P('mcap_topic', '', 'Topic (PoseStamped, Path or JointState) to learn from in .mcap '
+      'files; empty = the only such topic.'),
     P('recorded_dim', 'auto', 'How a recorded or taught base_link path becomes a skill: 2d '
       '(projected onto the task plane), 3d (base_link) or auto (2d when flat and parallel to '
       'the plane).', choices=RECORDED_DIMS, **_RUNTIME),

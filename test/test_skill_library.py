@@ -6,7 +6,7 @@ import time
 from bad_files import forged_npy, npz_bomb
 from etdmp_ros import limits, skill_library
 from etdmp_ros.dmp import (builtin_demo, builtin_demo_names, Demonstration, DemonstrationError,
-                           load_demo, nrmse, save_demo)
+                           learn, load_demo, nrmse, save_demo)
 from etdmp_ros.skill_library import (default_skills_dir, demonstration_files, load_demonstration,
                                      read_mcap_path, recorded_path_demo, save_skill_demo,
                                      SkillExistsError, SkillLibrary, UnknownSkillError)
@@ -159,7 +159,7 @@ def test_mcap_pose_stamped_topic_is_read_with_header_stamps(tmp_path):
     np.testing.assert_allclose(recorded.positions, path)
     np.testing.assert_allclose(recorded.t - recorded.t[0], (stamps - stamps[0]) * 1e-9,
                                atol=1e-6)
-    with pytest.raises(DemonstrationError, match='2 geometry_msgs/msg/PoseStamped or nav_msgs'):
+    with pytest.raises(DemonstrationError, match='holds 2 geometry_msgs/msg/PoseStamped, nav'):
         read_mcap_path(tmp_path / 'rec.mcap')
     with pytest.raises(DemonstrationError, match="frame 'odom'"):
         read_mcap_path(tmp_path / 'rec.mcap', '/other')
@@ -298,3 +298,99 @@ def test_a_protected_skill_is_not_replaced():
     assert library.get('G') is builtin and library.source('G') == 'built-in'
     library.add('G', builtin_demo('P'), 'taught')          # not protected: replaced
     assert library.source('G') == 'taught' and library.source('nothing') is None
+
+
+# -- kinesthetic teaching: a rosbag2 recording of /joint_states
+
+
+def _joint_state_bag(path, joints, stamps_ns, names=None, extra=False):
+    """Write (n, 6) joint positions as sensor_msgs/JointState messages, as ros2 bag record."""
+    from etdmp_ros import bag
+    from etdmp_ros.robot import JOINT_NAMES
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    names = list(JOINT_NAMES) if names is None else list(names)
+    order = [list(JOINT_NAMES).index(n) for n in names]
+    with bag.BagWriter(path) as writer:
+        writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
+        for k, (q, stamp) in enumerate(zip(joints, stamps_ns)):
+            msg = JointState(name=names + (['gripper_joint'] if extra else []),
+                             position=[float(q[i]) for i in order] + ([0.5] if extra else []))
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp), 10**9)
+            writer.write('/joint_states', 10**9 + k * 10**6, serialize_message(msg))
+
+
+def _freedrive_joints(n_rest=40, n_move=300):
+    """Return joints (n, 6) at rest, moving smoothly (a hand), then at rest again."""
+    q0 = np.array([0.0, -1.9, 1.9, -1.57, -1.57, 0.0])
+    s = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n_move))
+    moving = q0 + np.outer(s, [0.4, 0.25, -0.3, 0.2, 0.1, 0.3]) \
+        + 0.03 * np.outer(np.sin(2 * np.pi * s), [1.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+    return np.vstack([np.repeat(q0[None], n_rest, 0), moving,
+                      np.repeat(moving[-1][None], n_rest, 0)])
+
+
+@pytest.fixture(scope='module')
+def ur10():
+    from etdmp_ros.robot import UR10Model
+    return UR10Model(tool_offset=(0.0, 0.0, 0.16))
+
+
+def test_joint_state_recording_becomes_the_tool_path_by_forward_kinematics(tmp_path, ur10):
+    joints = _freedrive_joints()
+    stamps = 5 * 10**9 + np.arange(len(joints)) * 8 * 10**6          # 125 Hz, simulated time
+    shuffled = ('wrist_2_joint', 'shoulder_pan_joint', 'elbow_joint', 'wrist_3_joint',
+                'shoulder_lift_joint', 'wrist_1_joint')
+    _joint_state_bag(tmp_path / 'taught.mcap', joints, stamps, shuffled, extra=True)
+    recorded = read_mcap_path(tmp_path / 'taught.mcap', kinematics=ur10)
+    tip = np.array([ur10.tool_position(q) for q in joints])
+    threshold = skill_library.MOTION_THRESHOLD
+    moving = np.flatnonzero(np.linalg.norm(tip - tip[0], axis=1) > threshold)
+    still = np.flatnonzero(np.linalg.norm(tip - tip[-1], axis=1) > threshold)
+    first, last = moving[0] - 1, still[-1] + 1       # one sample of rest kept at each end
+    assert recorded.topic == '/joint_states'
+    np.testing.assert_allclose(recorded.positions, tip[first:last + 1], atol=1e-12)
+    np.testing.assert_allclose(recorded.t, stamps[first:last + 1] * 1e-9)
+    assert 39 <= first < 70 and len(joints) - 70 < last <= len(joints) - 40   # rest trimmed
+    rotation = ur10.frame_pose(joints[first + 100])[1]
+    from etdmp_ros.robot import quaternion_to_matrix
+    np.testing.assert_allclose(quaternion_to_matrix(recorded.orientations[100]), rotation,
+                               atol=1e-9)
+    demo = load_demonstration(tmp_path / 'taught.mcap', PLANE, kinematics=ur10)
+    assert demo.dim == 3 and demo.name == 'taught' and demo.orientations is not None
+    np.testing.assert_allclose(demo.t[0], 0.0)
+    skill = learn(demo)
+    traj = skill.generalize(demo.positions[0], demo.positions[-1])
+    assert np.linalg.norm(traj.x[-1] - demo.positions[-1]) < 1e-3
+
+
+def test_long_joint_state_recordings_are_decimated(tmp_path, ur10, monkeypatch):
+    monkeypatch.setattr(limits, 'MAX_DEMO_SAMPLES', 100)
+    joints = _freedrive_joints(n_rest=10, n_move=400)
+    _joint_state_bag(tmp_path / 'long.mcap', joints, np.arange(len(joints)) * 2 * 10**6)
+    recorded = read_mcap_path(tmp_path / 'long.mcap', kinematics=ur10)
+    assert len(recorded.positions) == 100
+    assert np.all(np.diff(recorded.t) > 0)
+
+
+def test_bad_joint_state_recordings_are_refused_with_the_message(tmp_path, ur10):
+    joints = _freedrive_joints(n_rest=5, n_move=50)
+    stamps = np.arange(len(joints)) * 10**7
+    _joint_state_bag(tmp_path / 'five.mcap', joints[:, :5], stamps,
+                     names=('shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint',
+                            'wrist_1_joint', 'wrist_2_joint'))
+    with pytest.raises(DemonstrationError, match=r'message 0 has no position of wrist_3_joint'):
+        read_mcap_path(tmp_path / 'five.mcap', kinematics=ur10)
+    broken = joints.copy()
+    broken[17, 2] = np.nan
+    _joint_state_bag(tmp_path / 'nan.mcap', broken, stamps)
+    with pytest.raises(DemonstrationError, match=r'message 17 has a NaN or inf joint'):
+        read_mcap_path(tmp_path / 'nan.mcap', kinematics=ur10)
+    _joint_state_bag(tmp_path / 'still.mcap', np.repeat(joints[:1], 30, 0), stamps[:30])
+    with pytest.raises(DemonstrationError, match=r'never moves more than'):
+        read_mcap_path(tmp_path / 'still.mcap', kinematics=ur10)
+    with pytest.raises(DemonstrationError, match=r'need the UR10 model'):
+        read_mcap_path(tmp_path / 'nan.mcap')
+    library = SkillLibrary()
+    added, errors = library.add_files([tmp_path], PLANE, kinematics=ur10)
+    assert added == [] and len(errors) == 3

@@ -311,7 +311,8 @@ class DmpServer(Node):
         for what, paths in sources:
             added, errors = self._library.add_files(
                 paths, settings.plane, mcap_topic=self.get_parameter('mcap_topic').value or None,
-                recorded_dim=settings.recorded_dim, plane_tolerance=settings.plane_tolerance)
+                recorded_dim=settings.recorded_dim, plane_tolerance=settings.plane_tolerance,
+                kinematics=self._model)
             for message in errors:
                 log.error(f'{what}: demonstration not learned: {message}')
             for entry in added:
