@@ -14,12 +14,14 @@ LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 ROS_TOOLS   ?= ../shared/ros
 ROS_STAMP   := $(VENV)/.ros-tools
 
-.PHONY: venv ros-tools browser test test-fast demo teach reproduce docs config bench clean distclean help
+.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs config bench clean distclean help
 .DEFAULT_GOAL := help
 
 help:
 	@echo "make demo       headless closed-loop demo: the UR10 writes a G (SKILL=W|P|R|wipe|stir, METHOD=dmp, MOVE_GOAL=1)"
 	@echo "make teach      the simulated system and the teaching page: draw a letter on http://localhost:8080"
+	@echo "make kinesthetic  lead the simulated arm through a stir (teaching mode), record /joint_states;"
+	@echo "                then make demo SKILL=stir DEMO_FILE=out/kinesthetic/stir_by_hand.mcap repeats it"
 	@echo "make reproduce  the paper's letter experiments, offline -> out/reproduce/"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
 	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
@@ -79,9 +81,16 @@ test-fast: $(STAMP)
 SKILL     ?= G
 METHOD    ?= etdmp
 MOVE_GOAL ?=
+# DEMO_FILE=<recording.mcap> (with SKILL=stir): a stir taught by moving the arm, repeated instead.
+DEMO_FILE ?=
 demo: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo --skill $(SKILL) --method $(METHOD) --out out/demo \
-	  $(if $(filter 1 yes true,$(MOVE_GOAL)),--move-goal)
+	  $(if $(filter 1 yes true,$(MOVE_GOAL)),--move-goal) $(if $(DEMO_FILE),--demo-file $(DEMO_FILE))
+
+# Kinesthetic teaching, simulated: ur10_sim's teaching mode leads the arm through a stir as a
+# hand in freedrive would, /joint_states recorded to out/kinesthetic/stir_by_hand.mcap.
+kinesthetic: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.kinesthetic --out out/kinesthetic
 
 # The four nodes and the teaching page (etdmp_ros/teach_session.py); Ctrl-C stops them.
 TEACH_PORT ?= 8080

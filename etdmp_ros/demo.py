@@ -86,6 +86,8 @@ class Options:
     parameters: dict = field(default_factory=dict)
     #: Move the goal marker by MOVE_GOAL_BY at MOVE_GOAL_AT of the movement (online ET-DMP).
     move_goal: bool = False
+    #: A taught stir (.mcap of /joint_states) instead of the built-in one (scenario.Scenario).
+    demo_file: Path = None
 
 
 @dataclass
@@ -358,7 +360,8 @@ def _run_demo(options, env):
     wall = time.monotonic()
     out = Path(options.out)
     out.mkdir(parents=True, exist_ok=True)
-    scenario = Scenario(options.config_dir, options.skill, options.layout, options.parameters)
+    scenario = Scenario(options.config_dir, options.skill, options.layout, options.parameters,
+                        options.demo_file)
     progress(f'starting ur10_sim, perception, dmp_server and controller (ROS_DOMAIN_ID '
              f'{env["ROS_DOMAIN_ID"]}, localhost only; logs in {out / "logs"})')
     recorder = Recorder(env['ROS_DOMAIN_ID'], animation=options.animation)
@@ -485,6 +488,10 @@ def parse_args(argv=None):
     parser.add_argument('--move-goal', action='store_true',
                         help='move the goal marker (ur10_sim goal_position) while the robot '
                              'moves: dmp_server follows it with the online ET-DMP')
+    parser.add_argument('--demo-file', default=None, type=Path, metavar='FILE',
+                        help='with --skill stir: a stir taught by moving the arm (rosbag2 .mcap '
+                             'of /joint_states, python -m etdmp_ros.kinesthetic), repeated from '
+                             'another quadrant instead of the built-in stir')
     parser.add_argument('--domain-id', default=None, type=int,
                         help='ROS_DOMAIN_ID of the demo (default: derived from the process id)')
     return parser.parse_args(argv)
@@ -499,7 +506,7 @@ def main(argv=None):
         os.environ.pop(name, None)
     options = Options(skill=args.skill, method=args.method, out=args.out,
                       animation=args.animation, layout=args.layout, timeout=args.timeout,
-                      move_goal=args.move_goal)
+                      move_goal=args.move_goal, demo_file=args.demo_file)
     try:
         metrics, written = run_demo(options, env)
     except DemoError as err:

@@ -9,7 +9,12 @@ How the numbers are measured (``metrics.json`` repeats this under ``definitions`
   compared in the task plane (base_link points projected onto it), 3D skills in base_link.
   The executed trace is cut to the same span of the plan: from the moment the controller
   started tracking (found by fitting the controller's stamped reference to the plan, to a
-  tenth of a millisecond) to that plus ``tau``; the approach before it is left out.
+  tenth of a millisecond) to that plus ``tau``; the approach before it is left out. A 3D skill
+  planned in dmp_server's ``mode`` 2 (the taught stir) is first taken back to the
+  demonstration's situation by mode 2's own transform (its turn about the independent axis and
+  its per-block scales, from the path's start and end): the measure's Rodrigues alignment of
+  the start direction alone counts that turn as a difference of shape (0.30 for a stir
+  repeated 150 degrees round the bottle that is the recording turned exactly).
 - tracking error: true pen tip minus the controller's reference at the same simulated stamps,
   while the plan is tracked.
 - goal error: the pen tip at the end (after the hold) to the true goal marker projected onto
@@ -61,6 +66,7 @@ import math
 import re
 
 from etdmp_ros.dmp import nrmse
+from etdmp_ros.dmp._transform import euclidean_transform
 from etdmp_ros.planning import FOLLOW_CONFIRMATIONS
 from etdmp_ros.robot import PEN_TIP_RADIUS, UR10Model
 from etdmp_ros.task_plane import quadrant
@@ -71,7 +77,8 @@ DEFINITIONS = {
              "the plan's tau (without the obstacle margin); 2D skills in the task plane, 3D in "
              'base_link; '
              'trace: true pen tip from the start of tracking (controller reference fitted to '
-             'the plan) to that + tau',
+             "the plan) to that + tau; 3D mode 2: first taken back to the demonstration's "
+             "situation by mode 2's transform (turn about the independent axis, block scales)",
     'tracking_error': 'true pen tip minus the controller reference at the same simulated '
                       'stamps, while tracking the plan',
     'goal_error': 'pen tip after the hold to the true goal marker projected onto the task '
@@ -228,6 +235,11 @@ def nrmse_over_tau(points, tau, t, scene, end=None):
         x = np.vstack([x, np.reshape(end, (1, 3))])
     if scene.planar:
         x = scene.plane.to_plane(x)
+    elif scene.server.get('mode') == 2:
+        demo = scene.demo.positions
+        placed = euclidean_transform(demo[0] - demo[-1], x[0] - x[-1], mode=2,
+                                     independent_axis=scene.server['independent_axis'])
+        x = (x - x[-1]) @ placed.R.T / placed.scale
     return float(nrmse(x, scene.demo.positions))
 
 

@@ -30,7 +30,8 @@ def _curves(run, metrics, extra):
     moved = run.goal_move is not None
     goal = np.asarray(metrics['executed_plan_end']) if moved else run.goal
     placed = place_demo(learn(scene.demo), run.start, goal,
-                        scene.plane if scene.planar else None)
+                        scene.plane if scene.planar else None, scene.server.get('mode', 1),
+                        scene.server.get('independent_axis', 2))
     curves = [(placed, DEMO_STYLE, 'demonstration, turned and scaled into place'
                + (' (at the moved goal)' if moved else ''))]
     executed = [(extra['executed'][1], dict(METHOD_STYLE[run.method], linewidth=3.5, alpha=0.5),

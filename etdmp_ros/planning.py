@@ -261,12 +261,13 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None):
                 start_b, goal_b, obstacles_b, settings.method, traj)
 
 
-def place_demo(skill, start, goal, plane=None):
+def place_demo(skill, start, goal, plane=None, mode=1, independent_axis=2):
     """
-    Return the demonstration (T, 3) rotated and uniformly scaled so it runs from start to goal.
+    Return the demonstration (T, 3) turned and scaled so it runs from start to goal.
 
-    This is where ET-DMP's plan lies without obstacles (mode 1): the demonstration drawn in
-    place, for display. ``start``, ``goal``: base_link points; ``plane`` for 2D skills.
+    This is where ET-DMP's plan lies without obstacles: the demonstration drawn in place, for
+    display. ``start``, ``goal``: base_link points; ``plane`` for 2D skills; ``mode``,
+    ``independent_axis``: a 3D skill's transform (mode 2 scales each block by its own ratio).
     """
     space = _Space(skill, plane)
     start_s, goal_s = space.inward(_points(start, 'start', (3,))), space.inward(
@@ -274,12 +275,12 @@ def place_demo(skill, start, goal, plane=None):
     i_demo = skill.start - skill.goal
     i_current = start_s - goal_s
     try:
-        transform = euclidean_transform(i_demo, i_current, size=skill.size)
+        transform = euclidean_transform(i_demo, i_current, mode if len(i_demo) == 3 else 1,
+                                        independent_axis, size=skill.size)
     except GeneralizationError as err:
         raise PlanningError(str(err)) from None
-    ratio = np.linalg.norm(i_current) / np.linalg.norm(i_demo)
-    # Row-vector form of x = g + ratio R^T (y - g_D).
-    return space.outward(goal_s + ratio * (skill.demo - skill.goal) @ transform.R)
+    # Row-vector form of x = g + R^T (scale * (y - g_D)).
+    return space.outward(goal_s + (transform.scale * (skill.demo - skill.goal)) @ transform.R)
 
 
 #: Consecutive perception messages that must agree on a moved goal or obstacle set before a

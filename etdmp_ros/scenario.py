@@ -15,6 +15,16 @@ the mouth), near the bottom, because the marker on the table cannot be seen insi
 The request's start stays empty (the tool's current position). Letters are written in 4 s,
 wiping in 5 s (:data:`DURATIONS`, dmp_server's ``duration``).
 
+A stir taught by moving the arm (``demo_file``: a rosbag2 ``.mcap`` of ``/joint_states``, what
+:mod:`etdmp_ros.kinesthetic` records; the demo's ``--demo-file``) replaces the built-in one:
+dmp_server learns it from the file (``demo_files``) and plans it, and the demonstration the run
+is measured against is the recorded tool path (by the same forward kinematics), taken relative
+to the bottle's mouth. The stirrer then starts :data:`TAUGHT_STIR_TURN_DEG` round the bottle's
+axis from where the recording started, in another quadrant, with dmp_server's 3D ``mode`` 2
+(the vertical follows the 1D rule, the horizontal plane the 2D one): the movement turns about
+the bottle's axis and stays in the bottle, where mode 1's Rodrigues rotation would tilt a turn
+this large out of it.
+
 Each node gets the system's parameter files (:func:`etdmp_ros.system.parameter_files`), then an
 overrides file of its own: the system's wiring (:func:`etdmp_ros.system.wiring_overrides`), the
 skill's layout and the caller's parameters.
@@ -26,7 +36,7 @@ from pathlib import Path
 
 from etdmp_ros import system
 from etdmp_ros.config_files import read_node_parameters, read_parameter_file
-from etdmp_ros.dmp import builtin_demo
+from etdmp_ros.dmp import builtin_demo, Demonstration
 from etdmp_ros.robot import quaternion_to_matrix, UR10Model
 from etdmp_ros.task_plane import TaskPlane
 import numpy as np
@@ -52,6 +62,9 @@ DURATIONS = {'G': 4.0, 'P': 4.0, 'R': 4.0, 'W': 4.0, 'wipe': 5.0}
 #: by 9 degrees, which keeps it inside the bottle; the plain DMP squeezes its circles).
 STIR_START_TURN_DEG = 30.0
 STIR_START_SCALE = 0.9
+#: A taught stir (``demo_file``) is repeated from its recorded start turned by this angle about
+#: the bottle's axis (another quadrant), not scaled.
+TAUGHT_STIR_TURN_DEG = 150.0
 
 
 #: ``--move-goal``: the goal marker moves by this much (base_link, m) per skill, at
@@ -74,13 +87,15 @@ class Scenario:
     What the demo needs from the parameter files (config folder + the skill's layout).
 
     ``config_dir``: the folder of the parameter files (None: the package's); ``parameters``:
-    extra node parameters, ``{node: {name: value}}``, after the skill's layout.
+    extra node parameters, ``{node: {name: value}}``, after the skill's layout;
+    ``demo_file``: a recorded stir to use instead of the built-in one (see the module docstring).
     """
 
     config_dir: Path
     skill: str
     layout: str = 'skill'
     parameters: dict = field(default_factory=dict)
+    demo_file: Path = None
     scene: dict = field(init=False)
     server: dict = field(init=False)
     controller: dict = field(init=False)
@@ -102,9 +117,12 @@ class Scenario:
                                       self.scene['task_plane.y_axis'],
                                       self.server['task_plane.scale'])
         self.demo = builtin_demo(self.skill)
+        self.start_turn_deg, self.start_scale = STIR_START_TURN_DEG, STIR_START_SCALE
         self.overrides = {name: dict(system.wiring_overrides(name)) for name in system.NODE_NAMES}
-        self.overrides['ur10_sim'].update(self._simulation_layout())
         self.overrides['dmp_server']['skill'] = self.skill
+        if self.demo_file is not None:
+            self._use_taught_stir()
+        self.overrides['ur10_sim'].update(self._simulation_layout())
         if self.skill in DURATIONS:
             self.overrides['dmp_server']['duration'] = DURATIONS[self.skill]
             self.server['duration'] = DURATIONS[self.skill]
@@ -114,6 +132,26 @@ class Scenario:
             self.overrides[name].update(values)
         if 'control_rate' in self.parameters.get('controller', {}):
             self.controller['control_rate'] = self.parameters['controller']['control_rate']
+
+    def _use_taught_stir(self):
+        """Replace the built-in stir by the recorded one of ``demo_file``."""
+        from etdmp_ros.skill_library import load_demonstration
+        if self.skill != 'stir':
+            raise ScenarioError(f'a demonstration file replaces the built-in stir (a 3D skill '
+                                f'taught in the bottle); the skill is {self.skill!r}')
+        self.demo_file = Path(self.demo_file).expanduser().resolve()
+        model = UR10Model(tool_offset=self.scene['tool_offset'])
+        try:
+            recorded = load_demonstration(self.demo_file, self.plane, recorded_dim='3d',
+                                          kinematics=model)
+        except ValueError as err:
+            raise ScenarioError(str(err)) from None
+        self.demo = Demonstration(recorded.name, recorded.positions - self.bottle_mouth,
+                                  recorded.t, recorded.orientations)
+        self.start_turn_deg, self.start_scale = TAUGHT_STIR_TURN_DEG, 1.0
+        self.overrides['dmp_server'].update(skill=recorded.name, mode=2,
+                                            demo_files=[str(self.demo_file)])
+        self.server['mode'] = 2
 
     def _simulation_layout(self):
         """Return ur10_sim's overrides: the skill's goal and obstacles, the stir start pose."""
@@ -166,11 +204,11 @@ class Scenario:
 
 def stir_start(scenario):
     """Return where the stirrer starts (base_link): see :data:`STIR_START_TURN_DEG`."""
-    a = math.radians(STIR_START_TURN_DEG)
+    a = math.radians(scenario.start_turn_deg)
     turn = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
                      [0.0, 0.0, 1.0]])
     offset = scenario.demo.positions[0] - scenario.demo.positions[-1]
-    return scenario.explicit_goal + STIR_START_SCALE * turn @ offset
+    return scenario.explicit_goal + scenario.start_scale * turn @ offset
 
 
 def stir_start_joints(scenario):

@@ -210,6 +210,12 @@ UR10_SIM = (
       "like a stereo camera's.", unit='m', value_range=(0.0, 1.0)),
     P('multisamples', 0, 'MSAA samples of the colour image (0 fastest; 4 smoother edges, '
       'about twice the render time).', value_range=(0, 16)),
+    P('teach_script', '', 'Teaching mode (kinesthetic teaching, simulated): a file of tool tip '
+      'positions (.csv/.npy/.npz, 3 columns in metres, with times) that leads the tool as a '
+      'hand in freedrive would, as offsets from where the tool is, its orientation held; '
+      'velocity commands are ignored while it plays; ~/teaching says when it is done. Set '
+      'at runtime to start it from the current pose; empty = off.',
+      section='Teaching mode', dynamic=True, example='/path/to/stir_by_hand.csv'),
 )
 
 # ------------------------------------------------------------------------------- perception

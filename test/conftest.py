@@ -33,7 +33,7 @@ _DOMAIN_IDS = itertools.count(1 + os.getpid() % 50)
 SUITES = {
     'unit': ('test_bag', 'test_cli', 'test_controller_sim', 'test_demos', 'test_dmp_core',
              'test_dmp_obstacles', 'test_dmp_online', 'test_dmp_orientation',
-             'test_dmp_similarity', 'test_dmp_skill', 'test_flake8',
+             'test_dmp_similarity', 'test_dmp_skill', 'test_flake8', 'test_guide',
              'test_ik', 'test_metrics', 'test_package_xml', 'test_paper_reproduction',
              'test_pep257', 'test_planning',
              'test_readme', 'test_robot_model', 'test_ros_conversions_geometry',
@@ -45,7 +45,7 @@ SUITES = {
               'test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
               'test_install_layout', 'test_namespaces', 'test_perception_node',
               'test_ros2_cli', 'test_ur10_sim_node', 'test_ur10_sim_tf'),
-    'system': ('test_end_to_end', 'test_teach_page'),
+    'system': ('test_end_to_end', 'test_kinesthetic', 'test_teach_page'),
 }
 _SUITE_OF = {module: suite for suite, modules in SUITES.items() for module in modules}
 

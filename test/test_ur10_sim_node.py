@@ -312,3 +312,37 @@ def test_commands_watchdog_and_runtime_parameters(launch):
     assert client.set_parameter('obstacle_positions', []).successful
     client.wait_for(lambda: len(client.received('/ur10_sim/ground_truth/obstacles')[-1].poses)
                     == 0, 5.0, 'no obstacles', sim)
+
+
+def test_teaching_mode_leads_the_tool_and_ignores_commands(launch, tmp_path):
+    """Kinesthetic teaching, simulated: teach_script leads the tool; bad scripts are refused."""
+    sim, client = launch({'camera_rate': 0.0})
+    tip = client.received('/ur10_sim/ground_truth/tool_tip')[-1].point
+    start = np.array([tip.x, tip.y, tip.z])
+    s = np.linspace(0.0, 1.0, 101)
+    ramp = s ** 3 * (10 - 15 * s + 6 * s ** 2)
+    line = np.column_stack([1.5 * s, 0.05 * ramp, -0.03 * ramp, np.zeros_like(s)])
+    script = tmp_path / 'line.csv'
+    np.savetxt(script, line, delimiter=',', header='t,x,y,z', comments='')
+    # 2 m away slowly: the arm straightens to its singular edge, where the joints would jump.
+    for bad, reason in ((tmp_path / 'missing.csv', 'no such file'),
+                        (tmp_path / 'far.csv', 'rad/s: slow it down'),   # stretched out
+                        (tmp_path / 'flat.csv', 'needs 3 columns')):
+        if bad.stem == 'far':
+            np.savetxt(bad, line * [20, 40, 40, 40], delimiter=',', header='t,x,y,z', comments='')
+        elif bad.stem == 'flat':
+            np.savetxt(bad, line[:, :3], delimiter=',', header='t,x,y', comments='')
+        result = client.set_parameter('teach_script', str(bad))
+        assert not result.successful and reason in result.reason.lower(), result.reason
+    result = client.set_parameter('teach_script', str(script))
+    assert result.successful, result.reason
+    client.command([0.5, 0.0, 0.0, 0.0, 0.0, 0.0], duration=1.0)    # ignored while it plays
+    client.wait_for(lambda: 'line.csv played' in sim.log(), 10.0, 'the script to end', sim)
+    time.sleep(0.3)
+    tip = client.received('/ur10_sim/ground_truth/tool_tip')[-1].point
+    end = np.array([tip.x, tip.y, tip.z])
+    assert np.linalg.norm(end - (start + [0.05, -0.03, 0.0])) < 1e-3
+    assert 'velocity command ignored' in sim.log()
+    client.command([0.2, 0.0, 0.0, 0.0, 0.0, 0.0], duration=0.3)    # applies again after
+    _, _, qd = client.joint_state()
+    assert qd[0] == pytest.approx(0.2, rel=0.05)

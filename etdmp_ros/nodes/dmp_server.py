@@ -762,7 +762,8 @@ class DmpServer(Node):
             except ValueError:   # e.g. the plain DMP refuses a closed letter: show none
                 baseline = None
             try:
-                demo = place_demo(skill, plan.start, plan.goal, plane)
+                demo = place_demo(skill, plan.start, plan.goal, plane, settings.plan.mode,
+                                  settings.plan.independent_axis)
             except ValueError:
                 demo = None
         colours = {'etdmp': (0.1, 0.8, 0.2, 1.0), 'dmp': (1.0, 0.5, 0.0, 1.0)}

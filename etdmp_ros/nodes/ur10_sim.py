@@ -26,8 +26,14 @@ and publishes the images: the physics and the joint states never wait for render
 transport, nor share an interpreter lock with them. The executor thread only receives commands
 and parameter changes, validates them and hands them over. Parameters: config/scene.yaml and
 config/ur10_sim.yaml (their values are also the built-in defaults: etdmp_ros.system);
-``goal_position``, ``obstacle_positions``, ``real_time_factor`` and ``watchdog_timeout`` can be
-changed at runtime.
+``goal_position``, ``obstacle_positions``, ``real_time_factor``, ``watchdog_timeout`` and
+``teach_script`` can be changed at runtime.
+
+Teaching mode (kinesthetic teaching, simulated): with ``teach_script`` set, a script leads the
+tool as a hand in freedrive would (:class:`etdmp_ros.robot.GuidedMotion`) while velocity commands
+are ignored; ``~/teaching`` (std_msgs/String, transient local) says ``playing <file>``, then
+``done <file>`` (or ``idle``). Record ``/joint_states`` meanwhile and learn from the recording
+(dmp_server ``demo_files``; ``python -m etdmp_ros.kinesthetic`` does both steps' first half).
 """
 
 import socket
@@ -36,12 +42,14 @@ import threading
 import time
 
 from etdmp_ros import system
+from etdmp_ros.dmp import DemonstrationError, load_demo
 from etdmp_ros.nodes._parameters import declare
 from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_command,
                                          encode as camera_snapshot)
 from etdmp_ros.nodes._spin import rate_qos, run
-from etdmp_ros.robot import (camera_transforms, FrameTree, MAX_OBSTACLES, parse_goal_position,
-                             parse_obstacle_positions, robot_description, SceneConfig, UR10Sim)
+from etdmp_ros.robot import (camera_transforms, FrameTree, GuidedMotion, GuideError,
+                             MAX_OBSTACLES, parse_goal_position, parse_obstacle_positions,
+                             robot_description, SceneConfig, UR10Sim)
 from etdmp_ros.ros_conversions import (joint_state_msg, MovingTransforms, ns_to_stamp,
                                        pose_array_from_numpy, tf_available, tf_message,
                                        velocity_command_array)
@@ -68,6 +76,7 @@ CAMERA_TOPICS = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR
 GOAL_TOPIC = '~/ground_truth/goal'
 OBSTACLES_TOPIC = '~/ground_truth/obstacles'
 TOOL_TIP_TOPIC = '~/ground_truth/tool_tip'
+TEACHING_TOPIC = '~/teaching'
 DESCRIPTION_TOPIC = 'robot_description'
 TF_TOPIC = 'tf'
 TF_STATIC_TOPIC = 'tf_static'
@@ -128,6 +137,10 @@ class UR10SimNode(Node):
         self._answered_ticks = 0
 
         self._lock = threading.Lock()
+        self._guide = None            # the teaching mode's script, while it plays
+        self._guide_name = ''
+        self._checked_guide = None    # (file, GuidedMotion) checked, not yet applied
+        self._ignored_commands = 0
         self._pending_command = None
         self._pending_goal = None
         self._pending_obstacles = None
@@ -158,6 +171,12 @@ class UR10SimNode(Node):
         self._camera_publishers = None   # made by frame(), for run_for(): images in-process
         self._tf_pub = None
         self._publish_description()
+        self._teaching_pub = self.create_publisher(String, TEACHING_TOPIC, LATCHED)
+        self._teaching_pub.publish(String(data='idle'))
+        if p['teach_script']:
+            self._guide_name = p['teach_script']
+            self._guide = self._load_guide(p['teach_script'])   # a bad one: startup fails
+            self._publish_teaching('playing')
         self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, reliable)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -177,6 +196,8 @@ class UR10SimNode(Node):
                     points = parse_obstacle_positions(_number_list(parameter))
                     if len(points) > MAX_OBSTACLES:
                         raise ValueError(f'at most {MAX_OBSTACLES} obstacles, got {len(points)}')
+                elif parameter.name == 'teach_script' and parameter.value:
+                    self._checked_guide = (parameter.value, self._load_guide(parameter.value))
             except ValueError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
@@ -194,6 +215,37 @@ class UR10SimNode(Node):
                     self.sim.watchdog_timeout = float(parameter.value)
                 elif parameter.name == 'command_wait':
                     self.command_wait = float(parameter.value)
+                elif parameter.name == 'teach_script':
+                    checked, self._checked_guide = self._checked_guide, None
+                    if parameter.value and checked and checked[0] == parameter.value:
+                        self._guide_name, self._guide = checked
+                        self._publish_teaching('playing')
+                    elif not parameter.value and self._guide is not None:
+                        self._guide = None
+                        self._publish_teaching('stopped')
+
+    # ---------------------------------------------------------------------- teaching mode
+    def _load_guide(self, path):
+        """Return the GuidedMotion of a script file from the current joints; ValueError."""
+        try:
+            script = load_demo(path)
+        except DemonstrationError as err:
+            raise ValueError(f'teach_script: {err}') from None
+        if script.dim != 3:
+            raise ValueError(f'teach_script {path}: needs 3 columns (x, y, z metres), got '
+                             f'{script.dim}')
+        try:
+            guide = GuidedMotion(self.sim.ur10, self.sim.q, script.t, script.positions,
+                                 self.tick_period, self.sim.velocity_limits)
+        except GuideError as err:
+            raise ValueError(f'teach_script {path}: {err}') from None
+        self.get_logger().info(f'teaching mode: {path} leads the tool for {guide.duration:.2f} '
+                               's; velocity commands are ignored until it is done')
+        return guide
+
+    def _publish_teaching(self, state):
+        """Publish the teaching mode's state on ~/teaching ('playing <file>', ...)."""
+        self._teaching_pub.publish(String(data=f'{state} {self._guide_name}'))
 
     # ------------------------------------------------------------------------------ commands
     def _on_command(self, msg):
@@ -209,6 +261,11 @@ class UR10SimNode(Node):
                                       f'{np.round(self.sim.velocity_limits, 3).tolist()} rad/s: '
                                       'clamped', throttle_duration_sec=1.0)
         with self._lock:
+            if self._guide is not None:
+                self._ignored_commands += 1
+                self.get_logger().warning('teaching mode: velocity command ignored while the '
+                                          'script leads the arm', throttle_duration_sec=1.0)
+                return
             self._pending_command = clamped
         self._answered.set()
 
@@ -314,6 +371,17 @@ class UR10SimNode(Node):
             command, self._pending_command = self._pending_command, None
             goal, self._pending_goal = self._pending_goal, None
             obstacles, self._pending_obstacles = self._pending_obstacles, None
+            guide = self._guide
+        if guide is not None:
+            command = guide.command(sim.q)
+            if guide.done:
+                with self._lock:
+                    if self._guide is guide:
+                        self._guide = None
+                self.get_logger().info(f'teaching mode: {self._guide_name} played '
+                                       f'({guide.duration:.2f} s); velocity commands apply '
+                                       f'again ({self._ignored_commands} ignored)')
+                self._publish_teaching('done')
         if command is not None:
             sim.set_velocity_command(command)
             if not self._commands_seen or self._watchdog_was_active:

@@ -13,6 +13,7 @@ from ._camera import CameraIntrinsics, CameraPose, matrix_to_quaternion, quatern
 from ._controller import Command, ControllerConfig, DelayEstimator, STATUSES, TrajectoryController
 from ._description import (camera_transforms, chain_pose, FrameTree, robot_description,
                            Transform)
+from ._guide import GuidedMotion, GuideError
 from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, IKResult
 from ._scene import (parse_goal_position, parse_obstacle_positions, PEN_TIP_RADIUS,
                      SCENE_PARAMETERS, SceneConfig)
@@ -42,7 +43,8 @@ def __getattr__(name):
 
 __all__ = [
     'CameraIntrinsics', 'CameraPose', 'Command', 'ControllerConfig',
-    'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'FrameTree', 'IKResult',
+    'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'FrameTree',
+    'GuidedMotion', 'GuideError', 'IKResult',
     'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_TIP_RADIUS',
     'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES', 'SceneConfig', 'TrajectoryController',
     'Transform', 'TrajectoryError', 'UR10Model', 'camera_transforms', 'chain_pose',
