@@ -40,6 +40,10 @@ def _curves(run, metrics, extra):
                  + f', nRMSE {format_nrmse(metrics["nrmse_plan"])}'),
                 (extra['trace'], {'color': 'k', 'linewidth': 0.9},
                  f'pen tip, true (MuJoCo), nRMSE {format_nrmse(metrics["nrmse_trace"])}')]
+    if getattr(scene, 'demo_file', None) is not None:       # a stir taught by moving the arm
+        curves.append((scene.demo.positions + scene.bottle_mouth,
+                       {'color': '0.3', 'linewidth': 1.2, 'linestyle': (0, (1, 1.5))},
+                       'taught: the tool path recorded by hand (joint states)'))
     if moved:
         curves.append((run.plan[1], dict(METHOD_STYLE[run.method], **REPLACED_STYLE),
                        f'{PLAN_LABELS[run.method]} as first planned (goal before the move), '

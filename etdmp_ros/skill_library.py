@@ -59,9 +59,12 @@ JOINT_STATE = 'sensor_msgs/msg/JointState'
 RECORDED_TYPES = (POSE_STAMPED, PATH, JOINT_STATE)
 _TYPES_TEXT = f'{POSE_STAMPED}, {PATH} or {JOINT_STATE}'
 #: A joint-state recording starts and ends with the arm at rest (the user takes hold of it, lets
-#: go): it is trimmed to the motion, from the last sample whose tool tip is within this distance
-#: (m) of the first sample's to the first within it of the last sample's.
+#: go): the motion is where the tool tip is farther than MOTION_THRESHOLD (m) from both the
+#: first and the last sample's position, and the demonstration is trimmed to it, widened to
+#: the last sample before it within SETTLED_THRESHOLD (m) of the start and the first after it
+#: within that of the end, so that it starts and ends (nearly) at rest.
 MOTION_THRESHOLD = 1e-3
+SETTLED_THRESHOLD = 1e-4
 BASE_FRAMES = ('', 'base_link')
 #: Orientations that mean "none recorded" when every pose carries one of them.
 UNSET_ORIENTATIONS = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
@@ -336,12 +339,16 @@ def joint_state_path(records, kinematics, where, topic='joint_states'):
 
 def _motion_span(positions):
     """Return (first, last) indices of the motion in ``positions``, or (None, None) if none."""
-    away_from_start = np.linalg.norm(positions - positions[0], axis=1) > MOTION_THRESHOLD
-    away_from_end = np.linalg.norm(positions - positions[-1], axis=1) > MOTION_THRESHOLD
-    if not away_from_start.any():
+    from_start = np.linalg.norm(positions - positions[0], axis=1)
+    from_end = np.linalg.norm(positions - positions[-1], axis=1)
+    if not np.any(from_start > MOTION_THRESHOLD):
         return None, None
-    first = max(int(np.argmax(away_from_start)) - 1, 0)
-    last = min(len(positions) - 1 - int(np.argmax(away_from_end[::-1])) + 1, len(positions) - 1)
+    moves = int(np.argmax(from_start > MOTION_THRESHOLD))
+    stops = len(positions) - 1 - int(np.argmax(from_end[::-1] > MOTION_THRESHOLD))
+    settled = np.flatnonzero(from_start[:moves] <= SETTLED_THRESHOLD)
+    first = int(settled[-1]) if settled.size else 0
+    settled = np.flatnonzero(from_end[stops + 1:] <= SETTLED_THRESHOLD)
+    last = stops + 1 + int(settled[0]) if settled.size else len(positions) - 1
     return first, last
 
 

