@@ -507,6 +507,40 @@ def test_a_plan_in_execution_follows_the_moved_goal(server, client):
         assert client.set_parameters(follow_goal=True)[0].successful
 
 
+def test_a_plan_in_execution_follows_an_obstacle_that_appears(server, client):
+    # An obstacle that appears on the rest of a plan in execution (three agreeing messages) is
+    # avoided by the remainder, published on the plan's time base; it still ends at the goal.
+    client.publish('joint_states', joint_state_msg(Q_INIT))
+    client.publish('obstacles', obstacles_msg(np.zeros((0, 3))))
+    perceived = np.array(SCENE['goal_position'])
+    client.publish('goal', PointStamped(header=BASE, point=point_msg(perceived)))
+    del client.paths[:]
+    _, x, _, plan = client.call(None, None, start_frame='', goal_frame='')
+    deadline = time.monotonic() + TIMEOUT
+    while not client.paths:
+        assert time.monotonic() < deadline, 'the plan was not published'
+        client.spin_for(0.05)
+    on_path = x[[int(0.6 * len(x))]] + [0.0, 0.0, SCENE['obstacle']['height']]
+    assert clearance_2d(x, on_path) < 1e-9
+    try:
+        client.publish('obstacles', obstacles_msg(on_path), times=3)
+        deadline = time.monotonic() + TIMEOUT
+        while len(client.paths) < 2:
+            assert time.monotonic() < deadline, f'the obstacle was not followed:\n{server.log()}'
+            client.spin_for(0.05)
+    finally:
+        client.publish('obstacles', obstacles_msg(np.zeros((0, 3))))
+    new = client.paths[-1]
+    assert new.header.stamp == plan.header.stamp
+    _, y, _ = path_to_numpy(new)
+    size = np.ptp(PLANE.to_plane(x) * PLANE.scale, axis=0).max()
+    assert clearance_2d(y, on_path) > 0.05 * size
+    np.testing.assert_allclose(y[0], x[np.argmin(np.linalg.norm(x - y[0], axis=1))], atol=1e-9)
+    assert np.linalg.norm(y[-1] - x[-1]) < 1e-3
+    assert 'following: obstacles moved to' in server.log()
+    client.spin_for(0.5)    # the cleared obstacle set is followed too: back to no obstacle
+
+
 def test_teaching_at_runtime_survives_a_restart(colcon_install, ros_env, tmp_path):
     # Own domain (conftest's ros_env): the module's server must not answer here.
     skills_dir = tmp_path / 'skills'
