@@ -132,6 +132,12 @@ def test_the_tool_tilts_and_turns_as_planned_in_mujoco(sim, ur10, name):
     assert_within_limits(controller, run)
     final = ur10.frame_pose(run['q'][-1])[1]
     assert np.degrees(np.linalg.norm(pin.log3(path.rotations[-1] @ final.T))) < 0.1
+    # The measure: the model's tool frame is MuJoCo's tool tip site, orientation included.
+    sim.set_joint_positions(run['q'][len(run['q']) // 2])
+    site_p, site_rot = sim.site_pose(sim.tool_tip_site)
+    p, rot = ur10.frame_pose(run['q'][len(run['q']) // 2])[:2]
+    assert np.linalg.norm(site_p - p) < 1e-9
+    assert np.linalg.norm(pin.log3(site_rot @ rot.T)) < 1e-9
 
 
 def test_an_orientation_the_ur10_cannot_reach_is_refused_before_moving(ur10):
