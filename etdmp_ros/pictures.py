@@ -374,7 +374,7 @@ class ToolInset:
         if self.planar:
             long_side = rot[:, 1]
             start = self.start_rot[:, 1]
-            turn = np.degrees(np.arctan2(np.cross(start[:2], long_side[:2]),
+            turn = np.degrees(np.arctan2(start[0] * long_side[1] - start[1] * long_side[0],
                                          start[:2] @ long_side[:2]))
             return np.array([long_side[1], -long_side[0]]), turn
         shaft = -rot[:, 2]

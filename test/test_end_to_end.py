@@ -14,6 +14,13 @@ acceleration limits; the true pen trace reaches the goal within 5 mm, clears eve
 keeps the demonstration's shape (nRMSE at most twice the plan's), and the DMP baseline from the
 same start is clearly worse. One run per skill and load (~15 s each) serves all the checks.
 
+Orientation (issue 15), case ``wipe-idle`` besides ``stir``: the stirrer tilts and circles, the
+sponge turns along the stroke. The true tool orientation (forward kinematics of the
+simulation's /joint_states; the model's tip is the simulation's ground-truth tip) is within
+0.5 degree RMS and 2 degrees max of the plan's at the same path time and of the controller's
+reference, and the plan's orientations are the demonstration's turned by the Euclidean
+transform (computed independently in ``etdmp_ros.metrics``) within 0.5 degree.
+
 Online ET-DMP (issue 14), case ``G-move`` (idle only): while the pen writes G, the goal marker
 is moved by 4 cm (ur10_sim's ``goal_position``, as ``ros2 param set`` would; the demo's
 ``--move-goal``). The pen ends within 2 mm of the new marker, every command within the
