@@ -307,6 +307,50 @@ def test_plans_of_a_skill_with_orientations_turn_the_tool(server, client):
     wait_for_log(server, 'the skill has no orientations')
 
 
+def test_an_orientation_the_ur10_cannot_reach_is_refused_with_the_reason(server, client):
+    # Stirring 1.08 m out: served with the stirrer's own orientations, refused when it must
+    # end pointing back at the base (the wrist would be beyond the arm's reach).
+    goal = np.array([1.08, 0.1, 0.2])
+    start = goal + [-0.05, 0.05, 0.25]
+    req = request(start, goal)
+    o = req.goal.pose.orientation
+    o.x, o.y, o.z, o.w = 0.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5)
+    assert client.set_parameters(skill='stir')[0].successful
+    try:
+        assert len(client.call(start, goal)[1]) > 100
+        assert len(client._result(client.generalize.call_async(req)).plan.poses) == 0
+    finally:
+        assert client.set_parameters(skill='G')[0].successful
+    line = wait_for_log(server, '/generalize', 'with its orientation, is out of reach')
+    assert "skill 'stir'" in line and 'pose at t = ' in line
+
+
+def test_a_taught_path_keeps_its_orientations(server, client):
+    # A 3D path whose tool turns by 40 degrees about the vertical as it goes: taught on
+    # /etdmp/demonstrations, it becomes a skill with orientations, and a plan from the taught
+    # start to its goal reproduces them.
+    n = 120
+    s = np.linspace(0.0, 1.0, n)
+    positions = np.column_stack([0.70 + 0.12 * s, 0.10 * np.sin(np.pi * s),
+                                 0.30 - 0.10 * s])
+    yaw = quat.about_axis([0.0, 0.0, 1.0], np.radians(40.0) * s)
+    taught_q = quat.multiply(yaw, TOOL_DOWN)
+    t = np.linspace(0.0, 2.4, n)
+    assert client.set_parameters(teach_skill_name='turning', skill='turning')[0].successful
+    try:
+        client.publish('demonstrations', path_from_numpy(positions, t, 10**9, 'base_link',
+                                                         taught_q), times=1)
+        deadline = time.monotonic() + TIMEOUT
+        while len(q := client.call(positions[0], positions[-1])[2]) == 0:
+            assert time.monotonic() < deadline, server.log()
+            client.spin_for(0.1)
+    finally:
+        assert client.set_parameters(teach_skill_name='taught', skill='G')[0].successful
+    assert np.degrees(quat.angle_between(q[0], taught_q[0])) < 0.5
+    assert np.degrees(quat.angle_between(q[-1], taught_q[-1])) < 0.5
+    assert np.degrees(quat.angle_between(q[0], q[-1])) == pytest.approx(40.0, abs=0.5)
+
+
 def test_obstacles_published_on_the_topic_are_avoided(server, client):
     _, free, _, _ = client.call(START, GOAL)
     # Two obstacles on the obstacle-free path, at the height of the scene's cylinders' tops.
