@@ -135,10 +135,7 @@ def path_from_numpy(positions, t=None, stamp=0, frame_id='base_link', orientatio
     stamps = pose_stamps(len(positions), t, stamp)
     orientation = pose_orientations(orientation, len(positions))
     if isinstance(orientation, np.ndarray):
-        path = path_from_numpy(positions, t, stamp, frame_id)
-        for pose, (x, y, z, w) in zip(path.poses, orientation.tolist()):
-            pose.pose.orientation = Quaternion(x=x, y=y, z=z, w=w)
-        return path
+        return _path_with_orientations(positions, stamps, stamp, frame_id, orientation)
     x, y, z, w = orientation
     quaternion = Quaternion(x=x, y=y, z=z, w=w)
     secs, nanosecs = np.divmod(stamps, _NS)
@@ -155,6 +152,25 @@ def path_from_numpy(positions, t=None, stamp=0, frame_id='base_link', orientatio
         point = pose.pose.position
         point.x, point.y, point.z = px, py, pz
         pose.pose.orientation = quaternion
+        poses.append(pose)
+    return path
+
+
+def _path_with_orientations(positions, stamps, stamp, frame_id, orientations):
+    """Build the Path of :func:`path_from_numpy` with one orientation (n, 4) per pose."""
+    secs, nanosecs = np.divmod(stamps, _NS)
+    path = Path()
+    path.header = Header(stamp=ns_to_stamp(stamp), frame_id=frame_id)
+    poses = path.poses
+    for sec, nanosec, (px, py, pz, qx, qy, qz, qw) in zip(
+            secs.tolist(), nanosecs.tolist(), np.hstack([positions, orientations]).tolist()):
+        pose = PoseStamped()
+        pose.header.stamp.sec = sec
+        pose.header.stamp.nanosec = nanosec
+        pose.header.frame_id = frame_id
+        point, q = pose.pose.position, pose.pose.orientation
+        point.x, point.y, point.z = px, py, pz
+        q.x, q.y, q.z, q.w = qx, qy, qz, qw
         poses.append(pose)
     return path
 
