@@ -280,8 +280,11 @@ def test_plans_of_a_skill_with_orientations_turn_the_tool(server, client):
         bad = [call(q) for q in ((0.0, 0.0, 0.6, 0.6), (math.nan, 0.0, 0.0, 1.0))]
         client.spin_for(0.5)
         shown = {m.ns: m for m in client.markers[-1].markers}
+        published = path_to_numpy(client.paths[-1])[2]
     finally:
         assert client.set_parameters(skill='G')[0].successful
+    # /etdmp/path (numpy-written bytes) carries the same per-pose orientations as the response.
+    np.testing.assert_array_equal(published, to_goal)
     expected = plan_path(skill, start, goal).orientation
     np.testing.assert_allclose(free, expected, atol=1e-12)
     np.testing.assert_array_equal(zero, free)
