@@ -335,7 +335,7 @@ def _write_outputs(out, run, metrics, extra, recorder, rec, options):
     plot_run(written[0], run, metrics, extra)
     snapshots = {name: recorder.snapshot(name) for name in ('start', 'middle', 'end')}
     written += write_pictures(out, run, rec, snapshots, recorder.frames, intrinsics,
-                              options.animation)
+                              options.animation, t0=extra['t0'])
     save_recording(out / 'recording.npz', rec, run.plan, run.other, extra['t0'],
                    extra['executed'] if run.goal_move is not None else None)
     return written
@@ -448,6 +448,14 @@ def summary(metrics, written):
         f'  motion {m["duration_s"]:.2f} s simulated (approach {m["approach_duration_s"]:.2f} s,'
         f' plan {m["plan_duration_s"]:.2f} s); demo took {m["wall_time_s"]:.0f} s',
     ]
+    if 'orientation_tracking_rms_deg' in m:
+        lines.append(
+            f'  orientation: the tool turns by up to {m["orientation_plan_turn_deg"]:.0f} deg; '
+            f'tracking error RMS {m["orientation_tracking_rms_deg"]:.3f} deg, max '
+            f'{m["orientation_tracking_max_deg"]:.3f} deg'
+            + (f'; plan vs the demonstration turned by the transform: max '
+               f'{m["orientation_plan_vs_demo_turned_max_deg"]:.2f} deg'
+               if 'orientation_plan_vs_demo_turned_max_deg' in m else ''))
     if 'goal_moved_by_mm' in m:
         lines += _move_summary(m)
     system = m.get('system', {})

@@ -4,21 +4,29 @@ Pictures of a closed-loop run: the plot of plans and trace, the camera frames wi
 :func:`plot_run` draws the top view (2D skills) or the top and side views (stir) of a
 :class:`etdmp_ros.metrics.Run` with its metrics; when the goal marker moved during the run, the
 plan as first planned (dashed), the plan as executed (re-planned online), the marker before
-(grey ring) and after, and the switch between the plans. :func:`write_pictures` writes the camera's
-frames (PNG) and the animation (GIF) with the pen's trace drawn in as ink (:func:`draw_ink`;
-the simulation leaves none). matplotlib, OpenCV and Pillow are imported when a picture is made.
+(grey ring) and after, and the switch between the plans. For a skill with orientations it draws
+the tool at intervals along the plan: the stirrer's shaft (stir, both views: the tilt) or the
+sponge's long side (wipe, top view: the turn), planned (coloured) and true (black, forward
+kinematics of the simulated joints at the same path time). :func:`write_pictures` writes the
+camera's frames (PNG) and the animation (GIF) with the pen's trace drawn in as ink
+(:func:`draw_ink`; the simulation leaves none) and, for a skill with orientations, the tool's
+tilt or turn in a corner (:class:`ToolInset`). matplotlib, OpenCV and Pillow are imported when
+a picture is made.
 """
 
 from etdmp_ros.dmp import learn, METHOD_LABELS
 from etdmp_ros.metrics import format_nrmse
 from etdmp_ros.planning import place_demo
 from etdmp_ros.plotting import DEMO_STYLE, METHOD_STYLE, REPLACED_STYLE
-from etdmp_ros.robot import CameraPose, PEN_TIP_RADIUS
+from etdmp_ros.robot import CameraPose, PEN_TIP_RADIUS, quaternion_to_matrix, UR10Model
 import numpy as np
 
 #: RGB of the pen's ink drawn into the camera frames.
 INK_COLOR = (25, 35, 150)
 PLAN_LABELS = {'etdmp': 'ET-DMP plan', 'dmp': 'DMP plan'}
+#: Tools drawn along the plan of a skill with orientations, and the drawn lengths (m) of the
+#: stirrer's shaft (from the tip along -tool z) and the sponge's long side (tool y, centred).
+TOOLS_DRAWN, SHAFT_LENGTH, SPONGE_LENGTH = 11, 0.06, 0.03
 
 
 # ------------------------------------------------------------------------------------ plot
@@ -178,6 +186,53 @@ def _draw_goal_move(ax, run, metrics, extra, xy):
                     xytext=(10, -4), textcoords='offset points', zorder=8)
 
 
+def tool_segments(run, extra, count=TOOLS_DRAWN):
+    """
+    Return (planned, true) tool segments (k, 2, 3) along the plan, or None without orientations.
+
+    Stirrer (3D skill): from the tip SHAFT_LENGTH along -tool z; sponge (2D): SPONGE_LENGTH
+    along tool y, centred on the tip. True: forward kinematics of the recorded joint state
+    nearest the same path time (after the tracking start ``extra['t0']``); None if none.
+    """
+    plan_t, plan_x, plan_q = run.plan
+    if run.scene.demo.orientations is None or plan_q is None or not len(plan_q):
+        return None
+    tau = float(extra['tau'])
+    idx = np.unique(np.linspace(0, np.searchsorted(plan_t, tau + 1e-9) - 1,
+                                count).round().astype(int))
+
+    def segments(points, rotations):
+        if run.scene.planar:
+            half = 0.5 * SPONGE_LENGTH * rotations[:, :, 1]
+            return np.stack([points - half, points + half], axis=1)
+        return np.stack([points, points - SHAFT_LENGTH * rotations[:, :, 2]], axis=1)
+
+    planned = segments(np.asarray(plan_x)[idx], quaternion_to_matrix(np.asarray(plan_q)[idx]))
+    joints = run.rec.get('joints')
+    if joints is None or not len(joints):
+        return planned, None
+    model = UR10Model(tool_offset=run.scene.scene['tool_offset'])
+    at = (extra['t0'] + np.asarray(plan_t)[idx]) * 1e9
+    k = np.clip(np.searchsorted(joints[:, 0], at), 0, len(joints) - 1)
+    poses = [model.frame_pose(q)[:2] for q in joints[k, 1:]]
+    return planned, segments(np.array([p for p, _ in poses]), np.array([r for _, r in poses]))
+
+
+def _draw_tools(ax, run, view, xy, tools):
+    if tools is None or (run.scene.planar and view != 'top'):
+        return
+    what = 'sponge (long side)' if run.scene.planar else 'stirrer shaft'
+    for segments, style, label in (
+            (tools[0], {'color': 'tab:purple', 'linewidth': 2.4, 'alpha': 0.8},
+             f'{what}, planned orientation'),
+            (tools[1], {'color': 'k', 'linewidth': 0.9},
+             f'{what}, true (MuJoCo joints)')):
+        if segments is None:
+            continue
+        for j, segment in enumerate(segments):
+            ax.plot(*xy(segment), label=label if j == 0 else None, zorder=5, **style)
+
+
 def _frame_axes(ax, plane, view, name, xy, focus, pad):
     h, v = xy(focus)
     ax.set_xlim(h.min() - pad, h.max() + pad)
@@ -211,7 +266,11 @@ def _legend_and_title(fig, run, metrics):
         f'{metrics["demo_quadrant"]})\ntracking error RMS {metrics["tracking_rms_mm"]:.2f} mm, '
         f'goal error {metrics["goal_error_mm"]:.1f} mm'
         + (' (to the moved marker)' if moved else '')
-        + f', min obstacle clearance {metrics["min_clearance_mm"]:.1f} mm', fontsize=10)
+        + f', min obstacle clearance {metrics["min_clearance_mm"]:.1f} mm'
+        + (f'\norientation tracking error RMS {metrics["orientation_tracking_rms_deg"]:.3f} '
+           f'deg, max {metrics["orientation_tracking_max_deg"]:.3f} deg (the tool turns by up '
+           f'to {metrics["orientation_plan_turn_deg"]:.0f} deg)'
+           if 'orientation_tracking_rms_deg' in metrics else ''), fontsize=10)
 
 
 def plot_run(path, run, metrics, extra):
@@ -226,8 +285,10 @@ def plot_run(path, run, metrics, extra):
     views = [('top', 'top view (robot base at the top)')]
     if not scene.planar:
         views.append(('side', 'side view (as the camera sees it)'))
-    # The legend's rows below the view: a moved goal adds three entries.
-    fig = _figure(scene, views, low, high, legend_rows=6 if run.goal_move is not None else 4)
+    tools = tool_segments(run, extra)
+    # The legend's rows below the view: a moved goal adds three entries, tools one.
+    fig = _figure(scene, views, low, high,
+                  legend_rows=(6 if run.goal_move is not None else 4) + (tools is not None))
     for i, (view, name) in enumerate(views):
         ax = fig.add_subplot(1, len(views), i + 1)
         xy = _projection(scene.plane, view)
@@ -236,6 +297,7 @@ def plot_run(path, run, metrics, extra):
         _draw_obstacles(ax, run, view, xy, low, high)
         for points, style, text in curves:
             ax.plot(*xy(points), label=text, **style)
+        _draw_tools(ax, run, view, xy, tools)
         _draw_markers(ax, run, metrics, extra, xy)
         _frame_axes(ax, scene.plane, view, name, xy, focus, pad)
     _legend_and_title(fig, run, metrics)
@@ -281,24 +343,110 @@ def _caption(frame, text, scale):
                 0.45 * scale, (0, 0, 0), 1 if scale < 1.5 else 2, cv2.LINE_AA)
 
 
-def write_pictures(out, run, rec, snapshots, frames, intrinsics, animation=True):
+class ToolInset:
+    """
+    The tool's orientation drawn into a corner of the camera frames (a skill with orientations).
+
+    The camera sees the stirrer inside the bottle or the sponge from afar; the inset shows
+    what turns: the stirrer's shaft (tool -z) in the side view (base_link y, z) with its tilt
+    from vertical, or the sponge's long side (tool y) in the top view with its turn from the
+    start; true (black, forward kinematics of the recorded joints at the frame's stamp) and
+    planned (purple, the plan at the same path time once tracking started, ``t0``).
+    """
+
+    def __init__(self, run, rec, t0=None):
+        """Prepare from a run, its recorded streams and the tracking start (simulated s)."""
+        self.planar = run.scene.planar
+        self.joints = rec.get('joints')
+        self.model = UR10Model(tool_offset=run.scene.scene['tool_offset'])
+        plan_t, _, plan_q = run.plan
+        self.plan_t = np.asarray(plan_t)
+        self.plan_rot = quaternion_to_matrix(np.asarray(plan_q))
+        self.t0 = t0
+        self.start_rot = self.plan_rot[0]
+
+    @classmethod
+    def of(cls, run, rec, t0=None):
+        """Return an inset for a run of a skill with orientations, else None."""
+        q = run.plan[2]
+        if run.scene.demo.orientations is None or q is None or not len(q) or \
+                rec.get('joints') is None or not len(rec['joints']):
+            return None
+        return cls(run, rec, t0)
+
+    def _direction(self, rot):
+        """Return the drawn direction (2,) in the inset's (right, up) and the angle (deg)."""
+        if self.planar:
+            long_side = rot[:, 1]
+            start = self.start_rot[:, 1]
+            turn = np.degrees(np.arctan2(start[0] * long_side[1] - start[1] * long_side[0],
+                                         start[:2] @ long_side[:2]))
+            return np.array([long_side[1], -long_side[0]]), turn
+        shaft = -rot[:, 2]
+        tilt = np.degrees(np.arccos(np.clip(shaft[2], -1.0, 1.0)))
+        return np.array([shaft[1], shaft[2]]), tilt
+
+    def draw(self, frame, stamp, scale):
+        """Draw the inset into ``frame`` (in place) for the simulated time ``stamp`` (ns)."""
+        import cv2
+
+        k = min(int(np.searchsorted(self.joints[:, 0], stamp)), len(self.joints) - 1)
+        rot = self.model.frame_pose(self.joints[k, 1:])[1]
+        size = int(round(110 * scale))
+        h = frame.shape[0]
+        x0, y0 = int(6 * scale), h - size - int(6 * scale)
+        cv2.rectangle(frame, (x0, y0), (x0 + size, y0 + size), (255, 255, 255), -1)
+        cv2.rectangle(frame, (x0, y0), (x0 + size, y0 + size), (0, 0, 0), 1)
+        centre = np.array([x0 + size / 2, y0 + (size / 2 if self.planar else size * 0.8)])
+        length = size * (0.42 if self.planar else 0.6)
+
+        def line(direction, colour, width):
+            d = np.array([direction[0], -direction[1]]) * length
+            a = centre - d if self.planar else centre
+            b = centre + d
+            cv2.line(frame, tuple(int(round(c)) for c in a), tuple(int(round(c)) for c in b),
+                     colour, width, cv2.LINE_AA)
+
+        reference = np.array([0.0, 1.0]) if not self.planar else \
+            self._direction(self.start_rot)[0]
+        line(reference, (170, 170, 170), 1)
+        if self.t0 is not None and stamp * 1e-9 >= self.t0:
+            i = min(int(np.searchsorted(self.plan_t, stamp * 1e-9 - self.t0)),
+                    len(self.plan_t) - 1)
+            line(self._direction(self.plan_rot[i])[0], (160, 80, 190),
+                 max(3, int(round(4 * scale))))
+        direction, angle = self._direction(rot)
+        line(direction, (0, 0, 0), max(1, int(round(1.5 * scale))))
+        text = f'turn {angle:+.0f} deg' if self.planar else f'tilt {angle:.0f} deg'
+        title = 'sponge, top' if self.planar else 'stirrer, side'
+        for j, line_text in enumerate((title, text)):
+            cv2.putText(frame, line_text, (x0 + int(4 * scale), y0 + int((13 + 13 * j) * scale)),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.36 * scale, (0, 0, 0), 1, cv2.LINE_AA)
+
+
+def write_pictures(out, run, rec, snapshots, frames, intrinsics, animation=True, t0=None):
     """
     Write the camera frames (PNG) and the animation (GIF), the pen's trace drawn in as ink.
 
     Returns the paths written. Frames are captioned with the simulated time since the
     ``/generalize`` call and the controller's status (and "goal moved" once the goal marker,
-    which the frames show where the simulation has it, has moved).
+    which the frames show where the simulation has it, has moved). A skill with orientations
+    gets the tool's orientation in a corner (:class:`ToolInset`; ``t0``: the tracking start,
+    simulated s, for the planned one).
     """
     from PIL import Image as PilImage
 
     camera = CameraPose(tuple(run.scene.scene['camera.position']),
                         tuple(run.scene.scene['camera.orientation']))
     tip = rec['tip'][rec['tip'][:, 0] >= run.call_ns]
+    inset = ToolInset.of(run, rec, t0)
 
     def render(stamp, rgb, depth, scale):
         frame = rgb.copy()
         draw_ink(frame, depth, tip[tip[:, 0] <= stamp, 1:], camera, intrinsics, scale,
                  thickness=1 if scale < 1 else 2)
+        if inset is not None:
+            inset.draw(frame, stamp, max(scale, 0.75))
         state = [text.split(':')[0] for ns, text in run.status if ns <= stamp]
         moved = run.goal_move is not None and stamp >= run.goal_move[0]
         _caption(frame, f't = {(stamp - run.call_ns) * 1e-9:+.2f} s  '

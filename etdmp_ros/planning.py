@@ -14,6 +14,13 @@ ET-DMP core and map the result back.
 - Timing: samples every ``output_period`` seconds from 0 to ``tau (1 + margin)``, with ``tau`` the
   ``duration`` setting (0: the demonstration's own duration) and ``margin`` the
   ``obstacle_margin`` when there are obstacles (a detour arrives later), else 0.
+- Orientation (docs/orientation.md#modes): a skill with orientations gives every pose its own,
+  the core's ``Trajectory.q`` (mode ``demo``: the demonstrated orientations turned with the
+  motion; ``goal``: converging to a requested goal orientation), in base_link: a 2D skill's
+  orientations are in the task plane's frame, ``q_base = q_P q_plane``
+  (:meth:`TaskPlane.orientation_from_plane`), a 3D skill's in base_link. A position-only skill,
+  or the ``orientation_mode`` setting ``tool``, gives every pose the one ``orientation`` setting
+  (mode ``tool``).
 """
 
 from dataclasses import dataclass, field, replace
@@ -24,6 +31,12 @@ import numpy as np
 #: Tool orientation (x, y, z, w) in base_link that points the tool's z axis down (-z of
 #: base_link), as at the scene's initial joint positions: the pen/stirrer points at the table.
 TOOL_DOWN = (-0.7071067811865476, 0.7071067811865476, 0.0, 0.0)
+
+
+#: How a plan's tool orientation is chosen (the ``orientation_mode`` setting): ``demo`` the
+#: skill's own orientations when it has them (``goal`` when a goal orientation is requested),
+#: else ``tool``; ``tool`` always the one ``orientation`` setting.
+PLAN_ORIENTATION_MODES = ('demo', 'tool')
 
 
 class PlanningError(ValueError):
@@ -108,7 +121,8 @@ class PlanSettings:
     How to plan (every field is a dmp_server parameter of the same name).
 
     ``obstacle_k`` is in 1/m; 0 keeps the core's default, ``k = gains.k_relative / |x0 - g|``.
-    ``orientation`` is normalised. Construction raises ValueError for bad values.
+    ``orientation`` is normalised; ``orientation_mode`` one of PLAN_ORIENTATION_MODES.
+    Construction raises ValueError for bad values.
     """
 
     method: str = 'etdmp'
@@ -122,12 +136,16 @@ class PlanSettings:
     goal_clearance: float = 0.02
     min_distance: float = 0.005
     orientation: tuple = TOOL_DOWN
+    orientation_mode: str = 'demo'
     workspace: Workspace = field(default_factory=Workspace)
 
     def __post_init__(self):
         """Validate and normalise."""
         if self.method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {self.method!r}')
+        if self.orientation_mode not in PLAN_ORIENTATION_MODES:
+            raise ValueError(f'orientation_mode must be one of {PLAN_ORIENTATION_MODES}, got '
+                             f'{self.orientation_mode!r}')
         if self.mode not in (1, 2):
             raise ValueError(f'mode must be 1 or 2, got {self.mode!r}')
         if self.independent_axis not in (0, 1, 2):
@@ -149,9 +167,11 @@ class Plan:
     """
     A planned tool path in base_link.
 
-    ``t`` (n,) seconds from the start; ``positions``, ``velocities`` (n, 3); ``orientation``
-    (x, y, z, w) for every pose; ``start``, ``goal`` and ``obstacles`` (m, 3) as used (projected
-    onto the task plane for 2D skills); ``trajectory``: the core's result in the skill's space.
+    ``t`` (n,) seconds from the start; ``positions``, ``velocities`` (n, 3); ``orientation``:
+    one (x, y, z, w) tuple for every pose (mode ``tool``) or an (n, 4) array, one unit
+    quaternion per pose (a skill with orientations), base_link; :attr:`orientations` is (n, 4)
+    either way. ``start``, ``goal`` and ``obstacles`` (m, 3) as used (projected onto the task
+    plane for 2D skills); ``trajectory``: the core's result in the skill's space.
     """
 
     t: np.ndarray
@@ -163,6 +183,18 @@ class Plan:
     obstacles: np.ndarray
     method: str
     trajectory: object
+
+    @property
+    def orientations(self):
+        """Return the orientation of every pose (n, 4), (x, y, z, w) in base_link."""
+        return pose_orientations(self.orientation, len(self.t))
+
+
+def pose_orientations(orientation, n):
+    """Return ``orientation`` (a (4,) tuple or an (n, 4) array) as an (n, 4) array."""
+    if isinstance(orientation, tuple):
+        return np.tile(np.asarray(orientation, dtype=float), (n, 1))
+    return np.asarray(orientation, dtype=float)
 
 
 def _points(value, what, shape):
@@ -201,20 +233,73 @@ class _Space:
     def outward_vectors(self, vectors):
         return vectors if self.plane is None else (self.scale * vectors) @ self.plane.axes
 
+    def inward_orientations(self, q):
+        return q if self.plane is None else self.plane.orientation_to_plane(q)
+
+    def outward_orientations(self, q):
+        return q if self.plane is None else self.plane.orientation_from_plane(q)
+
+
+def goal_orientation_of(skill, value, settings):
+    """
+    Return the requested goal orientation (4,) as the plan uses it, or None for none.
+
+    ``value``: None, or (x, y, z, w) in base_link. All zeros means "no goal orientation", and
+    so does exactly ``(0, 0, 0, 1)``, the default of a ROS Quaternion message (a request that
+    sets only the goal's position); ask for the identity itself with ``(0, 0, 0, -1)``. Raises
+    PlanningError for NaN, inf or a non-unit quaternion (norm off 1 by more than 1e-3), and
+    for a goal orientation given for a skill without orientations or with the
+    ``orientation_mode`` setting ``tool``.
+    """
+    if value is None:
+        return None
+    try:
+        q = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise PlanningError(f'goal orientation must be 4 numbers (x, y, z, w), got {value!r}') \
+            from None
+    if q.shape != (4,):
+        raise PlanningError(f'goal orientation must be 4 numbers (x, y, z, w), got shape '
+                            f'{q.shape}')
+    if not np.all(np.isfinite(q)):
+        raise PlanningError(f'goal orientation {q.tolist()} contains NaN or inf')
+    if not np.any(q) or np.array_equal(q, (0.0, 0.0, 0.0, 1.0)):
+        return None
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > GOAL_ORIENTATION_NORM_TOLERANCE:
+        raise PlanningError(f'goal orientation {_fmt(q)} is not a unit quaternion (norm '
+                            f'{norm:.4g}); send a unit one, or all zeros for no goal '
+                            'orientation')
+    if not skill.has_orientation:
+        raise PlanningError('a goal orientation was given, but the skill has no orientations '
+                            '(its tool keeps tool_orientation); send all zeros for none')
+    if settings.orientation_mode == 'tool':
+        raise PlanningError("a goal orientation was given, but orientation_mode is 'tool' (the "
+                            'tool keeps tool_orientation); send all zeros for none')
+    return q / norm
+
+
+#: Largest deviation from 1 of the norm of a requested goal orientation.
+GOAL_ORIENTATION_NORM_TOLERANCE = 1e-3
+
 
 def _fmt(point):
     return '(' + ', '.join(f'{c:.3f}' for c in point) + ')'
 
 
-def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None):
+def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
+              goal_orientation=None):
     """
     Plan ``skill`` (an ``etdmp_ros.dmp.Skill``) from ``start`` to ``goal`` around ``obstacles``.
 
     ``start``, ``goal``: base_link points (3,); ``obstacles``: (m, 3) base_link points;
-    ``settings``: PlanSettings; ``plane``: the TaskPlane (needed for 2D skills). Returns a Plan;
-    raises PlanningError with the reason when the request cannot be served.
+    ``settings``: PlanSettings; ``plane``: the TaskPlane (needed for 2D skills);
+    ``goal_orientation``: None or (x, y, z, w) in base_link (see :func:`goal_orientation_of`:
+    all zeros for none). Returns a Plan; raises PlanningError with the reason when the request
+    cannot be served.
     """
     settings = PlanSettings() if settings is None else settings
+    goal_q = goal_orientation_of(skill, goal_orientation, settings)
     start = _points(start, 'start', (3,))
     goal = _points(goal, 'goal', (3,))
     obstacles = _points(obstacles, 'obstacles', None)
@@ -248,16 +333,22 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None):
             start_s, goal_s, obstacles_s, method=settings.method, mode=settings.mode,
             independent_axis=settings.independent_axis, dt=settings.output_period,
             tau=settings.duration or None,
-            margin=settings.obstacle_margin if len(obstacles_s) else 0.0, gains=gains)
+            margin=settings.obstacle_margin if len(obstacles_s) else 0.0, gains=gains,
+            goal_orientation=None if goal_q is None else space.inward_orientations(goal_q))
     except GeneralizationError as err:
         raise PlanningError(str(err)) from None
+    if traj.q is not None and settings.orientation_mode == 'demo':
+        orientation = space.outward_orientations(traj.q)
+        orientation /= np.linalg.norm(orientation, axis=1, keepdims=True)
+    else:
+        orientation = settings.orientation
     positions = space.outward(traj.x)
     outside = settings.workspace.violation(positions)
     if outside is not None:
         i, reason = outside
         raise PlanningError(f"the plan leaves the UR10's reach at t = {traj.t[i]:.2f} s, "
                             f'{_fmt(positions[i])}: {reason}')
-    return Plan(traj.t, positions, space.outward_vectors(traj.v), settings.orientation,
+    return Plan(traj.t, positions, space.outward_vectors(traj.v), orientation,
                 start_b, goal_b, obstacles_b, settings.method, traj)
 
 
@@ -300,6 +391,13 @@ class FollowedPlan:
     update starts from the state the previous ones left, so the path stays continuous in
     position and velocity however often it changes (the goal filter keeps the acceleration
     bounded). ``t`` and ``positions`` are the whole path as it stands (the plan's own time base).
+
+    Orientation: ``orientation`` is the plan's one tuple (mode ``tool``) or an (n, 4) array
+    matching ``t``. The online rollout does not carry orientations, so a re-planned remainder
+    takes the plan's orientation at the same path time, which is the same phase (the phase
+    depends on time only, not on the goal or obstacles), and the plan's last orientation after
+    the plan's end: the tool keeps the orientation pattern it was given (and reaches a requested
+    goal orientation) even when the goal moves; it is not turned again with the moved goal.
     """
 
     def __init__(self, skill, plan, settings=None, plane=None):
@@ -323,6 +421,7 @@ class FollowedPlan:
         self.velocities = plan.velocities.copy()
         self.goal, self.obstacles = plan.goal.copy(), plan.obstacles.copy()
         self.orientation = plan.orientation
+        self._plan_t, self._plan_orientation = plan.t, plan.orientation
         self.updates = 0
         self._run.warm()
 
@@ -340,6 +439,12 @@ class FollowedPlan:
     def index(self, t):
         """Return the index of the pose at path time ``t`` (the last one at or before it)."""
         return int(np.clip(np.searchsorted(self.t, t + 1e-9) - 1, 0, len(self.t) - 1))
+
+    def orientations_at(self, t):
+        """Return the plan's orientations (len(t), 4) at path times ``t`` (its last after it)."""
+        i = np.clip(np.searchsorted(self._plan_t, np.asarray(t) + 1e-9) - 1, 0,
+                    len(self._plan_t) - 1)
+        return pose_orientations(self._plan_orientation, len(self._plan_t))[i]
 
     def update(self, t_switch, goal=None, obstacles=None, t_max=None):
         """
@@ -388,6 +493,9 @@ class FollowedPlan:
         self.positions = np.concatenate([self.positions[:keep], positions])
         self.velocities = np.concatenate([self.velocities[:keep],
                                           space.outward_vectors(vs)])
+        if not isinstance(self.orientation, tuple):
+            self.orientation = np.concatenate([self.orientation[:keep],
+                                               self.orientations_at(t_new)])
         self._run = after
         if goal_s is not None:
             self.goal = space.outward(goal_s)

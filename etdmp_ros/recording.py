@@ -25,8 +25,9 @@ from etdmp_ros import bag
 from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.ros_conversions import (compress_image_cdr, COMPRESSED_IMAGE_TYPE,
                                        COMPRESSED_SUFFIX, header_stamp_ns, image_from_cdr,
-                                       intrinsics_from_camera_info, message_class, path_to_numpy,
-                                       point_to_numpy, pose_array_to_numpy, stamp_to_ns)
+                                       intrinsics_from_camera_info, joint_state_arrays,
+                                       message_class, path_to_numpy, point_to_numpy,
+                                       pose_array_to_numpy, stamp_to_ns)
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.msg import Path as PathMessage
 from nav_msgs.srv import GetPlan
@@ -36,7 +37,7 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray, String
 
 #: Keep every n-th camera frame for the animation (30 Hz camera: 15 frames per second).
@@ -57,6 +58,7 @@ DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
 PATH_TOPIC = '/etdmp/path'
 GOAL_SEEN_TOPIC = '/etdmp/goal'
 ROSOUT_TOPIC = '/rosout'
+JOINTS_TOPIC = '/joint_states'
 #: Topics left out of the recording, with the reason (metrics.json ``recording.not_recorded``).
 NOT_RECORDED = {
     '/etdmp/detections/image': 'a view of the recorded camera images that perception draws '
@@ -64,7 +66,7 @@ NOT_RECORDED = {
 }
 #: The streams :func:`read_streams` returns for the metrics.
 MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC, PATH_TOPIC,
-                   GOAL_SEEN_TOPIC, ROSOUT_TOPIC)
+                   GOAL_SEEN_TOPIC, ROSOUT_TOPIC, JOINTS_TOPIC)
 
 
 class Stream:
@@ -384,6 +386,8 @@ def read_streams(path):
     Return the streams that :mod:`etdmp_ros.metrics` measures, from a :func:`write_bag` file.
 
     ``tip``, ``reference``: (n, 4) header stamps (ns) and positions, sorted by stamp;
+    ``reference_q`` (n, 4): the reference's orientations (x, y, z, w), in the same order;
+    ``joints`` (n, 7): /joint_states' stamps (ns) and positions (JOINT_NAMES order), sorted;
     ``commands`` (n, 6) and ``command_time``: the simulated time when each arrived (the stamp
     of the latest pen tip received before it), ``command_wall_time``: its receipt time (s);
     ``status``: [(simulated ns at receipt, text)]. Also, in order of arrival: ``paths``, every
@@ -393,6 +397,7 @@ def read_streams(path):
     nodes stamp their log lines with the wall clock, the clock of the receipt times).
     """
     tip, reference, commands, command_time, wall, status = [], [], [], [], [], []
+    joints = []
     paths, goal_seen, logs = [], [], []
     sim_ns = 0
     for topic, _, log_ns, data in bag.read_messages(path, MEASURED_TOPICS):
@@ -403,8 +408,16 @@ def read_streams(path):
             tip.append((stamp, msg.point.x, msg.point.y, msg.point.z))
         elif topic == REFERENCE_TOPIC:
             msg = deserialize_message(data, PoseStamped)
-            p = msg.pose.position
-            reference.append((stamp_to_ns(msg.header.stamp), p.x, p.y, p.z))
+            p, o = msg.pose.position, msg.pose.orientation
+            reference.append((stamp_to_ns(msg.header.stamp), p.x, p.y, p.z, o.x, o.y, o.z,
+                              o.w))
+        elif topic == JOINTS_TOPIC:
+            msg = deserialize_message(data, JointState)
+            try:
+                positions, _ = joint_state_arrays(msg)
+            except ValueError:
+                continue
+            joints.append((stamp_to_ns(msg.header.stamp), *positions))
         elif topic == COMMAND_TOPIC:
             commands.append(deserialize_message(data, Float64MultiArray).data)
             command_time.append(sim_ns)
@@ -423,9 +436,12 @@ def read_streams(path):
         else:
             msg = deserialize_message(data, Log)
             logs.append((stamp_to_ns(msg.stamp), msg.name, msg.msg))
-    tip, reference = np.array(tip).reshape(-1, 4), np.array(reference).reshape(-1, 4)
+    tip, reference = np.array(tip).reshape(-1, 4), np.array(reference).reshape(-1, 8)
+    reference = reference[np.argsort(reference[:, 0], kind='stable')]
+    joints = np.array(joints, dtype=float).reshape(-1, 7)
     return {'tip': tip[np.argsort(tip[:, 0], kind='stable')],
-            'reference': reference[np.argsort(reference[:, 0], kind='stable')],
+            'reference': reference[:, :4], 'reference_q': reference[:, 4:],
+            'joints': joints[np.argsort(joints[:, 0], kind='stable')],
             'command_time': np.array(command_time, dtype=float),
             'command_wall_time': np.array(wall, dtype=float),
             'commands': np.array(commands, dtype=float).reshape(-1, 6),

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from etdmp_ros._paths import config_path
 from etdmp_ros.dmp import builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
-from etdmp_ros.planning import PlanSettings, TOOL_DOWN, Workspace
+from etdmp_ros.planning import PLAN_ORIENTATION_MODES, PlanSettings, TOOL_DOWN, Workspace
 from etdmp_ros.robot import (ControllerConfig, DEFAULT_ACCELERATION_LIMITS, SCENE_PARAMETERS,
                              SceneConfig)
 from etdmp_ros.skill_library import RECORDED_DIMS
@@ -323,7 +323,11 @@ DMP_SERVER = (
     P('task_plane.scale', 0.02, 'Metres per demo unit of 2D skills (letters are about 10 '
       'units: 20 cm).', unit='m', value_range=(1e-5, 10.0), **_RUNTIME),
     P('tool_orientation', list(TOOL_DOWN), 'Tool orientation [x, y, z, w] in base_link of '
-      'every pose of a plan (normalised); the default points the tool down.', **_RUNTIME),
+      'every pose of a plan of a position-only skill, or of any skill with orientation_mode '
+      'tool (normalised); the default points the tool down.', **_RUNTIME),
+    P('orientation_mode', _PLAN.orientation_mode, "demo: a skill's own orientations, turned "
+      'with the motion (or converging to the goal orientation of a request), when it has them; '
+      'tool: always tool_orientation.', choices=PLAN_ORIENTATION_MODES, **_RUNTIME),
     P('obstacle_gamma', _GAINS.gamma, 'Steering gain gamma (paper Eq. 24).',
       value_range=(0.0, 1e5),
       section='Obstacles (paper Eq. 22-27)', **_RUNTIME),

@@ -64,6 +64,37 @@ def stir_plan(dt=0.01, goal=STIR_GOAL, rotate_deg=90.0):
     return PoseTrajectory(traj.t, traj.x, rotations), traj.t, traj.x
 
 
+def turning_plan(name, rotate_deg=90.0, goal_orientation=None, start=None, goal=None):
+    """
+    Return (PoseTrajectory, Plan) of ``stir`` or ``wipe`` with their own orientations.
+
+    dmp_server's plan (``plan_path``, default settings): ``stir`` into the scene's bottle,
+    ``wipe`` on the task plane, from the demonstration's start offset turned by ``rotate_deg``
+    about the goal (or from ``start`` to ``goal``, base_link); every pose has the tool
+    orientation the skill gives it (the stirrer's tilt, the sponge's yaw, turned with the
+    motion), or converges to ``goal_orientation``.
+    """
+    from etdmp_ros.planning import plan_path
+    from etdmp_ros.robot import quaternion_to_matrix
+    given = None if start is None else (start, goal)
+    demo = builtin_demo(name)
+    skill = learn(demo)
+    a = np.radians(rotate_deg)
+    rot = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0, 0, 1.0]])
+    if name == 'stir':
+        goal, plane = STIR_GOAL, None
+        start = goal + rot @ (demo.positions[0] - demo.positions[-1])
+    else:
+        plane = PLANE
+        goal = PLANE.from_plane(np.array([0.0, 0.0]))
+        offset = PLANE.from_plane(demo.positions[0] - demo.positions[-1]) - PLANE.origin
+        start = goal + rot @ offset
+    if given is not None:
+        start, goal = given
+    plan = plan_path(skill, start, goal, plane=plane, goal_orientation=goal_orientation)
+    return PoseTrajectory(plan.t, plan.positions, quaternion_to_matrix(plan.orientations)), plan
+
+
 @dataclass
 class Log:
     """What a closed-loop run recorded, one row per control step."""

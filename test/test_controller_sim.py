@@ -9,10 +9,12 @@ joints (``UR10Sim.tool_tip_position`` is the site before the last physics step, 
 reference, which must itself be the plan at nominal speed.
 """
 
-from controller_plans import (g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET)
+from controller_plans import (g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET,
+                              turning_plan)
 from etdmp_ros.robot import (ControllerConfig, PoseTrajectory, TrajectoryController, UR10Model,
                              UR10Sim)
 import numpy as np
+import pinocchio as pin
 import pytest
 
 
@@ -97,6 +99,66 @@ def test_stirring_in_mujoco(sim, ur10):
     assert rms <= 0.1e-3 and errors.max() <= 0.5e-3
     assert_within_limits(controller, run)
     np.testing.assert_allclose(run['tool'][-1], path.positions[-1], atol=0.1e-3)
+
+
+def orientation_errors(path, run, ur10):
+    """Return the true tool orientation errors (rad) over the tracking phase vs the plan."""
+    tracking = run['status'] == 'tracking'
+    t, ref, q = run['t'][tracking], run['ref'][tracking], run['q'][tracking]
+    t0 = path_time_offset(path, t, ref)
+    return np.array([np.linalg.norm(pin.log3(path.pose(s - t0)[1] @ ur10.frame_pose(qk)[1].T))
+                     for s, qk in zip(t, q)])
+
+
+@pytest.mark.parametrize('name', ['stir', 'wipe'])
+def test_the_tool_tilts_and_turns_as_planned_in_mujoco(sim, ur10, name):
+    # The stirrer tilts and circles, the sponge turns with the stroke: the true tool
+    # orientation (forward kinematics of the simulated joints) follows the plan's.
+    path, plan = turning_plan(name)
+    turn = np.degrees(max(np.linalg.norm(pin.log3(r @ path.rotations[0].T))
+                          for r in path.rotations))
+    assert turn > 9.0          # the plan does turn the tool
+    controller = TrajectoryController(ur10, ControllerConfig(rate=125.0, actuation_delay=0.0))
+    assert controller.check(path, Q_INITIAL) == ''
+    controller.follow(path)
+    run = drive(sim, controller, Q_INITIAL, 15.0, ur10)
+    angles = np.degrees(orientation_errors(path, run, ur10))
+    rms = np.sqrt(np.mean(angles ** 2))
+    errors = tracking_errors(path, run)
+    print(f'{name} in MuJoCo: orientation RMS {rms:.3f} deg, max {angles.max():.3f} deg '
+          f'(turn {turn:.1f} deg); position RMS {np.sqrt(np.mean(errors ** 2)) * 1e3:.3f} mm')
+    assert rms <= 0.5 and angles.max() <= 2.0
+    assert np.sqrt(np.mean(errors ** 2)) <= 0.1e-3 and errors.max() <= 0.5e-3
+    assert_within_limits(controller, run)
+    final = ur10.frame_pose(run['q'][-1])[1]
+    assert np.degrees(np.linalg.norm(pin.log3(path.rotations[-1] @ final.T))) < 0.1
+    # The measure: the model's tool frame is MuJoCo's tool tip site, orientation included.
+    sim.set_joint_positions(run['q'][len(run['q']) // 2])
+    site_p, site_rot = sim.site_pose(sim.tool_tip_site)
+    p, rot = ur10.frame_pose(run['q'][len(run['q']) // 2])[:2]
+    assert np.linalg.norm(site_p - p) < 1e-9
+    assert np.linalg.norm(pin.log3(site_rot @ rot.T)) < 1e-9
+
+
+def test_an_orientation_the_ur10_cannot_reach_is_refused_before_moving(ur10):
+    # Stirring far out (1.08 m from the base): reachable with the stirrer's own orientations,
+    # but not when it must end pointing back at the base (tool z along -x): the wrist would
+    # be beyond the arm's reach. Both pre-checks refuse it, saying where, before anything moves.
+    from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS
+    from etdmp_ros.robot._timing import timing_violation
+    goal = np.array([1.08, 0.1, 0.2])
+    start = goal + [-0.05, 0.05, 0.25]
+    back = (0.0, -np.sqrt(0.5), 0.0, np.sqrt(0.5))
+    controller = TrajectoryController(ur10, ControllerConfig(rate=125.0))
+    own, _ = turning_plan('stir', start=start, goal=goal)
+    assert controller.check(own, Q_INITIAL) == ''
+    path, plan = turning_plan('stir', start=start, goal=goal, goal_orientation=back)
+    reason = controller.check(path, Q_INITIAL)
+    assert reason.startswith('pose #') and 'is out of reach' in reason, reason
+    violation = timing_violation(ur10, plan.positions, path.rotations, plan.t, Q_INITIAL,
+                                 ur10.velocity_limits, DEFAULT_ACCELERATION_LIMITS, 64)
+    assert violation is not None and 'with its orientation, is out of reach' in \
+        violation.reason, violation
 
 
 def test_singularity_halt_in_mujoco(sim, ur10):

@@ -13,8 +13,10 @@ from pathlib import Path as FsPath
 import time
 
 from conftest import NodeProcess
+from etdmp_ros.dmp import _quaternion as quat
 from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains, save_demo
-from etdmp_ros.robot import JOINT_NAMES, UR10Model
+from etdmp_ros.planning import plan_path
+from etdmp_ros.robot import JOINT_NAMES, quaternion_to_matrix, UR10Model
 from etdmp_ros.ros_conversions import (joint_state_msg, path_from_numpy, path_to_numpy,
                                        pose_array_from_numpy)
 from etdmp_ros.task_plane import TaskPlane
@@ -254,6 +256,102 @@ def test_3d_skill_uses_base_link_directly(client):
     assert nrmse(x, demo.positions) < 0.005
     assert t[-1] == pytest.approx(demo.duration)
     assert np.ptp(x[:, 2]) > 0.2          # not squashed onto the task plane
+
+
+def test_plans_of_a_skill_with_orientations_turn_the_tool(server, client):
+    # Stir: every pose has the core's orientation (the tilted stirrer turned with the motion);
+    # the goal pose's orientation, if not all zeros, is reached; a bad one is refused.
+    mouth = np.array(SCENE['bottle']['position'] + [SCENE['bottle']['height']])
+    skill = learn(builtin_demo('stir'))
+    start, goal = mouth + skill.start + [0.03, -0.02, 0.05], mouth + skill.goal
+    turned = quat.multiply(quat.about_axis([1.0, 0.0, 0.0], 0.3), TOOL_DOWN)
+
+    def call(orientation):
+        req = request(start, goal)
+        o = req.goal.pose.orientation
+        o.x, o.y, o.z, o.w = (float(c) for c in orientation)
+        plan = client._result(client.generalize.call_async(req)).plan
+        return path_to_numpy(plan)[2]
+
+    assert client.set_parameters(skill='stir')[0].successful
+    try:
+        client.spin_for(0.3)
+        free, zero, to_goal = call((0, 0, 0, 1)), call((0, 0, 0, 0)), call(turned)
+        bad = [call(q) for q in ((0.0, 0.0, 0.6, 0.6), (math.nan, 0.0, 0.0, 1.0))]
+        client.spin_for(0.5)
+        shown = {m.ns: m for m in client.markers[-1].markers}
+        published = path_to_numpy(client.paths[-1])[2]
+    finally:
+        assert client.set_parameters(skill='G')[0].successful
+    # /etdmp/path (numpy-written bytes) carries the same per-pose orientations as the response.
+    np.testing.assert_array_equal(published, to_goal)
+    expected = plan_path(skill, start, goal).orientation
+    np.testing.assert_allclose(free, expected, atol=1e-12)
+    np.testing.assert_array_equal(zero, free)
+    assert np.degrees(quat.angle_between(free[0], free[len(free) // 3])) > 5.0   # it tilts
+    assert np.degrees(quat.angle_between(to_goal[-1], turned)) <= 0.1
+    assert np.degrees(quat.angle_between(
+        to_goal, plan_path(skill, start, goal, goal_orientation=turned).orientation)).max() < 1e-9
+    assert all(len(b) == 0 for b in bad)
+    wait_for_log(server, '/generalize', 'not a unit quaternion')
+    wait_for_log(server, '/generalize', 'goal orientation', 'NaN or inf')
+    # The markers of the last plan (the one to the goal orientation) show the tool's axes.
+    axes = shown['orientation']
+    points = np.array([(p.x, p.y, p.z) for p in axes.points]).reshape(-1, 3, 2, 3)
+    last = quaternion_to_matrix(to_goal[-1])
+    np.testing.assert_allclose(points[-1, :, 1] - points[-1, :, 0], 0.04 * last.T, atol=1e-9)
+    assert [c.r for c in axes.colors[:6]] == [1, 1, 0, 0, 0, 0]
+    assert len(axes.points) == 2 * 3 * 12
+    # A goal orientation for a position-only skill is refused, with the reason.
+    req = request(START, GOAL)
+    req.goal.pose.orientation.x = 1.0
+    req.goal.pose.orientation.w = 0.0
+    assert len(client._result(client.generalize.call_async(req)).plan.poses) == 0
+    wait_for_log(server, 'the skill has no orientations')
+
+
+def test_an_orientation_the_ur10_cannot_reach_is_refused_with_the_reason(server, client):
+    # Stirring 1.08 m out: served with the stirrer's own orientations, refused when it must
+    # end pointing back at the base (the wrist would be beyond the arm's reach).
+    goal = np.array([1.08, 0.1, 0.2])
+    start = goal + [-0.05, 0.05, 0.25]
+    req = request(start, goal)
+    o = req.goal.pose.orientation
+    o.x, o.y, o.z, o.w = 0.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5)
+    assert client.set_parameters(skill='stir')[0].successful
+    try:
+        assert len(client.call(start, goal)[1]) > 100
+        assert len(client._result(client.generalize.call_async(req)).plan.poses) == 0
+    finally:
+        assert client.set_parameters(skill='G')[0].successful
+    line = wait_for_log(server, '/generalize', 'with its orientation, is out of reach')
+    assert "skill 'stir'" in line and 'pose at t = ' in line
+
+
+def test_a_taught_path_keeps_its_orientations(server, client):
+    # A 3D path whose tool turns by 40 degrees about the vertical as it goes: taught on
+    # /etdmp/demonstrations, it becomes a skill with orientations, and a plan from the taught
+    # start to its goal reproduces them.
+    n = 120
+    s = np.linspace(0.0, 1.0, n)
+    positions = np.column_stack([0.70 + 0.12 * s, 0.10 * np.sin(np.pi * s),
+                                 0.30 - 0.10 * s])
+    yaw = quat.about_axis([0.0, 0.0, 1.0], np.radians(40.0) * s)
+    taught_q = quat.multiply(yaw, TOOL_DOWN)
+    t = np.linspace(0.0, 2.4, n)
+    assert client.set_parameters(teach_skill_name='turning', skill='turning')[0].successful
+    try:
+        client.publish('demonstrations', path_from_numpy(positions, t, 10**9, 'base_link',
+                                                         taught_q), times=1)
+        deadline = time.monotonic() + TIMEOUT
+        while len(q := client.call(positions[0], positions[-1])[2]) == 0:
+            assert time.monotonic() < deadline, server.log()
+            client.spin_for(0.1)
+    finally:
+        assert client.set_parameters(teach_skill_name='taught', skill='G')[0].successful
+    assert np.degrees(quat.angle_between(q[0], taught_q[0])) < 0.5
+    assert np.degrees(quat.angle_between(q[-1], taught_q[-1])) < 0.5
+    assert np.degrees(quat.angle_between(q[0], q[-1])) == pytest.approx(40.0, abs=0.5)
 
 
 def test_obstacles_published_on_the_topic_are_avoided(server, client):

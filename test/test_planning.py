@@ -2,6 +2,7 @@
 
 import math
 
+from etdmp_ros.dmp import _quaternion as quat
 from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains
 from etdmp_ros.planning import (FollowedPlan, place_demo, plan_path, PlanningError,
                                 PlanSettings, TOOL_DOWN, Workspace)
@@ -213,3 +214,115 @@ def test_a_followed_plan_moves_its_goal_without_a_jump():
     with pytest.raises(PlanningError):
         followed.update(2.6, goal=[np.nan, 0.0, 0.0])
     np.testing.assert_array_equal(followed.positions, before)
+
+
+# -- orientation (issue 15) ----------------------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def stir_skill():
+    return learn(builtin_demo('stir'))
+
+
+@pytest.fixture(scope='module')
+def wipe_skill():
+    return learn(builtin_demo('wipe'))
+
+
+def degrees(p, q):
+    return np.degrees(quat.angle_between(np.asarray(p), np.asarray(q)))
+
+
+def test_a_skill_with_orientations_gives_every_pose_its_own(stir_skill, wipe_skill):
+    # 3D: the core's orientations, in base_link as they are.
+    mouth = np.array([0.70, -0.30, 0.20])
+    start, goal = mouth + [-0.06, 0.04, 0.14], mouth + stir_skill.goal
+    plan = plan_path(stir_skill, start, goal)
+    core = stir_skill.generalize(start, goal, dt=0.01)
+    assert plan.orientation.shape == (len(plan.t), 4)
+    np.testing.assert_allclose(plan.orientation, core.q, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(plan.orientation, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_array_equal(plan.orientations, plan.orientation)
+    # 2D on a vertical whiteboard: the plane's orientations composed with the plane's frame.
+    s, g = WALL.from_plane(wipe_skill.start + [3.0, -2.0]), WALL.from_plane(wipe_skill.goal)
+    plan = plan_path(wipe_skill, s, g, plane=WALL)
+    core = wipe_skill.generalize(WALL.to_plane(s), WALL.to_plane(g), dt=0.01)
+    np.testing.assert_allclose(plan.orientation, WALL.orientation_from_plane(core.q),
+                               atol=1e-12)
+    # On the table plane (its frame is base_link's) a start where the demo starts reproduces the
+    # demonstrated orientations (the demo's are TOOL_DOWN composed with the sponge's yaw).
+    plan = plan_path(wipe_skill, PLANE.from_plane(wipe_skill.start),
+                     PLANE.from_plane(wipe_skill.goal), plane=PLANE)
+    demo_q = builtin_demo('wipe').orientations
+    assert degrees(plan.orientation[0], demo_q[0]) < 0.1
+    assert degrees(plan.orientation[-1], demo_q[-1]) < 0.1
+    # orientation_mode 'tool', and position-only skills: the one tool orientation.
+    tool = plan_path(wipe_skill, PLANE.from_plane(wipe_skill.start),
+                     PLANE.from_plane(wipe_skill.goal), plane=PLANE,
+                     settings=PlanSettings(orientation_mode='tool'))
+    assert tool.orientation == pytest.approx(TOOL_DOWN)
+    np.testing.assert_allclose(tool.orientations, np.tile(TOOL_DOWN, (len(tool.t), 1)))
+
+
+def test_a_goal_orientation_is_reached_and_none_is_all_zeros(stir_skill, wipe_skill):
+    mouth = np.array([0.70, -0.30, 0.20])
+    start, goal = mouth + [-0.06, 0.04, 0.14], mouth + stir_skill.goal
+    turned = quat.multiply(quat.about_axis([0.0, 1.0, 0.0], 0.4), TOOL_DOWN)
+    plan = plan_path(stir_skill, start, goal, goal_orientation=turned)
+    assert degrees(plan.orientation[-1], turned) <= 0.1
+    free = plan_path(stir_skill, start, goal)
+    assert degrees(plan.orientation[0], free.orientation[0]) < 1e-6   # starts as without
+    # 2D: the goal orientation is given in base_link, reached in base_link.
+    s, g = WALL.from_plane(wipe_skill.start + [3.0, -2.0]), WALL.from_plane(wipe_skill.goal)
+    wall_goal = WALL.orientation_from_plane(quat.multiply(quat.about_axis([0, 0, 1], 1.0),
+                                                          TOOL_DOWN))
+    plan = plan_path(wipe_skill, s, g, plane=WALL, goal_orientation=-wall_goal)
+    assert degrees(plan.orientation[-1], wall_goal) <= 0.1
+    # All zeros and the message default (0, 0, 0, 1) mean "none".
+    for none in ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), None):
+        np.testing.assert_array_equal(
+            plan_path(stir_skill, start, goal, goal_orientation=none).orientation,
+            free.orientation)
+    # ... and the identity itself is (0, 0, 0, -1).
+    identity = plan_path(stir_skill, start, goal, goal_orientation=(0.0, 0.0, 0.0, -1.0))
+    assert degrees(identity.orientation[-1], (0.0, 0.0, 0.0, 1.0)) <= 0.1
+
+
+@pytest.mark.parametrize('value, message', [
+    ((np.nan, 0.0, 0.0, 1.0), 'NaN or inf'),
+    ((0.0, 0.0, 0.0, np.inf), 'NaN or inf'),
+    ((0.0, 0.0, 0.5, 0.5), 'not a unit quaternion'),
+    ((0.0, 0.0, 1.0), '4 numbers'),
+])
+def test_bad_goal_orientations_are_refused_with_the_reason(stir_skill, value, message):
+    mouth = np.array([0.70, -0.30, 0.20])
+    with pytest.raises(PlanningError, match=message):
+        plan_path(stir_skill, mouth + [-0.06, 0.04, 0.14], mouth, goal_orientation=value)
+
+
+def test_a_goal_orientation_needs_a_skill_with_orientations(g_skill, stir_skill):
+    with pytest.raises(PlanningError, match='the skill has no orientations'):
+        plan_path(g_skill, START, GOAL, plane=PLANE, goal_orientation=TOOL_DOWN)
+    assert plan_path(g_skill, START, GOAL, plane=PLANE,
+                     goal_orientation=(0, 0, 0, 0)).orientation == pytest.approx(TOOL_DOWN)
+    mouth = np.array([0.70, -0.30, 0.20])
+    with pytest.raises(PlanningError, match="orientation_mode is 'tool'"):
+        plan_path(stir_skill, mouth + [-0.06, 0.04, 0.14], mouth, goal_orientation=TOOL_DOWN,
+                  settings=PlanSettings(orientation_mode='tool'))
+    with pytest.raises(ValueError, match='orientation_mode must be one of'):
+        PlanSettings(orientation_mode='goal')
+
+
+def test_a_followed_plan_keeps_the_orientation_of_the_same_phase(stir_skill):
+    mouth = np.array([0.70, -0.30, 0.20])
+    start, goal = mouth + [-0.06, 0.04, 0.14], mouth + stir_skill.goal
+    settings = PlanSettings()
+    plan = plan_path(stir_skill, start, goal, (), settings)
+    followed = FollowedPlan(stir_skill, plan, settings)
+    k = followed.update(2.0, goal=goal + [0.03, 0.0, 0.0])
+    assert followed.orientation.shape == (len(followed.t), 4)
+    np.testing.assert_array_equal(followed.orientation[:k], plan.orientation[:k])
+    n = min(len(plan.t), len(followed.t))
+    np.testing.assert_allclose(followed.t[k:n], plan.t[k:n], atol=1e-9)
+    np.testing.assert_array_equal(followed.orientation[k:n], plan.orientation[k:n])
+    np.testing.assert_array_equal(followed.orientation[n:],
+                                  np.tile(plan.orientation[-1], (len(followed.t) - n, 1)))

@@ -1,7 +1,7 @@
 """Geometry conversions: the Path builder and its bytes agree with rclpy's own messages."""
 
-from etdmp_ros.ros_conversions import (ns_to_stamp, path_from_numpy, path_to_numpy,
-                                       points_from_numpy, pose_array_from_numpy,
+from etdmp_ros.ros_conversions import (ns_to_stamp, path_from_cdr, path_from_numpy,
+                                       path_to_numpy, points_from_numpy, pose_array_from_numpy,
                                        pose_array_to_numpy, serialize_path, stamp_to_ns)
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from nav_msgs.msg import Path
@@ -80,10 +80,38 @@ def test_pose_arrays_and_stamps():
 
 def test_cdr_bytes_read_back_by_the_controller_reader():
     # /etdmp/path is published as these bytes; the controller reads raw bytes with path_from_cdr.
-    from etdmp_ros.ros_conversions import path_from_cdr
     frame, pose_frames, stamps, positions, quaternions = path_from_cdr(
         serialize_path(X, T, STAMP, 'base_link', Q))
     assert frame == 'base_link' and pose_frames == {'base_link'}
     np.testing.assert_array_equal(stamps - STAMP, np.round(T * 1e9).astype(np.int64))
     np.testing.assert_array_equal(positions, X)
     np.testing.assert_array_equal(quaternions, np.tile(Q, (len(X), 1)))
+
+
+def unit_quaternions(n, seed=5):
+    """Return ``n`` random unit quaternions (n, 4), (x, y, z, w)."""
+    q = np.random.default_rng(seed).normal(size=(n, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize('n', [1, 2, 501])
+@pytest.mark.parametrize('frame_id', ['base_link', 'abc', 'wörld'])
+def test_per_pose_orientations_in_the_built_path_and_its_bytes(n, frame_id):
+    qs = unit_quaternions(n)
+    built = path_from_numpy(X[:n], T[:n], STAMP, frame_id, qs)
+    reference = reference_path(X[:n], T[:n], STAMP, frame_id, Q)
+    for pose, q in zip(reference.poses, qs.tolist()):
+        pose.pose.orientation = Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])
+    assert built == reference
+    data = serialize_path(X[:n], T[:n], STAMP, frame_id, qs)
+    assert deserialize_message(data, Path) == built
+    expected = serialize_message(built)
+    assert len(data) == len(expected)
+    # Byte for byte where rclpy writes bytes: its padding is left unset, ours is zero.
+    written = np.frombuffer(data, np.uint8) != np.frombuffer(expected, np.uint8)
+    assert np.all(np.frombuffer(data, np.uint8)[written] == 0)
+    _, _, _, positions, quaternions = path_from_cdr(data)
+    np.testing.assert_array_equal(positions, X[:n])
+    np.testing.assert_array_equal(quaternions, qs)
+    with pytest.raises(ValueError, match=r'orientations must have shape'):
+        serialize_path(X[:n], T[:n], STAMP, frame_id, qs[:n - 1] if n > 1 else qs[:0])

@@ -40,14 +40,15 @@ from etdmp_ros.nodes._parameters import (declared_settings, InvalidConfiguration
 from etdmp_ros.nodes._queued_service import QueuedService
 from etdmp_ros.nodes._spin import run
 from etdmp_ros.planning import (FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo, Plan,
-                                plan_path, PlanSettings, Workspace)
+                                PLAN_ORIENTATION_MODES, plan_path, PlanSettings, Workspace)
 from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
 from etdmp_ros.robot._timing import timing_violation
 from etdmp_ros.ros_conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr,
                                        path_from_numpy, point_to_numpy, points_from_numpy,
                                        pose_array_to_numpy, serialize_path)
 from etdmp_ros.skill_library import (BASE_FRAMES, check_skill_name, default_skills_dir,
-                                     RECORDED_DIMS, recorded_path_demo, save_skill_demo,
+                                     RECORDED_DIMS, recorded_orientations,
+                                     recorded_path_demo, save_skill_demo,
                                      SkillLibrary)
 from etdmp_ros.task_plane import TaskPlane
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
@@ -59,7 +60,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 NODE_NAME = 'dmp_server'
@@ -152,6 +153,7 @@ class Settings:
             output_period=values['output_period'], gains=gains, obstacle_k=values['obstacle_k'],
             obstacle_margin=values['obstacle_margin'], goal_clearance=values['goal_clearance'],
             min_distance=values['min_distance'], orientation=values['tool_orientation'],
+            orientation_mode=_choice(values, 'orientation_mode', PLAN_ORIENTATION_MODES),
             workspace=workspace)
         plane = TaskPlane.create(values['task_plane.origin'], values['task_plane.x_axis'],
                                  values['task_plane.y_axis'], values['task_plane.scale'])
@@ -361,7 +363,7 @@ class DmpServer(Node):
                                  f'MAX_TAUGHT_PATH_BYTES = {limits.MAX_TAUGHT_PATH_BYTES} (about '
                                  f'{limits.MAX_DEMO_SAMPLES} poses, MAX_DEMO_SAMPLES); not '
                                  'decoded')
-            frame, pose_frames, stamps, positions, _ = path_from_cdr(data)
+            frame, pose_frames, stamps, positions, quaternions = path_from_cdr(data)
             wrong = sorted(({frame} | pose_frames) - set(BASE_FRAMES))
             if wrong:
                 raise ValueError(f'frame {_short(repr(wrong[0]))} is not base_link (no TF here)')
@@ -373,7 +375,8 @@ class DmpServer(Node):
             t = (stamps - stamps[0]) * 1e-9 if len(stamps) else None
             with np.errstate(over='raise', invalid='raise', divide='raise'):
                 demo = recorded_path_demo(name, positions, t, settings.plane,
-                                          settings.recorded_dim, settings.plane_tolerance)
+                                          settings.recorded_dim, settings.plane_tolerance,
+                                          recorded_orientations(quaternions))
                 self._check_usable(demo, settings)
                 entry = self._library.add(name, demo, _TAUGHT,
                                           protected=self._protected_sources(name, settings))
@@ -568,8 +571,11 @@ class DmpServer(Node):
             obstacles = self._current_obstacles(settings)
             skill = self._library.skill(settings.skill, settings.formulation, settings.n_basis)
             self._check_goal(goal, skill, settings)
+            goal_q = request.goal.pose.orientation
+            goal_q = (goal_q.x, goal_q.y, goal_q.z, goal_q.w)
             with self._core_lock, np.errstate(over='raise', invalid='raise', divide='raise'):
-                plan = plan_path(skill, start, goal, obstacles, settings.plan, settings.plane)
+                plan = plan_path(skill, start, goal, obstacles, settings.plan, settings.plane,
+                                 goal_orientation=goal_q)
                 if settings.check_timing:
                     self._check_timing(plan, skill, settings)
         except (ValueError, ArithmeticError) as err:   # PlanningError, UnknownSkillError, ...
@@ -690,8 +696,10 @@ class DmpServer(Node):
             p = f.plan
             keep = p.index(max(0.0, tau_c - _FOLLOW_OVERLAP))
             # Its bytes written with numpy: 0.2 ms where building the message takes ~8.
+            orientation = p.orientation if isinstance(p.orientation, tuple) else \
+                p.orientation[keep:]
             self._path_pub.publish(serialize_path(p.positions[keep:], p.t[keep:], f.stamp,
-                                                  'base_link', p.orientation))
+                                                  'base_link', orientation))
             took = (time.perf_counter() - received) * 1e3
             what = ' and '.join(
                 ([f'goal moved to ({new_goal[0]:.3f}, {new_goal[1]:.3f}, {new_goal[2]:.3f})']
@@ -777,6 +785,7 @@ class DmpServer(Node):
                     (0.9, 0.1, 0.1, 0.9), 0.03),
             _marker(header, 'start_goal', Marker.SPHERE_LIST, np.stack([plan.start, plan.goal]),
                     (0.2, 0.4, 1.0, 1.0), 0.015),
+            _axes_marker(header, 'orientation', plan.positions, plan.orientations),
         ])
         self._marker_pub.publish(markers)
 
@@ -873,6 +882,31 @@ def _marker(header, ns, kind, points, rgba, size):
     marker.scale.x = marker.scale.y = marker.scale.z = float(size)
     marker.color.r, marker.color.g, marker.color.b, marker.color.a = (float(c) for c in rgba)
     marker.points = points_from_numpy(points)
+    return marker
+
+
+#: Tool frames shown along a plan on /etdmp/markers (namespace ``orientation``), and the length
+#: (m) and width of their axes.
+MARKER_AXES, MARKER_AXIS_LENGTH, MARKER_AXIS_WIDTH = 12, 0.04, 0.003
+_AXIS_COLOURS = (ColorRGBA(r=1.0, a=1.0), ColorRGBA(g=1.0, a=1.0), ColorRGBA(b=1.0, a=1.0))
+
+
+def _axes_marker(header, ns, positions, orientations):
+    """
+    Return a LINE_LIST Marker of the tool's axes at MARKER_AXES poses evenly spread in time.
+
+    Each frame is three lines from the pose's position along the tool's x (red), y (green) and
+    z (blue) axes, MARKER_AXIS_LENGTH long: the orientation the plan gives the tool there.
+    """
+    if len(positions) == 0:
+        return _marker(header, ns, Marker.LINE_LIST, None, None, 0.0)
+    idx = np.unique(np.linspace(0, len(positions) - 1, MARKER_AXES).round().astype(int))
+    axes = quaternion_to_matrix(orientations[idx])               # (k, 3, 3): columns x, y, z
+    tips = positions[idx, None, :] + MARKER_AXIS_LENGTH * np.swapaxes(axes, 1, 2)
+    points = np.stack([np.repeat(positions[idx, None, :], 3, axis=1), tips], axis=2)
+    marker = _marker(header, ns, Marker.LINE_LIST, points.reshape(-1, 3), (1, 1, 1, 1),
+                     MARKER_AXIS_WIDTH)
+    marker.colors = [c for _ in idx for c in _AXIS_COLOURS for _ in range(2)]
     return marker
 
 

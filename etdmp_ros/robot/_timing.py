@@ -37,7 +37,8 @@ def timing_violation(model, positions, rotation, t, q_seed, velocity_limits,
     """
     Return a TimingViolation if the joints cannot follow ``positions`` at times ``t``, or None.
 
-    ``positions`` (n, 3) tool tip positions in base_link, all with ``rotation`` (3, 3); ``t``
+    ``positions`` (n, 3) tool tip positions in base_link, all with ``rotation`` (3, 3) or each
+    with its own (``rotation`` (n, 3, 3)); ``t``
     (n,) seconds; ``q_seed`` (6,) joints to start the IK from (the current ones); the limits
     (6,) in rad/s and rad/s^2. IK is solved at up to ``samples`` poses (``iterations`` Newton
     steps each after the first, warm-started). A path of fewer than 3 poses has no timing to
@@ -50,19 +51,22 @@ def timing_violation(model, positions, rotation, t, q_seed, velocity_limits,
         return TimingViolation(f'the plan has {n} pose(s): too short to be followed', np.inf)
     idx = np.unique(np.linspace(0, n - 1, min(n, max(3, int(samples)))).round().astype(int))
     q = np.asarray(q_seed, dtype=float)
+    rotation = np.asarray(rotation, dtype=float)
+    rotations = rotation if rotation.ndim == 3 else np.broadcast_to(rotation, (n, 3, 3))
     joints = np.empty((len(idx), 6))
     for k, i in enumerate(idx):
-        q, error = model.solve_pose(positions[i], rotation, q,
+        q, error = model.solve_pose(positions[i], rotations[i], q,
                                     iterations=60 if k == 0 else iterations)
         residual = float(np.linalg.norm(error))
         if residual > IK_RESIDUAL and k > 0:   # a jump: give Newton its full budget
-            q, error = model.solve_pose(positions[i], rotation, q)
+            q, error = model.solve_pose(positions[i], rotations[i], q)
             residual = float(np.linalg.norm(error))
         if residual > IK_RESIDUAL:
             p = positions[i]
+            what = '' if rotation.ndim == 2 else ' with its orientation'
             return TimingViolation(f'pose at t = {t[i]:.2f} s, ({p[0]:.3f}, {p[1]:.3f}, '
-                                   f'{p[2]:.3f}) m, is out of reach of the arm (IK misses it by '
-                                   f'{residual * 1000:.1f} mm)', np.inf)
+                                   f'{p[2]:.3f}) m{what}, is out of reach of the arm (IK misses '
+                                   f'it by {residual * 1000:.1f} mm)', np.inf)
         joints[k] = q
     times = t[idx]
     qd = np.diff(joints, axis=0) / np.diff(times)[:, None]
