@@ -718,11 +718,11 @@ def demo_turned(scene, start, goal, plan_t, tau):
     Return the demonstration's orientations at the plan's phase turned by ET-DMP's rotation.
 
     ``plan_t`` (n,) path times; ``tau`` the plan's duration without margin. Base_link (n, 4);
-    None for a position-only demonstration or a transform that mirrors.
+    None for a position-only demonstration, orientation_mode tool, or a transform that mirrors.
     """
     demo = scene.demo
-    if demo.orientations is None:
-        return None
+    if demo.orientations is None or scene.server.get('orientation_mode') == 'tool':
+        return None     # the plan keeps the tool's orientation: nothing turned to compare with
     if scene.planar:
         plane = scene.plane
         s, g = plane.to_plane(np.asarray(start)), plane.to_plane(np.asarray(goal))

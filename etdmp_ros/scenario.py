@@ -23,7 +23,8 @@ to the bottle's mouth. The stirrer then starts :data:`TAUGHT_STIR_TURN_DEG` roun
 axis from where the recording started, in another quadrant, with dmp_server's 3D ``mode`` 2
 (the vertical follows the 1D rule, the horizontal plane the 2D one): the movement turns about
 the bottle's axis and stays in the bottle, where mode 1's Rodrigues rotation would tilt a turn
-this large out of it.
+this large out of it; and with ``orientation_mode`` ``tool``: the scripted hand held the tool's
+orientation, which the repeat keeps rather than turning it by 150 degrees with the movement.
 
 Each node gets the system's parameter files (:func:`etdmp_ros.system.parameter_files`), then an
 overrides file of its own: the system's wiring (:func:`etdmp_ros.system.wiring_overrides`), the
@@ -149,9 +150,12 @@ class Scenario:
         self.demo = Demonstration(recorded.name, recorded.positions - self.bottle_mouth,
                                   recorded.t, recorded.orientations)
         self.start_turn_deg, self.start_scale = TAUGHT_STIR_TURN_DEG, 1.0
-        self.overrides['dmp_server'].update(skill=recorded.name, mode=2,
+        # The scripted hand holds the tool's orientation: the recording's is constant, and mode
+        # 'demo' would turn it by the 150 degrees with the movement (a 10 s turn of the wrist
+        # during the approach, for a stirrer that looks the same either way).
+        self.overrides['dmp_server'].update(skill=recorded.name, mode=2, orientation_mode='tool',
                                             demo_files=[str(self.demo_file)])
-        self.server['mode'] = 2
+        self.server.update(mode=2, orientation_mode='tool')
 
     def _simulation_layout(self):
         """Return ur10_sim's overrides: the skill's goal and obstacles, the stir start pose."""
