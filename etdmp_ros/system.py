@@ -139,7 +139,8 @@ SCENE = (
     P('whiteboard.size', [0.6, 0.6], 'Size of a thin (0.5 mm) white sheet lying on the table, '
       'centred under task_plane.origin; [0, 0]: none.', unit='m'),
     P('whiteboard.color', [0.95, 0.95, 0.95], 'Whiteboard colour, rgb in 0..1.'),
-    P('bottle.position', [0.70, -0.30], 'Where [x, y] the open bottle stands on the table.',
+    P('bottle.position', [0.70, -0.30], 'Where [x, y] the open bottle stands on the table; '
+      'ur10_sim moves it at runtime (ros2 param set /ur10_sim bottle.position "[0.7, -0.28]").',
       unit='m'),
     P('bottle.radius', 0.045, 'Bottle radius.', unit='m'),
     P('bottle.height', 0.20, 'Bottle height; its mouth is at this z.', unit='m'),
@@ -179,7 +180,8 @@ def _scene(*names, **changes):
 _SIM_DYNAMIC = {'dynamic': True, 'dynamic_typing': True}
 #: What the simulation builds from: the parameters of SceneConfig.
 UR10_SIM_SCENE = tuple(
-    _scene(name, **(_SIM_DYNAMIC if name in ('goal_position', 'obstacle_positions') else {}))[0]
+    _scene(name, **(_SIM_DYNAMIC if name in ('goal_position', 'obstacle_positions',
+                                              'bottle.position') else {}))[0]
     for name in SCENE_PARAMETERS)
 UR10_SIM = (
     P('control_rate', 125.0, 'Rate of /joint_states, /clock and the ground truth; velocity '
