@@ -179,9 +179,9 @@ def _scene(*names, **changes):
 #: Parameters of ur10_sim that may change while it runs.
 _SIM_DYNAMIC = {'dynamic': True, 'dynamic_typing': True}
 #: What the simulation builds from: the parameters of SceneConfig.
+_SIM_RUNTIME_SCENE = ('goal_position', 'obstacle_positions', 'bottle.position')
 UR10_SIM_SCENE = tuple(
-    _scene(name, **(_SIM_DYNAMIC if name in ('goal_position', 'obstacle_positions',
-                                              'bottle.position') else {}))[0]
+    _scene(name, **(_SIM_DYNAMIC if name in _SIM_RUNTIME_SCENE else {}))[0]
     for name in SCENE_PARAMETERS)
 UR10_SIM = (
     P('control_rate', 125.0, 'Rate of /joint_states, /clock and the ground truth; velocity '
