@@ -216,7 +216,8 @@ UR10_SIM = (
 
 # ------------------------------------------------------------------------------- perception
 PERCEPTION_SCENE = _scene('camera.position', 'camera.orientation', 'table.center', 'table.size',
-                          'goal_marker.radius', 'obstacle.radius', 'obstacle.height')
+                          'goal_marker.radius', 'obstacle.radius', 'obstacle.height',
+                          'bottle.radius', 'bottle.height')
 _DETECTION = {'dynamic': True}
 PERCEPTION = (
     P('goal_hsv_low', [45, 100, 50], 'Lower corner [h, s, v] of the goal colour (OpenCV HSV: '
@@ -233,6 +234,13 @@ PERCEPTION = (
     P('obstacle_hsv_high', [8, 255, 255], 'Upper corner [h, s, v] of the obstacle colour; a '
       'hue below the low hue wraps through 0 (red).', dynamic=True,
       dynamic_typing=True),
+    P('detect_bottle', True, 'Also locate the open bottle (an upright cylinder of '
+      'bottle.radius and bottle.height) and publish the centre of its mouth on /etdmp/bottle '
+      '(about 2 ms more per frame).', dynamic=True),
+    P('bottle_hsv_low', [100, 100, 40], 'Lower corner [h, s, v] of the bottle colour.',
+      dynamic=True, dynamic_typing=True),
+    P('bottle_hsv_high', [125, 255, 255], 'Upper corner [h, s, v] of the bottle colour.',
+      dynamic=True, dynamic_typing=True),
     P('min_blob_area', 40, 'Smaller colour blobs are ignored. At 640x480 the goal marker seen '
       'from 1.2 m covers about 1000 px, an obstacle about 1500 px.', unit='px',
       value_range=(1, 1_000_000), section='Blobs', **_DETECTION),
