@@ -655,8 +655,8 @@ class Detector:
         """
         Return a copy of the colour image with the detections drawn on it (same channel order).
 
-        Goal: yellow, obstacles: cyan, bottle: magenta (the fitted top-face circle, its centre and x, y, z in mm);
-        rejected blobs: grey boxes with the reason.
+        Goal: yellow, obstacles: cyan, bottle: magenta (the fitted top-face circle, its centre
+        and x, y, z in mm); rejected blobs: grey boxes with the reason.
         """
         image = np.array(rgb, dtype=np.uint8, copy=True)
         palette = {key: value[::-1] if bgr else value for key, value in _DRAW.items()}
