@@ -282,6 +282,8 @@ PERCEPTION = (
 
 # ------------------------------------------------------------------------------- dmp_server
 _RUNTIME = {'dynamic': True}
+#: dmp_server's goal_object: the perceived objects an empty goal frame id may mean.
+GOAL_OBJECTS = ('marker', 'bottle')
 DMP_SERVER_SCENE = (*_scene('tool_offset', 'initial_joint_positions'),
                     *_scene('task_plane.origin', 'task_plane.x_axis', 'task_plane.y_axis',
                             **_RUNTIME))
@@ -353,8 +355,15 @@ DMP_SERVER = (
       choices=('joint_states', 'tool_pose'), section='Inputs', **_RUNTIME),
     P('tool_state_max_age', 1.0, 'An older tool state counts as unknown; 0 = no limit.',
       unit='s', value_range=_DAY, **_RUNTIME),
-    P('goal_max_age', 0.0, 'An older /etdmp/goal counts as none; 0 = no limit.', unit='s',
-      value_range=_DAY, **_RUNTIME),
+    P('goal_max_age', 0.0, 'An older /etdmp/goal (or /etdmp/bottle) counts as none; 0 = no '
+      'limit.', unit='s', value_range=_DAY, **_RUNTIME),
+    P('goal_object', 'marker', 'What an empty goal frame id means: marker = the perceived goal '
+      'marker (/etdmp/goal), bottle = the perceived bottle mouth (/etdmp/bottle); goal_offset '
+      'is added to it, and a plan in execution follows that object.', choices=GOAL_OBJECTS,
+      **_RUNTIME),
+    P('goal_offset', [0.0, 0.0, 0.0], 'Added (base_link) to the perceived goal object for an '
+      'empty goal frame id: e.g. the stirring goal near the bottom of the bottle, [0, 0, '
+      '-0.15] below its mouth.', unit='m', **_RUNTIME),
     P('min_distance', _PLAN.min_distance, 'Start and goal closer than this fail the request '
       '(start equals goal).', unit='m', value_range=(0.0, 1.0), **_RUNTIME),
     P('reach_radius', _REACH.reach, 'UR10 reach about the shoulder (reach check: a simple '
