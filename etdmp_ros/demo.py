@@ -504,8 +504,9 @@ def parse_args(argv=None):
     parser.add_argument('--timeout', default=60.0, type=float,
                         help='s allowed beyond the plan duration for the execution')
     parser.add_argument('--move-goal', action='store_true',
-                        help='move the goal marker (ur10_sim goal_position) while the robot '
-                             'moves: dmp_server follows it with the online ET-DMP')
+                        help='move the goal marker (ur10_sim goal_position; stir: the bottle, '
+                             'bottle.position) while the robot moves: dmp_server follows it '
+                             'with the online ET-DMP')
     parser.add_argument('--domain-id', default=None, type=int,
                         help='ROS_DOMAIN_ID of the demo (default: derived from the process id)')
     return parser.parse_args(argv)

@@ -395,8 +395,9 @@ def read_streams(path):
     ``status``: [(simulated ns at receipt, text)]. Also, in order of arrival: ``paths``, every
     /etdmp/path as (simulated ns at receipt, receipt ns, header stamp ns, pose stamps ns (n,),
     positions (n, 3)); ``goal_seen``: /etdmp/goal as (m, 6) rows of simulated ns at receipt,
-    receipt ns, header stamp ns, x, y, z; ``bottle_seen``: /etdmp/bottle as those; ``logs``: /rosout as [(stamp ns, node, text)] (the
-    nodes stamp their log lines with the wall clock, the clock of the receipt times).
+    receipt ns, header stamp ns, x, y, z; ``bottle_seen``: /etdmp/bottle as those; ``logs``:
+    /rosout as [(stamp ns, node, text)] (the nodes stamp their log lines with the wall clock,
+    the clock of the receipt times).
     """
     tip, reference, commands, command_time, wall, status = [], [], [], [], [], []
     paths, goal_seen, bottle_seen, logs = [], [], [], []

@@ -150,7 +150,7 @@ class Scenario:
 
     @property
     def request_goal(self):
-        """The goal the demo's /generalize requests give: explicit, or None (perceived)."""
+        """Return the goal of the demo's /generalize requests: explicit, or None (perceived)."""
         return None if self.perceived_bottle else self.explicit_goal
 
     @property
