@@ -77,7 +77,8 @@ test-fast: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -m unit test
 
 # The closed loop: camera -> perception -> /generalize -> controller -> MuJoCo UR10 (out/demo/).
-# MOVE_GOAL=1: the goal marker moves by 4 cm while the pen writes (online ET-DMP, --move-goal).
+# MOVE_GOAL=1: the goal marker moves by 4 cm while the pen writes (online ET-DMP, --move-goal);
+# with SKILL=stir the bottle moves by 2 cm and the stirrer follows it.
 SKILL     ?= G
 METHOD    ?= etdmp
 MOVE_GOAL ?=

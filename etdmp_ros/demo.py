@@ -28,7 +28,11 @@ With ``--move-goal`` (``make demo MOVE_GOAL=1``) the demo moves the goal marker
 (:data:`etdmp_ros.scenario.MOVE_GOAL_BY`, 4 cm) at :data:`~etdmp_ros.scenario.MOVE_GOAL_AT` of
 the letter's duration after tracking began, as ``ros2 param set /ur10_sim goal_position`` would;
 dmp_server follows it (online ET-DMP) and the metrics measure the run against the moved marker
-and the plan as executed (:mod:`etdmp_ros.metrics`).
+and the plan as executed (:mod:`etdmp_ros.metrics`). For stir it moves the bottle instead
+(:data:`~etdmp_ros.scenario.MOVE_BOTTLE_BY`, 2 cm, at
+:data:`~etdmp_ros.scenario.MOVE_BOTTLE_AT`, as ``ros2 param set /ur10_sim bottle.position``
+would), and the stir request targets the perceived bottle (dmp_server's ``goal_object:
+bottle``), which dmp_server then follows.
 
 The goal, obstacles and start of each skill: :mod:`etdmp_ros.scenario`.
 """
@@ -51,7 +55,7 @@ from etdmp_ros.processes import (DISCOVERY_VARIABLES, isolated_environment, modu
 from etdmp_ros.recording import (read_streams, Recorder, RecorderError, save_recording,
                                  write_bag)
 from etdmp_ros.robot import CameraIntrinsics
-from etdmp_ros.scenario import MOVE_GOAL_AT, Scenario, ScenarioError, SKILLS
+from etdmp_ros.scenario import Scenario, ScenarioError, SKILLS
 import numpy as np
 
 STARTUP_TIMEOUT = 150.0
@@ -179,7 +183,7 @@ def _wait_for_the_system(recorder, nodes, scenario, live, progress):
 def _plan_for_comparison(recorder, nodes, scenario, other, live, progress):
     """Plan with the other method first, not executed, from the same start to the same goal."""
     recorder.set_server_parameters(method=other, execute=False)
-    _, o_t, o_x, _, reason = _generalize(recorder, nodes, scenario.explicit_goal)
+    _, o_t, o_x, _, reason = _generalize(recorder, nodes, scenario.request_goal)
     if len(o_x):
         progress(f'{METHOD_LABELS[other]} plan (not executed): {len(o_x)} poses over '
                  f'{o_t[-1]:.2f} s')
@@ -196,7 +200,7 @@ def _plan_and_execute(recorder, nodes, scenario, method, live, progress):
     live.start = recorder.latest_tip()
     live.call_ns = recorder.sim_ns
     recorder.request_snapshot('start', live.call_ns)
-    live.stamp, p_t, p_x, p_q, reason = _generalize(recorder, nodes, scenario.explicit_goal)
+    live.stamp, p_t, p_x, p_q, reason = _generalize(recorder, nodes, scenario.request_goal)
     if not len(p_x):
         raise DemoError(f'/generalize returned no plan: {reason}')
     # The plan starts where dmp_server saw the tool (projected onto the task plane for 2D
@@ -208,22 +212,37 @@ def _plan_and_execute(recorder, nodes, scenario, method, live, progress):
              f' published on /etdmp/path; the controller executes it')
 
 
-def _move_goal(recorder, move, live, progress):
-    """Move the goal marker in the simulation, as ``ros2 param set /ur10_sim goal_position``."""
-    before = np.asarray(recorder.goal_truth, dtype=float)
-    after = before + move
-    recorder.set_parameters('ur10_sim', goal_position=after.tolist())
+def _move_goal(recorder, move, live, progress, scenario):
+    """
+    Move the goal marker in the simulation, as ``ros2 param set /ur10_sim goal_position``.
+
+    Stir: the bottle (``bottle.position``); the move is then recorded as the goal's, the
+    bottle's mouth plus the skill's goal offset, before and after.
+    """
+    if scenario.perceived_bottle:
+        mouth = np.asarray(recorder.bottle_truth, dtype=float)
+        moved = mouth + move
+        recorder.set_parameters('ur10_sim', **{'bottle.position': moved[:2].tolist()})
+        before, after = mouth + scenario.goal_offset, moved + scenario.goal_offset
+        what = 'bottle'
+    else:
+        before = np.asarray(recorder.goal_truth, dtype=float)
+        after = before + move
+        recorder.set_parameters('ur10_sim', goal_position=after.tolist())
+        what = 'goal marker'
     live.goal_move = (recorder.sim_ns, before, after)
-    progress(f'goal marker moved by {np.linalg.norm(after - before) * 1e3:.0f} mm to '
+    progress(f'{what} moved by {np.linalg.norm(after - before) * 1e3:.0f} mm; the goal is now '
              f'{np.round(after, 3).tolist()}')
 
 
-def _follow_the_controller(recorder, nodes, live, timeout, progress, move=None, tau=None):
+def _follow_the_controller(recorder, nodes, live, timeout, progress, move=None, tau=None,
+                           scenario=None):
     """
     Report the controller's status until it is idle after the plan, or has failed.
 
-    ``move`` (3,): move the goal marker by this at MOVE_GOAL_AT of the letter's duration
-    ``tau`` (s; the plan's without its obstacle margin) after tracking began (``--move-goal``).
+    ``move`` (3,): move the goal marker (stir: the bottle) by this at ``scenario.move_at`` of
+    the movement's duration ``tau`` (s; the plan's without its obstacle margin) after tracking
+    began (``--move-goal``).
     """
     duration = live.plan[0][-1]
     tau = duration if tau is None else tau
@@ -233,7 +252,7 @@ def _follow_the_controller(recorder, nodes, live, timeout, progress, move=None, 
     while live.end_ns is None:
         nodes.check_alive()
         if move_at is not None and live.goal_move is None and recorder.sim_ns >= move_at:
-            _move_goal(recorder, move, live, progress)
+            _move_goal(recorder, move, live, progress, scenario)
             deadline += duration
         news = recorder.state(live.n_status)
         for ns, text in news[seen:]:
@@ -242,7 +261,7 @@ def _follow_the_controller(recorder, nodes, live, timeout, progress, move=None, 
             if word == 'tracking' and move_at is None:
                 recorder.request_snapshot('middle', ns + int(duration * 0.5e9))
                 if move is not None:
-                    move_at = ns + int(MOVE_GOAL_AT * tau * 1e9)
+                    move_at = ns + int(scenario.move_at * tau * 1e9)
             if word in STATUS_FAILURES:
                 live.failure, live.end_ns = text, ns
             elif word == 'idle' and any(t.split(':')[0] in ('holding', 'tracking')
@@ -272,7 +291,8 @@ def _drive(options, scenario, recorder, nodes, live, progress):
     _plan_for_comparison(recorder, nodes, scenario, other, live, progress)
     _plan_and_execute(recorder, nodes, scenario, options.method, live, progress)
     tau = float(scenario.server['duration']) or float(scenario.demo.duration)
-    _follow_the_controller(recorder, nodes, live, options.timeout, progress, move, tau)
+    _follow_the_controller(recorder, nodes, live, options.timeout, progress, move, tau,
+                           scenario)
     _last_frame(recorder, live)
 
 
@@ -361,7 +381,8 @@ def _run_demo(options, env):
     out = Path(options.out)
     out.mkdir(parents=True, exist_ok=True)
     scenario = Scenario(options.config_dir, options.skill, options.layout, options.parameters,
-                        options.demo_file)
+                        options.demo_file,
+                        perceived_bottle=options.move_goal and options.skill == 'stir')
     progress(f'starting ur10_sim, perception, dmp_server and controller (ROS_DOMAIN_ID '
              f'{env["ROS_DOMAIN_ID"]}, localhost only; logs in {out / "logs"})')
     recorder = Recorder(env['ROS_DOMAIN_ID'], animation=options.animation)
@@ -408,17 +429,17 @@ def _move_summary(m):
     """Return the summary's lines about a goal that moved (``--move-goal``)."""
     follow = m.get('goal_follow', {})
     if m['switch_path_time_s'] is None:
-        return [f'  goal marker moved by {m["goal_moved_by_mm"]:.0f} mm at path time '
+        return [f'  {m["moved_object"]} moved by {m["goal_moved_by_mm"]:.0f} mm at path time '
                 f'{follow.get("goal_moved_at_path_time_s", float("nan")):.2f} s: the plan was '
                 'NOT re-planned (goal error above is to the moved marker)']
     ratio = m['switch_speed_ratio_min']
     return [
-        f'  goal marker moved by {m["goal_moved_by_mm"]:.0f} mm at path time '
+        f'  {m["moved_object"]} moved by {m["goal_moved_by_mm"]:.0f} mm at path time '
         f'{follow["goal_moved_at_path_time_s"]:.2f} s; re-planned online from '
         f'{m["switch_path_time_s"]:.2f} s ({m["plan_updates"]} update(s)); first plan nRMSE '
         f'{format_nrmse(m["nrmse_original_plan"])}; tool speed after the switch >= '
         + ('n/a' if ratio is None else f'{100 * ratio:.0f} %') + " of the plan's",
-        f'  following: marker moved -> first command on the new path '
+        f'  following: {m["moved_object"]} moved -> first command on the new path '
         f'{_ms(follow["goal_change_to_first_command_s"], 1e3)} simulated (perception '
         f'{_ms(follow["perception_latency_s"], 1e3)}, confirmation '
         f'{_ms(follow["confirmation_wait_ms"])}); dmp_server {_ms(follow["dmp_server_ms"])}, '
@@ -494,8 +515,9 @@ def parse_args(argv=None):
     parser.add_argument('--timeout', default=60.0, type=float,
                         help='s allowed beyond the plan duration for the execution')
     parser.add_argument('--move-goal', action='store_true',
-                        help='move the goal marker (ur10_sim goal_position) while the robot '
-                             'moves: dmp_server follows it with the online ET-DMP')
+                        help='move the goal marker (ur10_sim goal_position; stir: the bottle, '
+                             'bottle.position) while the robot moves: dmp_server follows it '
+                             'with the online ET-DMP')
     parser.add_argument('--demo-file', default=None, type=Path, metavar='FILE',
                         help='with --skill stir: a stir taught by moving the arm (rosbag2 .mcap '
                              'of /joint_states, python -m etdmp_ros.kinesthetic), repeated from '

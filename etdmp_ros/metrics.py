@@ -410,8 +410,8 @@ def _executed(run):
 def _goal(run):
     """Return the goal the pen is measured against: the true marker projected (2D)."""
     scene = run.scene
-    if not scene.planar:
-        return run.goal
+    if not scene.planar:    # stir: the explicit goal, or the moved bottle's
+        return run.goal if run.goal_move is None else np.asarray(run.goal_move[2], float)
     marker = run.goal_truth if run.goal_move is None else run.goal_move[2]
     return scene.plane.from_plane(scene.plane.to_plane(np.asarray(marker, dtype=float)))
 
@@ -487,7 +487,9 @@ def _positions(run, tr):
         'tool_at_call': tr.tip_x[at_call].tolist(),
         'perceived_goal': None if run.goal_seen is None else run.goal_seen.tolist(),
         'true_goal_marker': None if run.goal_truth is None else run.goal_truth.tolist(),
-        'goal_source': 'perceived marker' if scene.explicit_goal is None else 'explicit',
+        'goal_source': ('perceived marker' if scene.explicit_goal is None else
+                        'perceived bottle' if getattr(scene, 'perceived_bottle', False)
+                        else 'explicit'),
         'start_quadrant': quadrant(start_rel[:2]),
         'demo_quadrant': quadrant(demo_rel[:2]),
         'start_turn_deg': math.degrees(turn),
@@ -521,16 +523,36 @@ def command_ratios(scene, qd):
     }
 
 
-def bottle_clearances(scene, trace, plan_x):
-    """Stirring: how close the pen tip came to the bottle's wall while inside it (mm)."""
-    mouth, r_b = scene.bottle_mouth, float(scene.scene['bottle.radius'])
+def bottle_clearances(scene, trace, plan_x, trace_mouths=None, plan_mouths=None):
+    """
+    Stirring: how close the pen tip came to the bottle's wall while inside it (mm).
+
+    ``trace_mouths``, ``plan_mouths`` ((n, 3) or None): where the bottle's mouth was at each
+    point (a bottle that moved); None: where the scene puts it.
+    """
+    r_b = float(scene.scene['bottle.radius'])
     out = {}
-    for key, points in (('bottle_wall_clearance_mm', trace),
-                        ('bottle_wall_clearance_plan_mm', plan_x)):
-        inside = points[points[:, 2] < mouth[2]]
-        gap = r_b - np.linalg.norm(inside[:, :2] - mouth[:2], axis=1) - PEN_TIP_RADIUS
+    for key, points, mouths in (('bottle_wall_clearance_mm', trace, trace_mouths),
+                                ('bottle_wall_clearance_plan_mm', plan_x, plan_mouths)):
+        mouths = np.broadcast_to(scene.bottle_mouth if mouths is None else mouths,
+                                 points.shape)
+        inside = points[:, 2] < mouths[:, 2]
+        gap = r_b - np.linalg.norm(points[inside, :2] - mouths[inside, :2], axis=1) \
+            - PEN_TIP_RADIUS
         out[key] = float(gap.min() * 1e3) if len(gap) else None
     return out
+
+
+def _moved_bottle_mouths(run, tr, ex):
+    """Where the mouth was at each trace and executed-plan point of a run whose bottle moved."""
+    scene = run.scene
+    move_ns, before, after = run.goal_move
+    mouth0 = np.asarray(before, float) - scene.goal_offset
+    mouth1 = np.asarray(after, float) - scene.goal_offset
+    tip_t = tr.tip_t[(tr.tip_t >= run.call_ns * 1e-9) & (tr.tip_t <= run.end_ns * 1e-9 + 1e-9)]
+    trace = np.where((tip_t >= move_ns * 1e-9)[:, None], mouth1, mouth0)
+    plan = np.where((ex.t + tr.t0 >= move_ns * 1e-9)[:, None], mouth1, mouth0)
+    return trace, plan
 
 
 def _other_plan(run, tau):
@@ -597,6 +619,20 @@ def goal_seen_after_move(scene, goal_seen, plan_goal, since_ns, threshold,
     return first, confirming
 
 
+def perceived_goal_rows(run):
+    """
+    Return the perceived goal as dmp_server took it: /etdmp/goal's rows (``read_streams``).
+
+    Stir with the perceived bottle: /etdmp/bottle's rows plus the skill's goal offset.
+    """
+    rec, scene = run.rec, run.scene
+    if not getattr(scene, 'perceived_bottle', False):
+        return rec.get('goal_seen', np.zeros((0, 6)))
+    rows = np.array(rec.get('bottle_seen', np.zeros((0, 6))), dtype=float).reshape(-1, 6)
+    rows[:, 3:6] += scene.goal_offset
+    return rows
+
+
 def follow_latencies(run, ex, t0):
     """
     Return the latencies of the first re-plan after the goal moved (``goal_follow``).
@@ -608,7 +644,7 @@ def follow_latencies(run, ex, t0):
     rec, scene = run.rec, run.scene
     move_ns = int(run.goal_move[0])
     threshold = float(scene.server.get('follow_threshold', 0.005))
-    seen = rec.get('goal_seen', np.zeros((0, 6)))
+    seen = perceived_goal_rows(run)
     first, confirming = goal_seen_after_move(scene, seen, run.plan[1][-1], run.call_ns,
                                              threshold)
     out = dict.fromkeys((
@@ -666,6 +702,7 @@ def goal_move_figures(run, tr, ex):
     radius = float(scene.scene['obstacle.radius'])
     first_goal = _placed(scene, before)[0] if scene.planar else run.goal
     figures = {
+        'moved_object': 'bottle' if getattr(scene, 'perceived_bottle', False) else 'goal marker',
         'goal_moved_by_mm': float(np.linalg.norm(np.asarray(after) - before) * 1e3),
         'goal_marker_before': np.asarray(before, dtype=float).tolist(),
         'goal_marker_after': np.asarray(after, dtype=float).tolist(),
@@ -681,7 +718,7 @@ def goal_move_figures(run, tr, ex):
         'switch_path_time_s': None, 'switch_time_s': None, 'switch_point': None,
         'switch_speed_ratio_min': None, 'switch_tool_speed_min_fraction': None,
     }
-    seen = run.rec.get('goal_seen', np.zeros((0, 6)))
+    seen = perceived_goal_rows(run)
     if len(seen):
         figures['perceived_goal_final'] = seen[-1, 3:6].tolist()
         figures['perceived_goal_final_error_mm'] = float(
@@ -805,7 +842,9 @@ def compute_metrics(run):
                'wall_time_s': float(run.wall_time),
                'definitions': DEFINITIONS}
     if not run.scene.planar:
-        metrics.update(bottle_clearances(run.scene, tr.trace, ex.x))
+        mouths = (_moved_bottle_mouths(run, tr, ex) if run.goal_move is not None
+                  and getattr(run.scene, 'perceived_bottle', False) else (None, None))
+        metrics.update(bottle_clearances(run.scene, tr.trace, ex.x, *mouths))
     metrics.update(orientation_figures(run, tr))
     metrics.update(_other_plan(run, tr.tau))
     extra = {'t0': tr.t0, 'tau': tr.tau, 'trace': tr.trace, 'goal': tr.goal,

@@ -66,8 +66,9 @@ def _focus(run, curves):
     if scene.planar:
         focus.append(np.asarray(run.obstacles_truth, dtype=float).reshape(-1, 3))
     else:
-        mouth, r_b = scene.bottle_mouth, float(scene.scene['bottle.radius'])
-        focus.append(mouth + [[r_b, r_b, 0.0], [-r_b, -r_b, -mouth[2]]])
+        r_b = float(scene.scene['bottle.radius'])
+        for mouth, _ in _bottle_mouths(run):
+            focus.append(mouth + [[r_b, r_b, 0.0], [-r_b, -r_b, -mouth[2]]])
     pad = 0.02 + (float(scene.scene['obstacle.radius']) if scene.planar else 0.0)
     return np.concatenate(focus), pad
 
@@ -110,17 +111,33 @@ def _projection(plane, view):
     return xy
 
 
-def _draw_bottle(ax, scene, view, xy):
+def _bottle_mouths(run):
+    """Return [(mouth, moved)]: where the bottle stood, before and after a move (stir)."""
+    scene = run.scene
+    if run.goal_move is None or not getattr(scene, 'perceived_bottle', False):
+        return [(scene.bottle_mouth, False)]
+    return [(np.asarray(run.goal_move[1], float) - scene.goal_offset, False),
+            (np.asarray(run.goal_move[2], float) - scene.goal_offset, True)]
+
+
+def _draw_bottle(ax, run, view, xy):
     from matplotlib.patches import Circle, Rectangle
 
-    mouth, r_b = scene.bottle_mouth, float(scene.scene['bottle.radius'])
-    (h,), (v,) = xy(mouth)
-    if view == 'top':
-        ax.add_patch(Circle((h, v), r_b, fill=False, edgecolor='tab:blue', linewidth=1.5,
-                            label='bottle'))
-    else:
-        ax.add_patch(Rectangle((h - r_b, 0.0), 2 * r_b, mouth[2], fill=False,
-                               edgecolor='tab:blue', linewidth=1.5, label='bottle'))
+    scene = run.scene
+    r_b = float(scene.scene['bottle.radius'])
+    places = _bottle_mouths(run)
+    for mouth, moved in places:
+        (h,), (v,) = xy(mouth)
+        style = ({'edgecolor': 'tab:blue', 'linewidth': 1.5,
+                  'label': 'bottle (after the move)' if moved else 'bottle'}
+                 if moved or len(places) == 1 else
+                 {'edgecolor': '0.6', 'linewidth': 1.0, 'linestyle': '--',
+                  'label': 'bottle before the move'})
+        if view == 'top':
+            ax.add_patch(Circle((h, v), r_b, fill=False, **style))
+        else:
+            ax.add_patch(Rectangle((h - r_b, 0.0), 2 * r_b, mouth[2], fill=False, **style))
+    if view != 'top':
         ax.axhline(0.0, color='0.6', linewidth=1.0)
 
 
@@ -153,7 +170,8 @@ def _draw_markers(ax, run, metrics, extra, xy):
     ax.plot(*xy(extra['goal']), marker='o', markersize=12, markerfacecolor='none',
             markeredgecolor='k', markeredgewidth=1.8, linestyle='none',
             label=('goal (true marker, after the move)' if moved else 'goal (true marker)')
-            if planar else 'goal (requested)', zorder=6)
+            if planar else ('goal (in the moved bottle)' if moved else 'goal (requested)'),
+            zorder=6)
     if planar:
         seen = metrics.get('perceived_goal_final') if moved else None
         ax.plot(*xy(run.goal if seen is None else seen), marker='x', markersize=8,
@@ -161,14 +179,18 @@ def _draw_markers(ax, run, metrics, extra, xy):
 
 
 def _draw_goal_move(ax, run, metrics, extra, xy):
-    """Draw the marker before the move (grey ring), the move, and the switch of plans."""
-    plane = run.scene.plane
-    before = plane.from_plane(plane.to_plane(np.asarray(run.goal_move[1], dtype=float)))
+    """Draw the goal before the move (grey ring), the move, and the switch of plans."""
+    plane, what = run.scene.plane, metrics.get('moved_object', 'goal marker')
+    before = np.asarray(run.goal_move[1], dtype=float)
+    if run.scene.planar:
+        before = plane.from_plane(plane.to_plane(before))
     (h0,), (v0,) = xy(before)
     (h1,), (v1,) = xy(extra['goal'])
     ax.plot(h0, v0, marker='o', markersize=12, markerfacecolor='none', markeredgecolor='0.5',
             markeredgewidth=1.5, linestyle='none', zorder=6,
-            label=f'goal marker before the move ({metrics["goal_moved_by_mm"]:.0f} mm)')
+            label=(f'goal marker before the move ({metrics["goal_moved_by_mm"]:.0f} mm)'
+                   if what == 'goal marker' else
+                   f'goal before the {what} moved ({metrics["goal_moved_by_mm"]:.0f} mm)'))
     ax.annotate('', xy=(h1, v1), xytext=(h0, v0), zorder=6,
                 arrowprops={'arrowstyle': '->', 'color': '0.4', 'linewidth': 1.2,
                             'shrinkA': 7, 'shrinkB': 7})
@@ -178,7 +200,7 @@ def _draw_goal_move(ax, run, metrics, extra, xy):
     moved_at = metrics['goal_follow']['goal_moved_at_path_time_s']
     ax.plot(h, v, marker='D', markersize=7, color='tab:orange', markeredgecolor='k',
             linestyle='none', zorder=8,
-            label=f'switch: marker moved at {moved_at:.2f} s, re-planned from '
+            label=f'switch: {what.split()[-1]} moved at {moved_at:.2f} s, re-planned from '
                   f'{metrics["switch_path_time_s"]:.2f} s (path time)')
     ratio = metrics.get('switch_speed_ratio_min')
     if ratio is not None:
@@ -259,13 +281,15 @@ def _legend_and_title(fig, run, metrics):
     moved = run.goal_move is not None
     fig.suptitle(
         f'{run.scene.skill}: {METHOD_LABELS[run.method]} executed by the simulated UR10'
-        + (f', the goal marker moved by {metrics["goal_moved_by_mm"]:.0f} mm while it wrote'
-           if moved else '') + '\n'
+        + (f', the {metrics.get("moved_object", "goal marker")} moved by '
+           f'{metrics["goal_moved_by_mm"]:.0f} mm while it '
+           + ('wrote' if run.scene.planar else 'stirred') if moved else '') + '\n'
         f'start direction {metrics["start_turn_deg"]:+.0f} deg from the demonstration\'s '
         f'(quadrant {metrics["start_quadrant"]} of the goal; demonstration: '
         f'{metrics["demo_quadrant"]})\ntracking error RMS {metrics["tracking_rms_mm"]:.2f} mm, '
         f'goal error {metrics["goal_error_mm"]:.1f} mm'
-        + (' (to the moved marker)' if moved else '')
+        + ((' (to the moved marker)' if run.scene.planar else ' (in the moved bottle)')
+           if moved else '')
         + f', min obstacle clearance {metrics["min_clearance_mm"]:.1f} mm'
         + (f'\norientation tracking error RMS {metrics["orientation_tracking_rms_deg"]:.3f} '
            f'deg, max {metrics["orientation_tracking_max_deg"]:.3f} deg (the tool turns by up '
@@ -293,7 +317,7 @@ def plot_run(path, run, metrics, extra):
         ax = fig.add_subplot(1, len(views), i + 1)
         xy = _projection(scene.plane, view)
         if not scene.planar:
-            _draw_bottle(ax, scene, view, xy)
+            _draw_bottle(ax, run, view, xy)
         _draw_obstacles(ax, run, view, xy, low, high)
         for points, style, text in curves:
             ax.plot(*xy(points), label=text, **style)

@@ -24,6 +24,7 @@ ET-DMP core and map the result back.
 """
 
 from dataclasses import dataclass, field, replace
+import math
 
 from etdmp_ros.dmp import euclidean_transform, GeneralizationError, METHODS, ObstacleGains
 import numpy as np
@@ -424,6 +425,13 @@ class FollowedPlan:
         self._plan_t, self._plan_orientation = plan.t, plan.orientation
         self.updates = 0
         self._run.warm()
+        # The samples the run will step through while nothing moves, and the run they start
+        # from: at first the plan's own (the offline rollout that the run reproduces), then
+        # those of the last update; update() takes its state at the switch from them.
+        self._base, self._rows = self._run, None
+        traj = plan.trajectory
+        if traj is not None and len(traj.t) == len(plan.t) and len(traj.t) > 1:
+            self._rows = self._run._replayed(traj.x[1:], traj.v[1:], traj.a[1:])
 
     def placed(self, points):
         """Return base_link ``points`` (..., 3) as the plan uses them (on the task plane, 2D)."""
@@ -445,6 +453,24 @@ class FollowedPlan:
         i = np.clip(np.searchsorted(self._plan_t, np.asarray(t) + 1e-9) - 1, 0,
                     len(self._plan_t) - 1)
         return pose_orientations(self._plan_orientation, len(self._plan_t))[i]
+
+    def _at(self, t):
+        """
+        Return the online run at path time ``t`` (at or after the run's own time).
+
+        A sample of the rows kept, where ``t`` is one of theirs (no integration: the sample is
+        the one the path holds), else the run advanced to ``t``.
+        """
+        base, rows = self._base, self._rows
+        if rows is not None:
+            i = int(round((t - base.t) / base.dt)) - 1
+            if -1 <= i < len(rows.t):
+                run = base.copy()
+                if i >= 0:
+                    run._set_row(rows, i)
+                return run
+        self._run.run(t)
+        return self._run
 
     def update(self, t_switch, goal=None, obstacles=None, t_max=None):
         """
@@ -469,18 +495,29 @@ class FollowedPlan:
                 raise PlanningError(f"goal {_fmt(goal_b)} is out of the UR10's reach: "
                                     f'{outside[1]}')
         k = self.index(max(t_switch, self._run.t))
-        run = self._run
-        run.run(self.t[k])      # in step with the path as it stands
+        run = self._at(self.t[k])   # in step with the path as it stands
         t_max = self.duration + self._run.tau if t_max is None else t_max
         trial = run.copy()      # what-if: the run itself changes only on success
         try:
             with np.errstate(over='raise', invalid='raise', divide='raise'):
-                x, v, _ = trial.step(goal=goal_s, obstacles=obstacles_s)
-                after = trial.copy()
-                _, xs, vs, _ = trial.run(t_max)
+                # The step that takes the new input and the rest of the movement in one
+                # call of the numba loop (what a step() and a run() give, to rounding).
+                trial._take(goal=goal_s, obstacles=obstacles_s)
+                rows = trial._rows(int(math.floor((t_max - trial.t) / trial.dt + 0.5)))
+                if rows is not None and len(rows.t):
+                    after = trial.copy()
+                    after._set_row(rows, 0)
+                    xs, vs = rows.x, rows.v
+                    kept = trial, rows
+                else:           # only step() can (the filtered goal passes by the start)
+                    kept = None, None
+                    trial = run.copy()
+                    x, v, _ = trial.step(goal=goal_s, obstacles=obstacles_s)
+                    after = trial.copy()
+                    _, xs, vs, _ = trial.run(t_max)
+                    xs, vs = np.vstack([x[None], xs]), np.vstack([v[None], vs])
         except (GeneralizationError, ArithmeticError) as err:
             raise PlanningError(str(err)) from None
-        xs, vs = np.vstack([x[None], xs]), np.vstack([v[None], vs])
         positions = space.outward(xs)
         outside = settings.workspace.violation(positions)
         if outside is not None:
@@ -497,6 +534,7 @@ class FollowedPlan:
             self.orientation = np.concatenate([self.orientation[:keep],
                                                self.orientations_at(t_new)])
         self._run = after
+        self._base, self._rows = kept
         if goal_s is not None:
             self.goal = space.outward(goal_s)
         if obstacles_s is not None:

@@ -57,6 +57,7 @@ COLOR_TOPIC = '/camera/camera/color/image_raw'
 DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
 PATH_TOPIC = '/etdmp/path'
 GOAL_SEEN_TOPIC = '/etdmp/goal'
+BOTTLE_SEEN_TOPIC = '/etdmp/bottle'
 ROSOUT_TOPIC = '/rosout'
 JOINTS_TOPIC = '/joint_states'
 #: Topics left out of the recording, with the reason (metrics.json ``recording.not_recorded``).
@@ -66,7 +67,7 @@ NOT_RECORDED = {
 }
 #: The streams :func:`read_streams` returns for the metrics.
 MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC, PATH_TOPIC,
-                   GOAL_SEEN_TOPIC, ROSOUT_TOPIC, JOINTS_TOPIC)
+                   GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC, ROSOUT_TOPIC, JOINTS_TOPIC)
 
 
 class Stream:
@@ -110,7 +111,7 @@ class Recorder(BackgroundNode):
         self.streams = {}             # topic -> Stream
         self.unrecorded = {}          # topic -> why not
         self.status = []              # (sim ns at receipt, text)
-        self.goal_truth = self.obstacles_truth = None
+        self.goal_truth = self.obstacles_truth = self.bottle_truth = None
         self.goal_seen = self.obstacles_seen = None
         self.goal_seen_stamp = 0
         self.camera_info = None
@@ -142,6 +143,8 @@ class Recorder(BackgroundNode):
                 (TIP_TOPIC, PointStamped, STREAM, self._on_tip),
                 ('/ur10_sim/ground_truth/goal', PointStamped, 10, self._on_goal_truth),
                 ('/ur10_sim/ground_truth/obstacles', PoseArray, 10, self._on_obstacles_truth),
+                ('/ur10_sim/ground_truth/bottle', PointStamped, 10, self._on_bottle_truth),
+                (BOTTLE_SEEN_TOPIC, PointStamped, 10, None),
                 (GOAL_SEEN_TOPIC, PointStamped, 10, self._on_goal_seen),
                 ('/etdmp/obstacles', PoseArray, 10, self._on_obstacles_seen),
                 (COMMAND_TOPIC, Float64MultiArray, STREAM, None),
@@ -212,6 +215,9 @@ class Recorder(BackgroundNode):
 
     def _on_goal_truth(self, raw):
         self.goal_truth = point_to_numpy(deserialize_message(raw, PointStamped).point)
+
+    def _on_bottle_truth(self, raw):
+        self.bottle_truth = point_to_numpy(deserialize_message(raw, PointStamped).point)
 
     def _on_obstacles_truth(self, raw):
         self.obstacles_truth = pose_array_to_numpy(deserialize_message(raw, PoseArray))
@@ -393,12 +399,13 @@ def read_streams(path):
     ``status``: [(simulated ns at receipt, text)]. Also, in order of arrival: ``paths``, every
     /etdmp/path as (simulated ns at receipt, receipt ns, header stamp ns, pose stamps ns (n,),
     positions (n, 3)); ``goal_seen``: /etdmp/goal as (m, 6) rows of simulated ns at receipt,
-    receipt ns, header stamp ns, x, y, z; ``logs``: /rosout as [(stamp ns, node, text)] (the
-    nodes stamp their log lines with the wall clock, the clock of the receipt times).
+    receipt ns, header stamp ns, x, y, z; ``bottle_seen``: /etdmp/bottle as those; ``logs``:
+    /rosout as [(stamp ns, node, text)] (the nodes stamp their log lines with the wall clock,
+    the clock of the receipt times).
     """
     tip, reference, commands, command_time, wall, status = [], [], [], [], [], []
     joints = []
-    paths, goal_seen, logs = [], [], []
+    paths, goal_seen, bottle_seen, logs = [], [], [], []
     sim_ns = 0
     for topic, _, log_ns, data in bag.read_messages(path, MEASURED_TOPICS):
         if topic == TIP_TOPIC:
@@ -429,10 +436,11 @@ def read_streams(path):
             _, positions, _ = path_to_numpy(msg)
             stamps = np.array([stamp_to_ns(p.header.stamp) for p in msg.poses], dtype=np.int64)
             paths.append((sim_ns, log_ns, stamp_to_ns(msg.header.stamp), stamps, positions))
-        elif topic == GOAL_SEEN_TOPIC:
+        elif topic in (GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC):
             msg = deserialize_message(data, PointStamped)
-            goal_seen.append((sim_ns, log_ns, stamp_to_ns(msg.header.stamp), msg.point.x,
-                              msg.point.y, msg.point.z))
+            rows = goal_seen if topic == GOAL_SEEN_TOPIC else bottle_seen
+            rows.append((sim_ns, log_ns, stamp_to_ns(msg.header.stamp), msg.point.x,
+                         msg.point.y, msg.point.z))
         else:
             msg = deserialize_message(data, Log)
             logs.append((stamp_to_ns(msg.stamp), msg.name, msg.msg))
@@ -448,6 +456,7 @@ def read_streams(path):
             'status': status,
             'paths': paths,
             'goal_seen': np.array(goal_seen, dtype=float).reshape(-1, 6),
+            'bottle_seen': np.array(bottle_seen, dtype=float).reshape(-1, 6),
             'logs': logs}
 
 

@@ -12,6 +12,9 @@ simulation starts with the stirrer above the bottle, its start direction turned 
 the vertical from the demonstration's (:data:`STIR_START_TURN_DEG`); the goal is explicit: the
 bottle's mouth centre plus the demonstration's goal offset (the built-in stir demo's origin is
 the mouth), near the bottom, because the marker on the table cannot be seen inside a bottle.
+With ``perceived_bottle`` (the demo's ``--move-goal`` for stir) the goal is the perceived
+bottle instead: dmp_server's ``goal_object: bottle`` and ``goal_offset`` the demonstration's
+goal offset, the request's goal frame empty, so that a plan in execution follows the bottle.
 The request's start stays empty (the tool's current position). Letters are written in 4 s,
 wiping in 5 s (:data:`DURATIONS`, dmp_server's ``duration``).
 
@@ -76,6 +79,13 @@ MOVE_GOAL_BY = {'G': [0.0, 0.04, 0.0], 'P': [0.0, 0.04, 0.0], 'R': [0.04, 0.0, 0
 #: ``duration``, the plan's without its obstacle margin) after tracking began; for G about 35 %
 #: of the letter's length is written by then.
 MOVE_GOAL_AT = 0.4
+#: Stir with ``--move-goal``: the bottle moves by this (base_link, m; ur10_sim's
+#: ``bottle.position``) at MOVE_BOTTLE_AT of the stir's duration, while the stirrer comes down
+#: towards the mouth (at 10 % it is 0.11 m above it, and enters it at about 22 %). Not later:
+#: a bottle put 2 cm away in an instant while the stirrer circles 25 mm from its axis inside
+#: it would push its wall through the stirrer before any plan could follow.
+MOVE_BOTTLE_BY = [0.0, 0.02, 0.0]
+MOVE_BOTTLE_AT = 0.1
 
 
 class ScenarioError(ValueError):
@@ -97,6 +107,7 @@ class Scenario:
     layout: str = 'skill'
     parameters: dict = field(default_factory=dict)
     demo_file: Path = None
+    perceived_bottle: bool = False
     scene: dict = field(init=False)
     server: dict = field(init=False)
     controller: dict = field(init=False)
@@ -167,15 +178,37 @@ class Scenario:
         if self.skill == 'stir':
             self.explicit_goal = self.bottle_mouth + self.demo.positions[-1]
             sim['initial_joint_positions'] = stir_start_joints(self).tolist()
+            if self.perceived_bottle:
+                self.overrides['dmp_server'].update(
+                    goal_object='bottle', goal_offset=[float(v) for v in self.goal_offset])
+        elif self.perceived_bottle:
+            raise ScenarioError(f'only stir targets the bottle, not {self.skill!r}')
         return sim
 
     @property
+    def goal_offset(self):
+        """Stir: the goal relative to the bottle's mouth (the demonstration's own goal)."""
+        return np.asarray(self.demo.positions[-1], dtype=float)
+
+    @property
+    def request_goal(self):
+        """Return the goal of the demo's /generalize requests: explicit, or None (perceived)."""
+        return None if self.perceived_bottle else self.explicit_goal
+
+    @property
     def goal_move(self):
-        """How the goal marker moves with ``--move-goal`` (base_link, m)."""
+        """How the goal marker (stir: the bottle) moves with ``--move-goal`` (base_link, m)."""
+        if self.skill == 'stir':
+            return np.array(MOVE_BOTTLE_BY, dtype=float)
         if self.skill not in MOVE_GOAL_BY:
             raise ScenarioError(f'--move-goal moves the perceived goal marker; the goal of '
                                 f'{self.skill!r} is explicit (skills: {", ".join(MOVE_GOAL_BY)})')
         return np.array(MOVE_GOAL_BY[self.skill], dtype=float)
+
+    @property
+    def move_at(self):
+        """Fraction of the movement's duration at which ``--move-goal`` moves the goal."""
+        return MOVE_BOTTLE_AT if self.skill == 'stir' else MOVE_GOAL_AT
 
     @property
     def planar(self):

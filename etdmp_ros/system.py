@@ -139,7 +139,8 @@ SCENE = (
     P('whiteboard.size', [0.6, 0.6], 'Size of a thin (0.5 mm) white sheet lying on the table, '
       'centred under task_plane.origin; [0, 0]: none.', unit='m'),
     P('whiteboard.color', [0.95, 0.95, 0.95], 'Whiteboard colour, rgb in 0..1.'),
-    P('bottle.position', [0.70, -0.30], 'Where [x, y] the open bottle stands on the table.',
+    P('bottle.position', [0.70, -0.30], 'Where [x, y] the open bottle stands on the table; '
+      'ur10_sim moves it at runtime (ros2 param set /ur10_sim bottle.position "[0.7, -0.28]").',
       unit='m'),
     P('bottle.radius', 0.045, 'Bottle radius.', unit='m'),
     P('bottle.height', 0.20, 'Bottle height; its mouth is at this z.', unit='m'),
@@ -178,8 +179,9 @@ def _scene(*names, **changes):
 #: Parameters of ur10_sim that may change while it runs.
 _SIM_DYNAMIC = {'dynamic': True, 'dynamic_typing': True}
 #: What the simulation builds from: the parameters of SceneConfig.
+_SIM_RUNTIME_SCENE = ('goal_position', 'obstacle_positions', 'bottle.position')
 UR10_SIM_SCENE = tuple(
-    _scene(name, **(_SIM_DYNAMIC if name in ('goal_position', 'obstacle_positions') else {}))[0]
+    _scene(name, **(_SIM_DYNAMIC if name in _SIM_RUNTIME_SCENE else {}))[0]
     for name in SCENE_PARAMETERS)
 UR10_SIM = (
     P('control_rate', 125.0, 'Rate of /joint_states, /clock and the ground truth; velocity '
@@ -220,7 +222,8 @@ UR10_SIM = (
 
 # ------------------------------------------------------------------------------- perception
 PERCEPTION_SCENE = _scene('camera.position', 'camera.orientation', 'table.center', 'table.size',
-                          'goal_marker.radius', 'obstacle.radius', 'obstacle.height')
+                          'goal_marker.radius', 'obstacle.radius', 'obstacle.height',
+                          'bottle.radius', 'bottle.height')
 _DETECTION = {'dynamic': True}
 PERCEPTION = (
     P('goal_hsv_low', [45, 100, 50], 'Lower corner [h, s, v] of the goal colour (OpenCV HSV: '
@@ -237,6 +240,13 @@ PERCEPTION = (
     P('obstacle_hsv_high', [8, 255, 255], 'Upper corner [h, s, v] of the obstacle colour; a '
       'hue below the low hue wraps through 0 (red).', dynamic=True,
       dynamic_typing=True),
+    P('detect_bottle', True, 'Also locate the open bottle (an upright cylinder of '
+      'bottle.radius and bottle.height) and publish the centre of its mouth on /etdmp/bottle '
+      '(about 2 ms more per frame).', dynamic=True),
+    P('bottle_hsv_low', [100, 100, 40], 'Lower corner [h, s, v] of the bottle colour.',
+      dynamic=True, dynamic_typing=True),
+    P('bottle_hsv_high', [125, 255, 255], 'Upper corner [h, s, v] of the bottle colour.',
+      dynamic=True, dynamic_typing=True),
     P('min_blob_area', 40, 'Smaller colour blobs are ignored. At 640x480 the goal marker seen '
       'from 1.2 m covers about 1000 px, an obstacle about 1500 px.', unit='px',
       value_range=(1, 1_000_000), section='Blobs', **_DETECTION),
@@ -278,6 +288,8 @@ PERCEPTION = (
 
 # ------------------------------------------------------------------------------- dmp_server
 _RUNTIME = {'dynamic': True}
+#: dmp_server's goal_object: the perceived objects an empty goal frame id may mean.
+GOAL_OBJECTS = ('marker', 'bottle')
 DMP_SERVER_SCENE = (*_scene('tool_offset', 'initial_joint_positions'),
                     *_scene('task_plane.origin', 'task_plane.x_axis', 'task_plane.y_axis',
                             **_RUNTIME))
@@ -355,8 +367,15 @@ DMP_SERVER = (
       choices=('joint_states', 'tool_pose'), section='Inputs', **_RUNTIME),
     P('tool_state_max_age', 1.0, 'An older tool state counts as unknown; 0 = no limit.',
       unit='s', value_range=_DAY, **_RUNTIME),
-    P('goal_max_age', 0.0, 'An older /etdmp/goal counts as none; 0 = no limit.', unit='s',
-      value_range=_DAY, **_RUNTIME),
+    P('goal_max_age', 0.0, 'An older /etdmp/goal (or /etdmp/bottle) counts as none; 0 = no '
+      'limit.', unit='s', value_range=_DAY, **_RUNTIME),
+    P('goal_object', 'marker', 'What an empty goal frame id means: marker = the perceived goal '
+      'marker (/etdmp/goal), bottle = the perceived bottle mouth (/etdmp/bottle); goal_offset '
+      'is added to it, and a plan in execution follows that object.', choices=GOAL_OBJECTS,
+      **_RUNTIME),
+    P('goal_offset', [0.0, 0.0, 0.0], 'Added (base_link) to the perceived goal object for an '
+      'empty goal frame id: e.g. the stirring goal near the bottom of the bottle, [0, 0, '
+      '-0.15] below its mouth.', unit='m', **_RUNTIME),
     P('min_distance', _PLAN.min_distance, 'Start and goal closer than this fail the request '
       '(start equals goal).', unit='m', value_range=(0.0, 1.0), **_RUNTIME),
     P('reach_radius', _REACH.reach, 'UR10 reach about the shoulder (reach check: a simple '

@@ -69,6 +69,7 @@ class Client:
             'joint_states': self.node.create_publisher(JointState, '/joint_states', 10),
             'goal': self.node.create_publisher(PointStamped, '/etdmp/goal', 10),
             'obstacles': self.node.create_publisher(PoseArray, '/etdmp/obstacles', 10),
+            'bottle': self.node.create_publisher(PointStamped, '/etdmp/bottle', 10),
             'tool_pose': self.node.create_publisher(PoseStamped, '/etdmp/tool_pose', 10),
             'demonstrations': self.node.create_publisher(Path, '/etdmp/demonstrations', 10),
         }
@@ -637,6 +638,46 @@ def test_a_plan_in_execution_follows_an_obstacle_that_appears(server, client):
     assert np.linalg.norm(y[-1] - x[-1]) < 1e-3
     assert 'following: obstacles moved to' in server.log()
     client.spin_for(0.5)    # the cleared obstacle set is followed too: back to no obstacle
+
+
+def test_the_bottle_as_goal_object_plans_stirring_and_follows_the_moved_bottle(server, client):
+    # goal_object bottle: an empty goal frame id means the perceived bottle mouth plus
+    # goal_offset (the stir demonstration's goal below the mouth); the plan in execution
+    # follows the bottle when it moves, and not the marker.
+    mouth = np.array(SCENE['bottle']['position'] + [SCENE['bottle']['height']])
+    demo = builtin_demo('stir')
+    start = mouth + demo.start + [0.03, -0.02, 0.05]
+    client.publish('bottle', PointStamped(header=BASE, point=point_msg(mouth)))
+    assert client.set_parameters(skill='stir', goal_object='bottle',
+                                 goal_offset=[float(v) for v in demo.goal])[0].successful
+    try:
+        del client.paths[:]
+        t, x, _, plan = client.call(start, None, goal_frame='')
+        assert len(x) > 100
+        assert np.linalg.norm(x[-1] - (mouth + demo.goal)) < 1e-3
+        assert nrmse(x, demo.positions) < 0.005
+        deadline = time.monotonic() + TIMEOUT
+        while not client.paths:
+            assert time.monotonic() < deadline, 'the plan was not published'
+            client.spin_for(0.05)
+        # The marker moving is not the goal any more.
+        client.publish('goal', PointStamped(header=BASE, point=point_msg(
+            np.array(SCENE['goal_position']) + [0.0, 0.05, 0.0])), times=4)
+        assert len(client.paths) == 1, 'the marker was followed with goal_object bottle'
+        moved = mouth + [0.0, 0.02, 0.0]
+        client.publish('bottle', PointStamped(header=BASE, point=point_msg(moved)), times=4)
+        deadline = time.monotonic() + TIMEOUT
+        while len(client.paths) < 2:
+            assert time.monotonic() < deadline, f'the bottle was not followed:\n{server.log()}'
+            client.spin_for(0.05)
+        _, y, _ = path_to_numpy(client.paths[-1])
+        assert np.linalg.norm(y[-1] - (moved + demo.goal)) < 1e-3
+        for bad in ([0.0, 0.0], [0.0, math.nan, 0.0]):
+            assert not client.set_parameters(goal_offset=bad)[0].successful
+        assert not client.set_parameters(goal_object='cup')[0].successful
+    finally:
+        assert client.set_parameters(skill='G', goal_object='marker',
+                                     goal_offset=[0.0, 0.0, 0.0])[0].successful
 
 
 def test_teaching_at_runtime_survives_a_restart(colcon_install, ros_env, tmp_path):

@@ -28,6 +28,13 @@ velocity and acceleration limits, no stop-and-go at the switch of plans (the too
 least 20 % of the plan's there, unless the plan itself slows) and no second approach, and the
 trace keeps the demonstration's shape placed at the new goal (nRMSE within twice the no-move
 run's + 0.05; the G-idle run's metrics are reused).
+
+Case ``stir-move`` (idle only): the same checks while stirring, with the bottle moved by 2 cm
+(ur10_sim's ``bottle.position``) at 10 % of the stir, the stirrer coming down towards its mouth;
+the request targets the perceived bottle (/etdmp/bottle, dmp_server's ``goal_object: bottle``
+with the demonstration's goal offset). The stirrer ends within 2 mm of the goal in the moved
+bottle and never touches its wall (the clearance against the bottle where it stood at each
+moment); the stir-idle run is the no-move one.
 """
 
 from collections import defaultdict
@@ -88,10 +95,15 @@ def run(request, colcon_install, module_ros_env, tmp_path_factory):
     return _run((skill, load, False), colcon_install, module_ros_env, tmp_path_factory)
 
 
-@pytest.fixture(scope='module', params=['G'], ids=['G-move'])
+#: How far the goal moves with --move-goal (mm): the issue's 3-5 cm for a letter, 2 cm for the
+#: bottle.
+MOVE_RANGE_MM = {'G': (30.0, 50.0), 'stir': (19.9, 20.1)}
+
+
+@pytest.fixture(scope='module', params=['G', 'stir'], ids=['G-move', 'stir-move'])
 def moved(request, colcon_install, module_ros_env, tmp_path_factory):
     """
-    Run the demo with the goal marker moved while the pen writes (idle machine).
+    Run the demo with the goal marker (stir: the bottle) moved while the tool moves (idle).
 
     Return (metrics, output folder, metrics of the same skill without the move).
     """
@@ -284,15 +296,21 @@ def test_the_recording_holds_the_run_as_the_readme_lists_it(run):
 
 def test_moved_goal_the_pen_ends_at_the_new_marker(moved):
     m, _, _ = moved
-    assert 30.0 <= m['goal_moved_by_mm'] <= 50.0        # the issue's 3-5 cm
+    low, high = MOVE_RANGE_MM[m['skill']]
+    assert low <= m['goal_moved_by_mm'] <= high
     before, after = np.array(m['goal_marker_before']), np.array(m['goal_marker_after'])
-    assert np.linalg.norm(after - np.array(m['true_goal_marker'])) > 0.03
-    # goal_error_mm: to the marker's final position, projected onto the task plane.
+    # The goal before the move: the marker, or (stir) the explicit goal in the unmoved bottle.
+    first = np.array(m['true_goal_marker'] if m['skill'] != 'stir' else m['goal'])
+    assert np.linalg.norm(before - first) < 1e-9
+    assert np.linalg.norm(after - first) > 0.9 * low * 1e-3
+    # goal_error_mm: to the marker's final position, projected onto the task plane; stir: to
+    # the goal in the moved bottle (its mouth plus the demonstration's goal offset).
     assert m['goal_error_mm'] < 2.0, m['goal_error_mm']
-    assert m['goal_error_vs_first_marker_mm'] > 30.0
+    assert m['goal_error_vs_first_marker_mm'] > 0.9 * low
     assert np.linalg.norm(np.array(m['executed_plan_end'])[:2] - after[:2]) < 3e-3
     assert np.linalg.norm(np.array(m['perceived_goal_final']) - after) < 3e-3
-    assert np.linalg.norm(before - np.array(m['true_goal_marker'])) < 1e-9
+    if m['skill'] == 'stir':
+        assert m['goal_source'] == 'perceived bottle' and m['moved_object'] == 'bottle'
 
 
 def test_moved_goal_commands_within_the_limits(moved):
@@ -310,10 +328,12 @@ def test_moved_goal_no_stop_and_go_and_no_second_approach(moved):
     assert m['switch_speed_samples'] >= 20                       # 0.5 s at 125 Hz, mostly
     assert m['switch_speed_ratio_min'] >= 0.2, m['switch_speed_ratio_min']
     assert m['switch_tool_speed_min_fraction'] >= 0.2, m['switch_tool_speed_min_fraction']
-    # The controller took the re-planned remainder over without an approach.
+    # The controller took the re-planned remainder over without an approach (stir starts at
+    # the plan's start: no approach at all).
     words = [text.split(':')[0] for text in m['controller_status']]
-    assert words.count('approaching') == 1, m['controller_status']
-    assert words.index('approaching') < words.index('tracking') < words.index('holding')
+    assert words.count('approaching') == (0 if m['skill'] == 'stir' else 1), words
+    assert words.count('tracking') == 1 and words.index('tracking') < words.index('holding')
+    assert 'approaching' not in words[words.index('tracking'):], words
 
 
 def test_moved_goal_keeps_the_shape(moved):
@@ -323,6 +343,11 @@ def test_moved_goal_keeps_the_shape(moved):
     assert m['nrmse_trace'] <= 2.0 * still['nrmse_trace'] + 0.05, (m['nrmse_trace'],
                                                                    still['nrmse_trace'])
     assert m['min_clearance_mm'] > 0.0
+    if m['skill'] == 'stir':
+        # The stirrer never touched the bottle's wall, measured against the bottle where it
+        # stood at each moment (the trace and the plan as executed).
+        assert m['bottle_wall_clearance_mm'] > 0.0, m['bottle_wall_clearance_mm']
+        assert m['bottle_wall_clearance_plan_mm'] > 0.0
 
 
 def test_moved_goal_dmp_server_followed_it(moved):

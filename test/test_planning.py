@@ -326,3 +326,53 @@ def test_a_followed_plan_keeps_the_orientation_of_the_same_phase(stir_skill):
     np.testing.assert_array_equal(followed.orientation[k:n], plan.orientation[k:n])
     np.testing.assert_array_equal(followed.orientation[n:],
                                   np.tile(plan.orientation[-1], (len(followed.t) - n, 1)))
+
+
+def _stepped_reference(skill, plan, settings, plane, moves):
+    """Return the path of FollowedPlan.update as the online run's step() and run() give it."""
+    space_in = (lambda p: plane.to_plane(p)) if plane is not None else (lambda p: p)
+    space_out = (lambda p: plane.from_plane(p)) if plane is not None else (lambda p: p)
+    run = skill.online(space_in(plan.start), space_in(plan.goal), space_in(plan.obstacles),
+                       dt=settings.output_period, tau=settings.duration or None)
+    t, x = plan.t.copy(), plan.positions.copy()
+    for t_switch, goal, obstacles in moves:
+        k = int(round(t_switch / run.dt))
+        run.run(t[k])
+        x0, _, _ = run.step(goal=space_in(goal),
+                            obstacles=None if obstacles is None else space_in(obstacles))
+        after = run.copy()
+        _, xs, _, _ = run.run(t[-1] + run.tau)
+        x = np.concatenate([x[:k + 1], space_out(np.vstack([x0[None], xs]))])
+        t = np.concatenate([t[:k + 1], after.t + run.dt * np.arange(len(xs) + 1)])
+        run = after
+    return t, x
+
+
+@pytest.mark.parametrize('name', ['G', 'stir'])
+def test_a_followed_plan_is_the_online_run_stepped_and_run(name):
+    # update() takes the run's state at the switch from the samples the path holds and
+    # integrates the step that takes the new input with the rest in one call: the same path
+    # as the online run stepped to the switch, stepped with the new goal and run to the end.
+    skill = learn(builtin_demo(name))
+    settings = PlanSettings(duration=4.0)
+    if name == 'G':
+        plane = TaskPlane.create([0.75, 0.15, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0], 0.003)
+        start, goal = np.array([0.70, 0.20, 0.0]), np.array([0.838, 0.1, 0.0])
+        obstacles = np.array([[0.76, 0.16, 0.0]])
+        shift = np.array([0.04, 0.0, 0.0])
+    else:
+        plane = None
+        start, goal = np.array([0.55, 0.25, 0.30]), np.array([0.70, 0.10, 0.22])
+        obstacles = np.zeros((0, 3))
+        shift = np.array([0.0, 0.02, 0.0])
+    plan = plan_path(skill, start, goal, obstacles, settings, plane)
+    moves = [(1.6, goal + shift, None), (1.9, goal + 2 * shift, obstacles + shift / 4),
+             (2.5, goal + shift, None)]
+    followed = FollowedPlan(skill, plan, settings, plane)
+    for t_switch, new_goal, new_obstacles in moves:
+        followed.update(t_switch, goal=new_goal, obstacles=new_obstacles)
+    t, x = _stepped_reference(skill, plan, settings, plane, moves)
+    assert followed.t.shape == t.shape
+    np.testing.assert_allclose(followed.t, t, atol=1e-12)
+    size = float(np.max(np.linalg.norm(plan.positions - plan.goal, axis=1)))
+    assert np.max(np.abs(followed.positions - x)) <= 1e-9 * size

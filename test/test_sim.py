@@ -201,6 +201,39 @@ def test_moved_objects_are_seen_where_they_are(sim):
     sim.reset()
 
 
+def test_the_bottle_moves_with_its_collision_geometry_and_bad_values_are_refused(sim):
+    # bottle.position at runtime (ur10_sim's parameter): the bottle's geometry, the one that
+    # collides and the one the camera renders, stands where it was put.
+    import mujoco
+    sim.reset()
+    start = np.array(sim.scene.bottle_position, dtype=float)
+    np.testing.assert_allclose(sim.bottle_mouth, [*start, sim.scene.bottle_height])
+    moved = start + [0.0, 0.02]
+    sim.set_bottle(moved)
+    np.testing.assert_allclose(sim.bottle_position, moved)
+    geom = sim.model.geom('bottle').id
+    np.testing.assert_allclose(sim.data.geom_xpos[geom][:2], moved, atol=1e-9)
+    assert sim.model.geom_contype[geom] or sim.model.geom_conaffinity[geom]
+
+    def wall_hit(x, y):
+        # A ray down onto the wall's top: the bottle's geometry is there, or it is not.
+        point = np.array([x, y, sim.scene.bottle_height + 0.1])
+        geomid = np.array([-1], dtype=np.int32)
+        mujoco.mj_ray(sim.model, sim.data, point, np.array([0.0, 0.0, -1.0]), None, 1, -1,
+                      geomid)
+        return int(geomid[0]) == geom
+
+    rim = sim.scene.bottle_radius - 0.002
+    assert wall_hit(moved[0] + rim, moved[1])
+    assert not wall_hit(start[0], start[1] - rim)      # where its wall was: nothing now
+    for bad in ([0.7], [0.7, float('nan')], 'here'):
+        with pytest.raises(ValueError):
+            sim.set_bottle(bad)
+    np.testing.assert_allclose(sim.bottle_position, moved)
+    sim.reset()
+    np.testing.assert_allclose(sim.bottle_position, start)
+
+
 # ------------------------------------------------------------------------------------- camera
 def test_intrinsics_are_a_d435_colour_camera(sim):
     k = sim.intrinsics

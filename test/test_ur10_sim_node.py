@@ -35,6 +35,7 @@ TOPICS = {
     '/camera/camera/color/camera_info': CameraInfo,
     '/ur10_sim/ground_truth/goal': PointStamped,
     '/ur10_sim/ground_truth/obstacles': PoseArray,
+    '/ur10_sim/ground_truth/bottle': PointStamped,
     '/ur10_sim/ground_truth/tool_tip': PointStamped,
 }
 
@@ -312,6 +313,17 @@ def test_commands_watchdog_and_runtime_parameters(launch):
     assert client.set_parameter('obstacle_positions', []).successful
     client.wait_for(lambda: len(client.received('/ur10_sim/ground_truth/obstacles')[-1].poses)
                     == 0, 5.0, 'no obstacles', sim)
+    # bottle.position moves the bottle; its mouth is the ground truth (z = bottle.height).
+    height = read_parameter_file(config_path('scene.yaml'))['bottle.height']
+    assert client.set_parameter('bottle.position', '[0.7, -0.28]').successful     # a string
+    client.wait_for(lambda: abs(client.received('/ur10_sim/ground_truth/bottle')[-1].point.y
+                                + 0.28) < 1e-9, 5.0, 'the bottle to move', sim)
+    mouth = client.received('/ur10_sim/ground_truth/bottle')[-1]
+    assert mouth.header.frame_id == 'base_link'
+    assert np.allclose([mouth.point.x, mouth.point.y, mouth.point.z], [0.7, -0.28, height])
+    for bad in ([0.7, -0.28, 0.0], [0.7, float('nan')], 'home'):
+        result = client.set_parameter('bottle.position', bad)
+        assert not result.successful and 'bottle.position' in result.reason
 
 
 def test_teaching_mode_leads_the_tool_and_ignores_commands(launch, tmp_path):

@@ -429,9 +429,9 @@ def test_blobs_that_cannot_be_an_object_are_refused(sim, detector):
             assert np.linalg.norm(found.goal.position - scene.goal_position) < TOLERANCE
         for position in found.obstacle_positions():   # only true obstacles, if any
             assert match(scene.obstacle_positions, position[None])[0] < TOLERANCE, name
-    # Obstacles too: swapped bytes refuse every blob.
+    # Obstacles too: swapped bytes refuse every blob (and the bottle's).
     found = detector.detect(rgb, depth.byteswap(), k)
-    assert found.obstacles == [] and len(found.rejected) == 3
+    assert found.obstacles == [] and found.bottle is None and len(found.rejected) == 4
     # Off the table: the same goal with a table that ends before it.
     small = Detector(detector.goal, detector.obstacle, detector.camera_pose,
                      ((0.3, 0.0), (0.6, 1.5)), detector.settings)
@@ -580,3 +580,52 @@ def test_frame_synchronizer():
     assert sync.add('info', 11 * ms, 'i11')[0] == 10 * ms
     with pytest.raises(ValueError):
         FrameSynchronizer((), 0)
+
+
+# ----------------------------------------------------------------- the bottle (issue 14, stir)
+
+
+def test_the_bottle_is_located_within_2_mm_moved_and_with_the_stirrer_in_it(sim, detector):
+    # The centre of the bottle's mouth against the simulation's ground truth: where it stands,
+    # moved by 2 cm (as the stir demo moves it), and with the stirrer at points of the stir
+    # demonstration inside it (it hides part of the mouth). Measured: 0.8-1.3 mm, mostly in z
+    # (the top band holds a little of the walls below the 4 mm rim).
+    from etdmp_ros.robot import UR10Model
+    from etdmp_ros.scenario import Scenario
+    scenario = Scenario(None, 'stir')
+    model = UR10Model(tool_offset=scenario.scene['tool_offset'])
+    q = np.array(scenario.overrides['ur10_sim']['initial_joint_positions'], dtype=float)
+    home = np.array(sim.scene.bottle_position, dtype=float)
+    errors = []
+    try:
+        sim.set_goal(sim.scene.goal_position)
+        sim.set_obstacles(sim.scene.obstacle_positions)
+        for shift in ([0.0, 0.0], [0.0, 0.02], [0.02, 0.0], [-0.014, -0.014]):
+            sim.set_bottle(home + shift)
+            mouth = sim.bottle_mouth
+            for fraction in (0.0, 0.5, 0.9, 1.0):
+                demo = scenario.demo.positions
+                target = mouth + demo[int(fraction * (len(demo) - 1))]
+                q, error = model.solve_pose(target, scenario.tool_rotation, q, iterations=200,
+                                            tolerance=1e-9)
+                assert np.linalg.norm(error[:3]) < 1e-5
+                sim.set_joint_positions(q)
+                rgb, depth = sim.render_rgb_depth()
+                found = detector.detect(rgb, depth, sim.intrinsics)
+                assert found.bottle is not None, [r.reason for r in found.rejected]
+                assert found.bottle.kind == 'bottle' and found.bottle.single
+                errors.append(np.linalg.norm(found.bottle.position - mouth))
+                # The goal marker and the obstacles are found as before.
+                assert found.goal is not None and len(found.obstacles) == 2
+    finally:
+        sim.reset()
+    assert max(errors) < 0.002, np.round(np.array(errors) * 1e3, 2)
+
+
+def test_without_detect_bottle_no_bottle_is_looked_for(sim):
+    sim.reset()
+    p = dict(parameters(), detect_bottle=False)
+    detector = detector_from_parameters(p)
+    assert detector.bottle is None
+    rgb, depth = sim.render_rgb_depth()
+    assert detector.detect(rgb, depth, sim.intrinsics).bottle is None

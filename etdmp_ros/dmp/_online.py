@@ -89,6 +89,23 @@ class OnlineGains:
                              f'{self.done_tolerance!r}')
 
 
+class _Rows(NamedTuple):
+    """Samples of :meth:`OnlineRun.run` with the state behind each (``n0``: steps before)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    goal_f: np.ndarray
+    R: np.ndarray
+    A: np.ndarray
+    M: np.ndarray
+    k: np.ndarray
+    vstart: np.ndarray
+    theta: np.ndarray
+    n0: int
+
+
 class OnlineRun:
     """
     One movement rolled out step by step (made by :meth:`Skill.online`).
@@ -228,25 +245,8 @@ class OnlineRun:
         (NaN, wrong shape, goal at the start, obstacle on the goal, ...); the run is then as it
         was.
         """
-        skill = self._skill
-        target = self._goal if goal is None else self._point(goal, 'goal')
-        new_goal = not np.array_equal(target, self._goal)
-        obstacles = self._obstacles if obstacles is None else self._obstacle_set(obstacles)
         measured = None if actual is None else self._point(actual, 'actual')
-        if new_goal:
-            gap = np.linalg.norm(self._x0 - target)
-            if not gap > EPS * skill.size:
-                raise GeneralizationError(
-                    f"goal equals the movement's start (|x0 - g| = {gap:.3g}): the transform "
-                    'is undefined and there is no movement to make')
-            # Raises where the placement is undefined (e.g. the plain DMP's division by ~0).
-            skill._placement(self._x0[None], target[None], self._method, self._mode,
-                             self._axis)
-        if len(obstacles) and (new_goal or obstacles is not self._obstacles):
-            if np.any(np.linalg.norm(obstacles - target, axis=1) <= EPS * skill.size):
-                raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
-        # Checked: from here on the run changes.
-        self._goal, self._obstacles = target, obstacles
+        self._take(goal, obstacles)     # checked: from here on the run changes
         rate = 1.0
         if measured is not None:
             with np.errstate(over='ignore'):    # an absurd measurement: rate MIN_RATE
@@ -255,7 +255,7 @@ class OnlineRun:
         if not np.array_equal(self._goal_f, self._goal):
             keep = math.exp(-self.online.alpha_goal * self.dt / self.tau)
             goal_f = self._goal + (self._goal_f - self._goal) * keep
-            if np.linalg.norm(goal_f - self._goal) <= EPS * skill.size:
+            if np.linalg.norm(goal_f - self._goal) <= EPS * self._skill.size:
                 goal_f = self._goal.copy()
             self._goal_f = goal_f
             try:
@@ -267,6 +267,34 @@ class OnlineRun:
         self._n += 1
         self._theta += rate * self.dt
         return self._x.copy(), self._xd.copy(), self._a.copy()
+
+    def _take(self, goal=None, obstacles=None):
+        """
+        Put a new goal and/or obstacle set in force, as :meth:`step` takes them, without a step.
+
+        Raises GeneralizationError, leaving the run as it was, for what :meth:`step` refuses.
+        The next step (or :meth:`run`) then moves the filtered goal towards the new goal.
+        """
+        skill = self._skill
+        target = self._goal if goal is None else self._point(goal, 'goal')
+        new_goal = not np.array_equal(target, self._goal)
+        obstacles = self._obstacles if obstacles is None else self._obstacle_set(obstacles)
+        if new_goal:
+            gap = np.linalg.norm(self._x0 - target)
+            if not gap > EPS * skill.size:
+                raise GeneralizationError(
+                    f"goal equals the movement's start (|x0 - g| = {gap:.3g}): the transform "
+                    'is undefined and there is no movement to make')
+            # Raises where the placement is undefined (the plain DMP's division by ~0). The
+            # ET-DMP's is defined wherever the goal is off the start (checked above; the
+            # demonstration's own |I_D| was checked when the run was made).
+            if self._method != 'etdmp':
+                skill._placement(self._x0[None], target[None], self._method, self._mode,
+                                 self._axis)
+        if len(obstacles) and (new_goal or obstacles is not self._obstacles):
+            if np.any(np.linalg.norm(obstacles - target, axis=1) <= EPS * skill.size):
+                raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
+        self._goal, self._obstacles = target, obstacles
 
     def copy(self):
         """Return an independent copy of the run (for a what-if rollout; the skill is shared)."""
@@ -284,11 +312,30 @@ class OnlineRun:
         millisecond, where N calls of :meth:`step` while the filter moves take ~0.2 ms each.
         """
         n_max = int(math.floor((t_max - self.t) / self.dt + 0.5))
-        if n_max <= 0 or self.done:
-            d = self._skill.dim
-            return np.zeros(0), np.zeros((0, d)), np.zeros((0, d)), np.zeros((0, d))
-        if not fast or numba is None:
+        rows = self._rows(n_max) if fast and numba is not None else None
+        if rows is None:
+            if n_max <= 0 or self.done:
+                d = self._skill.dim
+                return np.zeros(0), np.zeros((0, d)), np.zeros((0, d)), np.zeros((0, d))
             return self._run_by_steps(n_max)
+        n = len(rows.t)
+        if n:
+            self._set_row(rows, n - 1)
+        return rows.t, rows.x, rows.v, rows.a
+
+    def _rows(self, n_max):
+        """
+        Return the samples of :meth:`run` for at most ``n_max`` steps; leave the run as it is.
+
+        Returns a :class:`_Rows` (possibly of no samples: ``n_max <= 0`` or done), which
+        :meth:`_set_row` puts any of in force, or None where only :meth:`step` can (the
+        filtered goal passes by the start).
+        """
+        d = self._skill.dim
+        if n_max <= 0 or self.done:
+            empty = np.zeros((0, d))
+            return _Rows(np.zeros(0), empty, empty, empty, empty, np.zeros((0, d, d)), empty,
+                         empty, np.zeros(0), empty, np.zeros(0), self._n)
         skill = self._skill
         g = self._goal
         keep = math.exp(-self.online.alpha_goal * self.dt / self.tau)
@@ -298,24 +345,24 @@ class OnlineRun:
         goal_f[snapped] = g
         moving = 0 if np.array_equal(self._goal_f, g) else \
             int(np.argmax(snapped)) + 1 if snapped.any() else n_max
-        R = np.broadcast_to(self._R, (n_max,) + self._R.shape).copy()
-        A = np.broadcast_to(self._A, goal_f.shape).copy()
-        M = np.broadcast_to(self._M, goal_f.shape).copy()
-        k = np.full(n_max, self._k)
-        vstart = np.broadcast_to(self._vstart, goal_f.shape).copy()
+        R = np.empty((n_max, d, d))
+        A, M, vstart = np.empty((n_max, d)), np.empty((n_max, d)), np.empty((n_max, d))
+        k = np.empty(n_max)
         if moving:
             try:
                 transform, vstart_m, A_m, M_m = skill._placement(
-                    np.broadcast_to(self._x0, (moving, skill.dim)), goal_f[:moving],
+                    np.broadcast_to(self._x0, (moving, d)), goal_f[:moving],
                     self._method, self._mode, self._axis)
             except GeneralizationError:     # g_f passes by x0: step() keeps the old placement
-                return self._run_by_steps(n_max)
+                return None
             R[:moving], A[:moving], M[:moving] = transform.R, A_m, M_m
             R[moving:], A[moving:], M[moving:] = transform.R[-1], A_m[-1], M_m[-1]
             vstart[:moving], vstart[moving:] = vstart_m, vstart_m[-1]
             length = np.linalg.norm(self._x0 - goal_f, axis=1)
             k[:] = self.gains.k if self.gains.k is not None else \
                 self.gains.k_relative / np.maximum(length, 1e-300)
+        else:
+            R[:], A[:], M[:], vstart[:], k[:] = self._R, self._A, self._M, self._vstart, self._k
         sub = self._substeps
         theta = self._theta + self.dt * np.arange(n_max)
         s_mid, f_mid, s_out, f_out = self._forcing_rows(n_max)
@@ -334,17 +381,38 @@ class OnlineRun:
         done = np.flatnonzero(ended & rest)
         n = int(done[0]) + 1 if len(done) else n_max
         t = self.t + self.dt * np.arange(1, n + 1)
-        last = n - 1
-        self._goal_f = goal_f[last].copy()
-        self._R, self._A, self._M, self._k = R[last].copy(), A[last].copy(), M[last].copy(), \
-            float(k[last])
-        self._vstart = vstart[last].copy()
-        self._x, self._xd, self._a = X[last].copy(), V[last].copy(), Acc[last].copy()
+        return _Rows(t, X[:n], V[:n], Acc[:n], goal_f[:n], R[:n], A[:n], M[:n], k[:n],
+                     vstart[:n], theta[:n] + self.dt, self._n)
+
+    def _replayed(self, x, v, a):
+        """
+        Return the rows of this run stepped with no input, from samples computed elsewhere.
+
+        ``x``, ``v``, ``a`` (N, d): the samples after each of the next N steps, as the offline
+        rollout that the run reproduces computed them (the plan it follows); the placement in
+        force stays. Only while the goal filter rests (``g_f = g``); None otherwise.
+        """
+        if not np.array_equal(self._goal_f, self._goal):
+            return None
+        n, d = np.shape(x)
+        steps = np.arange(1, n + 1)
+        return _Rows(self.t + self.dt * steps, x, v, a,
+                     np.broadcast_to(self._goal_f, (n, d)), np.broadcast_to(self._R, (n, d, d)),
+                     np.broadcast_to(self._A, (n, d)), np.broadcast_to(self._M, (n, d)),
+                     np.full(n, self._k), np.broadcast_to(self._vstart, (n, d)),
+                     self._theta + self.dt * steps, self._n)
+
+    def _set_row(self, rows, i):
+        """Put sample ``i`` of ``rows`` (from :meth:`_rows` of this run's state) in force."""
+        self._goal_f = rows.goal_f[i].copy()
+        self._R, self._A, self._M = rows.R[i].copy(), rows.A[i].copy(), rows.M[i].copy()
+        self._k = float(rows.k[i])
+        self._vstart = rows.vstart[i].copy()
+        self._x, self._xd, self._a = rows.x[i].copy(), rows.v[i].copy(), rows.a[i].copy()
         self._v = self._xd * self.tau
         self._rate = 1.0
-        self._n += n
-        self._theta = float(theta[last] + self.dt)
-        return t, X[:n].copy(), V[:n].copy(), Acc[:n].copy()
+        self._n = rows.n0 + i + 1
+        self._theta = float(rows.theta[i])
 
     def _forcing_rows(self, n):
         """

@@ -28,7 +28,7 @@ a millisecond), and the skill library has its own lock. Settings are an immutabl
 replaced whole when parameters change.
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 import pathlib
 import threading
 import time
@@ -131,6 +131,8 @@ class Settings:
     follow_threshold: float
     follow_lead: float
     initial_joints: np.ndarray
+    goal_object: str = 'marker'
+    goal_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
     def from_values(cls, values):
@@ -171,7 +173,17 @@ class Settings:
             check_timing=values['check_timing'], max_request_wait=values['max_request_wait'],
             follow_goal=values['follow_goal'], follow_threshold=values['follow_threshold'],
             follow_lead=values['follow_lead'],
-            initial_joints=_joints(values['initial_joint_positions']))
+            initial_joints=_joints(values['initial_joint_positions']),
+            goal_object=_choice(values, 'goal_object', system.GOAL_OBJECTS),
+            goal_offset=_offset(values['goal_offset']))
+
+
+def _offset(values):
+    offset = np.asarray(values, dtype=float)
+    if offset.shape != (3,) or not np.all(np.isfinite(offset)) or np.any(np.abs(offset) > 2.0):
+        raise ValueError(f'goal_offset must be 3 finite numbers [x, y, z] within 2 m, got '
+                         f'{values!r}')
+    return offset
 
 
 def _joints(values):
@@ -216,6 +228,7 @@ class DmpServer(Node):
         self._joint_state = _Latest()
         self._tool_pose = _Latest()
         self._goal = _Latest()
+        self._bottle = _Latest()
         self._obstacles = _Latest()
         try:
             self._model = UR10Model(tool_offset=self.get_parameter('tool_offset').value)
@@ -236,6 +249,8 @@ class DmpServer(Node):
         self._tool_subscriptions = {}  # tool_position_source -> subscription (made on first use)
         self._subscribe_tool_source(settings.tool_position_source)
         self.create_subscription(PointStamped, 'etdmp/goal', self._on_goal, 10,
+                                 callback_group=inputs)
+        self.create_subscription(PointStamped, 'etdmp/bottle', self._on_bottle, 10,
                                  callback_group=inputs)
         self.create_subscription(PoseArray, 'etdmp/obstacles', self._on_obstacles, 10,
                                  callback_group=inputs)
@@ -436,26 +451,37 @@ class DmpServer(Node):
                 self._tool_pose.update(p)
 
     def _on_goal(self, msg):
+        self._on_goal_object(msg, 'marker', '/etdmp/goal', self._goal)
+
+    def _on_bottle(self, msg):
+        self._on_goal_object(msg, 'bottle', '/etdmp/bottle', self._bottle)
+
+    def _on_goal_object(self, msg, kind, topic, latest):
+        """Keep a perceived goal object; follow it if it is the goal_object of the plan."""
         p = point_to_numpy(msg.point)
-        if not self._frame_ok(msg.header.frame_id, '/etdmp/goal'):
+        if not self._frame_ok(msg.header.frame_id, topic):
             return
         if not np.all(np.isfinite(p)):
-            self.get_logger().warn('/etdmp/goal: NaN or inf goal ignored',
+            self.get_logger().warn(f'{topic}: NaN or inf point ignored',
                                    throttle_duration_sec=_THROTTLE)
             return
         try:
-            _bounded(p, '/etdmp/goal')
+            _bounded(p, topic)
         except ValueError as err:
             self.get_logger().warn(f'{err}: ignored', throttle_duration_sec=_THROTTLE)
             return
-        outside = self._settings.plan.workspace.violation(p)
-        if outside is not None:   # kept: a request using it fails with the reason
-            self.get_logger().warn(f'/etdmp/goal ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) is out of '
-                                   f"the UR10's reach: {outside[1]}; requests using it fail",
-                                   throttle_duration_sec=_THROTTLE)
+        settings = self._settings
         with self._state_lock:
-            self._goal.update(p)
-        self._follow(goal=p)
+            latest.update(p)
+        if settings.goal_object != kind:
+            return
+        goal = p + settings.goal_offset
+        outside = settings.plan.workspace.violation(goal)
+        if outside is not None:   # kept: a request using it fails with the reason
+            self.get_logger().warn(f'{topic} ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) + goal_offset '
+                                   f"is out of the UR10's reach: {outside[1]}; requests using "
+                                   'it fail', throttle_duration_sec=_THROTTLE)
+        self._follow(goal=goal)
 
     def _on_obstacles(self, msg):
         points = pose_array_to_numpy(msg)
@@ -486,15 +512,18 @@ class DmpServer(Node):
         return value
 
     def _perceived_goal(self, settings):
+        """Return the perceived goal object (goal_object) plus goal_offset."""
+        bottle = settings.goal_object == 'bottle'
+        latest, topic = (self._bottle, '/etdmp/bottle') if bottle else (self._goal, '/etdmp/goal')
         with self._state_lock:
-            goal = self._goal.fresh(settings.goal_max_age)
+            goal = latest.fresh(settings.goal_max_age)
             if goal is None:
-                if self._goal.value is None:
-                    raise ValueError('no perceived goal yet on /etdmp/goal; give a goal in '
+                if latest.value is None:
+                    raise ValueError(f'no perceived goal yet on {topic}; give a goal in '
                                      'base_link instead of an empty frame id')
-                raise ValueError(f'the latest perceived goal is {self._goal.age():.1f} s old '
+                raise ValueError(f'the latest perceived goal is {latest.age():.1f} s old '
                                  f'(goal_max_age {settings.goal_max_age:g} s)')
-            return goal
+            return goal + settings.goal_offset
 
     def _current_obstacles(self, settings):
         with self._state_lock:

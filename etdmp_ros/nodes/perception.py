@@ -14,6 +14,9 @@ newest complete frame. Publishes, stamped with the image's stamp, in base_link:
   when no goal is visible (and a throttled warning);
 - ``/etdmp/obstacles`` (geometry_msgs/PoseArray): centres of the obstacles' top faces, every
   processed frame, empty when none are visible;
+- ``/etdmp/bottle`` (geometry_msgs/PointStamped): centre of the open bottle's mouth (while
+  ``detect_bottle``); nothing when it is not seen. dmp_server takes it as the goal object of a
+  skill with ``goal_object: bottle`` (stirring; docs/dmp_server.md);
 - ``/etdmp/detections/image`` (sensor_msgs/Image rgb8): the colour image annotated, at most
   ``debug_image_rate`` and only while someone subscribes.
 
@@ -52,6 +55,7 @@ DEPTH_TOPIC = 'camera/camera/aligned_depth_to_color/image_raw'
 INFO_TOPIC = 'camera/camera/color/camera_info'
 GOAL_TOPIC = 'etdmp/goal'
 OBSTACLES_TOPIC = 'etdmp/obstacles'
+BOTTLE_TOPIC = 'etdmp/bottle'
 DEBUG_IMAGE_TOPIC = 'etdmp/detections/image'
 BASE_FRAME = 'base_link'
 COLOR_ENCODINGS = ('rgb8', 'bgr8')
@@ -124,6 +128,7 @@ class PerceptionNode(Node):
                                  QoSProfile(depth=5, reliability=reliability))
         self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, 10)
         self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, 10)
+        self._bottle_pub = self.create_publisher(PointStamped, BOTTLE_TOPIC, 10)
         self._debug_pub = self.create_publisher(Image, DEBUG_IMAGE_TOPIC, 1)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -264,6 +269,13 @@ class PerceptionNode(Node):
                     *detections.goal.position))
         self._obstacles_pub.publish(pose_array_from_numpy(detections.obstacle_positions(),
                                                           frame_id=BASE_FRAME, stamp=stamp))
+        if detections.bottle is not None:
+            bottle = PointStamped()
+            bottle.header.stamp = stamp
+            bottle.header.frame_id = BASE_FRAME
+            bottle.point.x, bottle.point.y, bottle.point.z = (
+                float(v) for v in detections.bottle.position)
+            self._bottle_pub.publish(bottle)
         self._warn_about(detections)
         self._publish_debug_image(detections, rgb, intrinsics, color_msg, bgr)
 

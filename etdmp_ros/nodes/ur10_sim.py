@@ -8,7 +8,8 @@ velocities in rad/s, UR order). Publishes, stamped with the simulated time:
   ``control_rate``;
 - ``/camera/camera/color/image_raw`` (rgb8), ``/camera/camera/aligned_depth_to_color/image_raw``
   (16UC1, mm) and their ``camera_info`` at ``camera_rate``, frame ``camera_color_optical_frame``;
-- ``/ur10_sim/ground_truth/goal`` and ``.../obstacles`` (base_link) with each camera frame,
+- ``/ur10_sim/ground_truth/goal``, ``.../obstacles`` and ``.../bottle`` (the centre of the
+  bottle's mouth; base_link) with each camera frame,
   stamped like it (what the camera saw), or at 10 Hz when the camera is off;
 - as a UR driver, robot_state_publisher and realsense-ros would: ``/robot_description``
   (std_msgs/String, transient local: the UR10 URDF the simulation is built from, with the tool
@@ -26,8 +27,8 @@ and publishes the images: the physics and the joint states never wait for render
 transport, nor share an interpreter lock with them. The executor thread only receives commands
 and parameter changes, validates them and hands them over. Parameters: config/scene.yaml and
 config/ur10_sim.yaml (their values are also the built-in defaults: etdmp_ros.system);
-``goal_position``, ``obstacle_positions``, ``real_time_factor``, ``watchdog_timeout`` and
-``teach_script`` can be changed at runtime.
+``goal_position``, ``obstacle_positions``, ``bottle.position``, ``real_time_factor``,
+``watchdog_timeout`` and ``teach_script`` can be changed at runtime.
 
 Teaching mode (kinesthetic teaching, simulated): with ``teach_script`` set, a script leads the
 tool as a hand in freedrive would (:class:`etdmp_ros.robot.GuidedMotion`) while velocity commands
@@ -48,8 +49,8 @@ from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_com
                                          encode as camera_snapshot)
 from etdmp_ros.nodes._spin import rate_qos, run
 from etdmp_ros.robot import (camera_transforms, FrameTree, GuidedMotion, GuideError,
-                             MAX_OBSTACLES, parse_goal_position, parse_obstacle_positions,
-                             robot_description, SceneConfig, UR10Sim)
+                             MAX_OBSTACLES, parse_bottle_position, parse_goal_position,
+                             parse_obstacle_positions, robot_description, SceneConfig, UR10Sim)
 from etdmp_ros.ros_conversions import (joint_state_msg, MovingTransforms, ns_to_stamp,
                                        pose_array_from_numpy, tf_available, tf_message,
                                        velocity_command_array)
@@ -75,6 +76,7 @@ CAMERA_TOPICS = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR
                  'depth_info': DEPTH_INFO_TOPIC}
 GOAL_TOPIC = '~/ground_truth/goal'
 OBSTACLES_TOPIC = '~/ground_truth/obstacles'
+BOTTLE_TOPIC = '~/ground_truth/bottle'
 TOOL_TIP_TOPIC = '~/ground_truth/tool_tip'
 TEACHING_TOPIC = '~/teaching'
 DESCRIPTION_TOPIC = 'robot_description'
@@ -143,6 +145,7 @@ class UR10SimNode(Node):
         self._ignored_commands = 0
         self._pending_command = None
         self._pending_goal = None
+        self._pending_bottle = None
         self._pending_obstacles = None
         self._stop = threading.Event()
         self._thread = None
@@ -167,6 +170,7 @@ class UR10SimNode(Node):
         self._clock_pub = self.create_publisher(Clock, '/clock', state)
         self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, reliable)
         self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, reliable)
+        self._bottle_pub = self.create_publisher(PointStamped, BOTTLE_TOPIC, reliable)
         self._tool_pub = self.create_publisher(PointStamped, TOOL_TIP_TOPIC, state)
         self._camera_publishers = None   # made by frame(), for run_for(): images in-process
         self._tf_pub = None
@@ -192,6 +196,8 @@ class UR10SimNode(Node):
             try:
                 if parameter.name == 'goal_position':
                     parse_goal_position(_number_list(parameter))
+                elif parameter.name == 'bottle.position':
+                    parse_bottle_position(_number_list(parameter))
                 elif parameter.name == 'obstacle_positions':
                     points = parse_obstacle_positions(_number_list(parameter))
                     if len(points) > MAX_OBSTACLES:
@@ -207,6 +213,8 @@ class UR10SimNode(Node):
             for parameter in parameters:
                 if parameter.name == 'goal_position':
                     self._pending_goal = parse_goal_position(_number_list(parameter))
+                elif parameter.name == 'bottle.position':
+                    self._pending_bottle = parse_bottle_position(_number_list(parameter))
                 elif parameter.name == 'obstacle_positions':
                     self._pending_obstacles = parse_obstacle_positions(_number_list(parameter))
                 elif parameter.name == 'real_time_factor':
@@ -370,6 +378,7 @@ class UR10SimNode(Node):
         with self._lock:
             command, self._pending_command = self._pending_command, None
             goal, self._pending_goal = self._pending_goal, None
+            bottle, self._pending_bottle = self._pending_bottle, None
             obstacles, self._pending_obstacles = self._pending_obstacles, None
             guide = self._guide
         if guide is not None:
@@ -390,6 +399,8 @@ class UR10SimNode(Node):
                 self._commands_seen = True
         if goal is not None:
             sim.set_goal(goal)
+        if bottle is not None:
+            sim.set_bottle(bottle)
         if obstacles is not None:
             sim.set_obstacles(obstacles)
 
@@ -465,6 +476,7 @@ class UR10SimNode(Node):
     def _publish_ground_truth(self, stamp):
         sim = self.sim
         self._goal_pub.publish(_point_stamped(sim.goal_position, stamp))
+        self._bottle_pub.publish(_point_stamped(sim.bottle_mouth, stamp))
         obstacles = pose_array_from_numpy(sim.obstacle_positions, frame_id='base_link')
         obstacles.header.stamp = stamp
         self._obstacles_pub.publish(obstacles)

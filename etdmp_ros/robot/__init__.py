@@ -15,8 +15,8 @@ from ._description import (camera_transforms, chain_pose, FrameTree, robot_descr
                            Transform)
 from ._guide import GuidedMotion, GuideError
 from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, IKResult
-from ._scene import (parse_goal_position, parse_obstacle_positions, PEN_TIP_RADIUS,
-                     SCENE_PARAMETERS, SceneConfig)
+from ._scene import (parse_bottle_position, parse_goal_position, parse_obstacle_positions,
+                     PEN_TIP_RADIUS, SCENE_PARAMETERS, SceneConfig)
 from ._trajectory import (MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
                           trajectory_from_path, TrajectoryError)
 from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_urdf_path,
@@ -48,7 +48,7 @@ __all__ = [
     'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_TIP_RADIUS',
     'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES', 'SceneConfig', 'TrajectoryController',
     'Transform', 'TrajectoryError', 'UR10Model', 'camera_transforms', 'chain_pose',
-    'matrix_to_quaternion', 'parse_goal_position',
+    'matrix_to_quaternion', 'parse_bottle_position', 'parse_goal_position',
     'parse_obstacle_positions', 'quaternion_to_matrix', 'quaternions_to_rotations',
     'robot_data_dir', 'robot_description', 'trajectory_from_path', 'ur10_urdf_path',
     *_LAZY_NAMES,

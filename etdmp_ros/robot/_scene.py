@@ -75,6 +75,11 @@ def parse_goal_position(value):
     return _vector('goal_position', value, size=3)
 
 
+def parse_bottle_position(value):
+    """Return ``bottle.position`` as a float array (2,) [x, y]; ValueError if not 2 finite."""
+    return _vector('bottle.position', value, size=2)
+
+
 def parse_obstacle_positions(value):
     """
     Return ``obstacle_positions`` (flat [x1, y1, z1, x2, ...]) as an array (N, 3).
@@ -149,7 +154,7 @@ class SceneConfig:
             table_color=_color('table.color', p['table.color']),
             whiteboard_size=whiteboard,
             whiteboard_color=_color('whiteboard.color', p['whiteboard.color']),
-            bottle_position=_vector('bottle.position', p['bottle.position'], 2),
+            bottle_position=parse_bottle_position(p['bottle.position']),
             bottle_radius=_positive('bottle.radius', p['bottle.radius']),
             bottle_height=_positive('bottle.height', p['bottle.height']),
             bottle_color=_color('bottle.color', p['bottle.color']),

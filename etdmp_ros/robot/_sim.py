@@ -50,8 +50,8 @@ import xml.etree.ElementTree as ElementTree
 import numpy as np
 
 from ._camera import CameraIntrinsics
-from ._scene import (GOAL_MARKER_THICKNESS, parse_goal_position, parse_obstacle_positions,
-                     PEN_TIP_RADIUS)
+from ._scene import (GOAL_MARKER_THICKNESS, parse_bottle_position, parse_goal_position,
+                     parse_obstacle_positions, PEN_TIP_RADIUS)
 from ._ur10 import JOINT_NAMES, robot_data_dir, ur10_urdf_path, UR10Model
 
 mujoco = None   # imported by _import_mujoco() when the first simulation is built
@@ -283,8 +283,10 @@ class UR10Sim:
                            rgba=s.whiteboard_color)
         vertices, faces = _tube_mesh(s.bottle_radius, s.bottle_height, wall=0.004, floor=0.01)
         spec.add_mesh(name='bottle', uservert=vertices.ravel(), userface=faces.ravel())
-        world.add_geom(name='bottle', type=mujoco.mjtGeom.mjGEOM_MESH, meshname='bottle',
-                       pos=[*s.bottle_position, 0.0], rgba=s.bottle_color)
+        # A mocap body: it moves at runtime (set_bottle), its collision geometry with it.
+        bottle = world.add_body(name='bottle', mocap=True, pos=[*s.bottle_position, 0.0])
+        bottle.add_geom(name='bottle', type=mujoco.mjtGeom.mjGEOM_MESH, meshname='bottle',
+                        rgba=s.bottle_color)
 
         goal = world.add_body(name='goal_marker', mocap=True, pos=s.goal_position)
         goal.add_geom(name='goal_marker', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
@@ -310,6 +312,7 @@ class UR10Sim:
         self.tool_tip_site = m.site('tool_tip').id
         self.camera_id = m.camera(CAMERA_NAME).id
         self._goal_mocap = m.body_mocapid[m.body('goal_marker').id]
+        self._bottle_mocap = m.body_mocapid[m.body('bottle').id]
         self._obstacle_mocap = [m.body_mocapid[m.body(f'obstacle_{i}').id]
                                 for i in range(MAX_OBSTACLES)]
         self._obstacle_geoms = [m.geom(f'obstacle_{i}').id for i in range(MAX_OBSTACLES)]
@@ -327,6 +330,7 @@ class UR10Sim:
         self._command_time = -math.inf
         self.watchdog_active = self.watchdog_timeout > 0
         self.set_goal(self.scene.goal_position)
+        self.set_bottle(self.scene.bottle_position)
         self.set_obstacles(self.scene.obstacle_positions)
         mujoco.mj_forward(self.model, self.data)
 
@@ -438,6 +442,21 @@ class UR10Sim:
         """Move the goal marker (top face centre) to ``position`` [x, y, z]; ValueError if bad."""
         self.data.mocap_pos[self._goal_mocap] = parse_goal_position(position)
         mujoco.mj_kinematics(self.model, self.data)   # the camera sees it at once
+
+    @property
+    def bottle_position(self):
+        """Bottle position (2,): [x, y] of its axis on the table, base_link."""
+        return self.data.mocap_pos[self._bottle_mocap, :2].copy()
+
+    @property
+    def bottle_mouth(self):
+        """Centre of the bottle's mouth (3,): on its axis at z = its height, base_link."""
+        return np.array([*self.bottle_position, self.scene.bottle_height])
+
+    def set_bottle(self, position):
+        """Move the bottle (its axis) to ``position`` [x, y] on the table; ValueError if bad."""
+        self.data.mocap_pos[self._bottle_mocap] = [*parse_bottle_position(position), 0.0]
+        mujoco.mj_kinematics(self.model, self.data)
 
     @property
     def obstacle_positions(self):

@@ -80,6 +80,7 @@ from .. import limits
 #: Kinds of detected objects, as in :attr:`Detection.kind`.
 GOAL = 'goal'
 OBSTACLE = 'obstacle'
+BOTTLE = 'bottle'
 _RIM_KERNEL = np.ones((3, 3), np.uint8)
 # An occluder this many pixels from an outline pixel makes it an occlusion edge (2: across the
 # one-pixel line that _split removes between two objects of one colour).
@@ -90,7 +91,8 @@ _NO_DEPTH = np.float32(np.inf)
 # blobs: an all-green frame's median would cost 3 ms).
 _DEPTH_SAMPLES = 4096
 # Drawing colours (RGB) of the annotated image.
-_DRAW = {GOAL: (255, 230, 0), OBSTACLE: (0, 230, 255), 'rejected': (150, 150, 150)}
+_DRAW = {GOAL: (255, 230, 0), OBSTACLE: (0, 230, 255), BOTTLE: (255, 0, 255),
+         'rejected': (150, 150, 150)}
 
 
 def _a(noun):
@@ -248,11 +250,12 @@ class Rejection:
 
 @dataclass(eq=False)
 class Detections:
-    """Result of one frame: the goal (or None), the obstacles and the rejected blobs."""
+    """Result of one frame: the goal and the bottle (or None), the obstacles, rejected blobs."""
 
     goal: Detection = None
     obstacles: list = field(default_factory=list)
     rejected: list = field(default_factory=list)
+    bottle: Detection = None
 
     def obstacle_positions(self):
         """Return the obstacle points (N, 3) in base_link (N may be 0)."""
@@ -351,11 +354,13 @@ class Detector:
 
     ``goal`` and ``obstacle`` are :class:`ObjectModel` instances, ``camera_pose`` the
     :class:`CameraPose` of the colour optical frame in base_link, ``table`` the table top
-    ``(centre [x, y], size [x, y])`` (m, at z = 0) on which every object stands. Stateless
+    ``(centre [x, y], size [x, y])`` (m, at z = 0) on which every object stands. ``bottle``:
+    the :class:`ObjectModel` of the open bottle (an upright cylinder whose top face is its
+    mouth: the reported point is the mouth's centre), or None not to look for it. Stateless
     between frames.
     """
 
-    def __init__(self, goal, obstacle, camera_pose, table, settings=None):
+    def __init__(self, goal, obstacle, camera_pose, table, settings=None, bottle=None):
         """Keep the object models, the camera pose, the table and the settings."""
         if not isinstance(camera_pose, CameraPose):
             raise ValueError(f'camera_pose must be a CameraPose, got {type(camera_pose).__name__}')
@@ -369,6 +374,7 @@ class Detector:
                              f'{centre.tolist()}, {size.tolist()}')
         self.goal = goal
         self.obstacle = obstacle
+        self.bottle = bottle
         self.camera_pose = camera_pose
         self.table = (centre, size)
         self._table_low, self._table_high = centre - 0.5 * size, centre + 0.5 * size
@@ -377,12 +383,14 @@ class Detector:
         self._position = np.asarray(camera_pose.position)
 
     @classmethod
-    def from_scene(cls, scene, goal_color, obstacle_color, settings=None):
+    def from_scene(cls, scene, goal_color, obstacle_color, settings=None, bottle_color=None):
         """Return a detector for a :class:`SceneConfig` (object sizes, camera pose)."""
+        bottle = None if bottle_color is None else ObjectModel(
+            BOTTLE, bottle_color, scene.bottle_radius, scene.bottle_height)
         return cls(ObjectModel(GOAL, goal_color, scene.goal_radius, GOAL_MARKER_THICKNESS),
                    ObjectModel(OBSTACLE, obstacle_color, scene.obstacle_radius,
                                scene.obstacle_height),
-                   scene.camera_pose, (scene.table_center, scene.table_size), settings)
+                   scene.camera_pose, (scene.table_center, scene.table_size), settings, bottle)
 
     def detect(self, rgb, depth_mm, intrinsics, bgr=False):
         """
@@ -407,6 +415,15 @@ class Detector:
                                                  'another goal blob is larger'))
         result.obstacles = self._detect_class(self.obstacle, hsv, depth_mm, intrinsics,
                                               result.rejected)
+        if self.bottle is not None:
+            bottles = self._detect_class(self.bottle, hsv, depth_mm, intrinsics,
+                                         result.rejected)
+            if bottles:     # the largest; a stirrer in it can cut it in two (_split)
+                bottles.sort(key=lambda b: -b.area)
+                result.bottle = bottles[0]
+                for extra in bottles[1:]:
+                    result.rejected.append(Rejection(BOTTLE, extra.bbox, extra.area,
+                                                     'another bottle blob is larger'))
         return result
 
     def _detect_class(self, model, hsv, depth_mm, intrinsics, rejected):
@@ -487,7 +504,7 @@ class Detector:
         """
         if not np.all(np.isfinite(position)):
             return 'its position is not finite'
-        count = 1 if single or model.kind == GOAL else limits.MAX_MERGED_OBSTACLES
+        count = 1 if single or model.kind != OBSTACLE else limits.MAX_MERGED_OBSTACLES
         reach = (2 * count - 1) * model.radius + limits.OBJECT_EXTENT_MARGIN
         dx, dy = points[:, 0] - position[0], points[:, 1] - position[1]
         outside = np.count_nonzero(dx * dx + dy * dy > reach * reach)
@@ -638,16 +655,18 @@ class Detector:
         """
         Return a copy of the colour image with the detections drawn on it (same channel order).
 
-        Goal: yellow, obstacles: cyan (the fitted top-face circle, its centre and x, y, z in mm);
-        rejected blobs: grey boxes with the reason.
+        Goal: yellow, obstacles: cyan, bottle: magenta (the fitted top-face circle, its centre
+        and x, y, z in mm); rejected blobs: grey boxes with the reason.
         """
         image = np.array(rgb, dtype=np.uint8, copy=True)
         palette = {key: value[::-1] if bgr else value for key, value in _DRAW.items()}
         items = ([detections.goal] if detections.goal is not None else []) + \
-            list(detections.obstacles)
+            list(detections.obstacles) + \
+            ([detections.bottle] if detections.bottle is not None else [])
         angles = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
+        models = {GOAL: self.goal, OBSTACLE: self.obstacle, BOTTLE: self.bottle}
         for det in items:
-            model = self.goal if det.kind == GOAL else self.obstacle
+            model = models[det.kind]
             color = palette[det.kind]
             circle = det.position + model.radius * np.stack(
                 [np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
@@ -678,6 +697,9 @@ DETECTOR_PARAMETERS = (
     'table.center', 'table.size', 'min_blob_area', 'min_depth_pixels', 'top_band',
     'occlusion_gap', 'min_rim_points', 'max_rim_rms', 'height_tolerance',
 )
+#: Optional ones: with all four (and ``detect_bottle`` not false) the detector also looks for
+#: the bottle (the centre of its mouth).
+BOTTLE_PARAMETERS = ('bottle.radius', 'bottle.height', 'bottle_hsv_low', 'bottle_hsv_high')
 
 
 def detector_from_parameters(params):
@@ -706,10 +728,18 @@ def detector_from_parameters(params):
         settings = DetectorSettings(**{name: p[name] for name in (
             'min_blob_area', 'min_depth_pixels', 'top_band', 'occlusion_gap', 'min_rim_points',
             'max_rim_rms', 'height_tolerance')})
+        bottle = None
+        if p.get('detect_bottle', True) and all(p.get(name) is not None
+                                                for name in BOTTLE_PARAMETERS):
+            try:
+                color = HsvRange(p['bottle_hsv_low'], p['bottle_hsv_high'])
+            except ValueError as exc:
+                raise ValueError(f'bottle_hsv_low/high: {exc}') from None
+            bottle = ObjectModel(BOTTLE, color, p['bottle.radius'], p['bottle.height'])
         return Detector(
             ObjectModel(GOAL, colors[GOAL], p['goal_marker.radius'], GOAL_MARKER_THICKNESS),
             ObjectModel(OBSTACLE, colors[OBSTACLE], p['obstacle.radius'], p['obstacle.height']),
-            pose, (p['table.center'], p['table.size']), settings)
+            pose, (p['table.center'], p['table.size']), settings, bottle)
     except TypeError as exc:   # a list where a number belongs, None
         raise ValueError(f'perception parameters: {exc}') from None
 
