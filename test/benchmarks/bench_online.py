@@ -145,12 +145,12 @@ def time_core(name, updates, rng):
             continue
         updated = time.perf_counter()
         first = followed.index(max(0.0, t_switch - 0.2))
-        path_from_numpy(followed.positions[first:], followed.t[first:], 0, 'base_link',
-                        followed.orientation)
+        q = followed.orientation   # one tuple, or one per pose (a skill with orientations)
+        q = q if isinstance(q, tuple) else q[first:]
+        path_from_numpy(followed.positions[first:], followed.t[first:], 0, 'base_link', q)
         built = time.perf_counter()
         # What dmp_server publishes: the remainder's bytes written with numpy.
-        serialize_path(followed.positions[first:], followed.t[first:], 0, 'base_link',
-                       followed.orientation)
+        serialize_path(followed.positions[first:], followed.t[first:], 0, 'base_link', q)
         done = time.perf_counter()
         if i >= WARM_UP:
             core.append((updated - started) * 1e3)
