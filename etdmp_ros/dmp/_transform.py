@@ -27,10 +27,16 @@ number per block, ``|I_C| / |I_D|``, and needs no division by a component of ``I
 """
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
 from ._errors import GeneralizationError
+
+try:  # The fast path is optional: without numba the numpy formula below serves.
+    import numba
+except ImportError:  # pragma: no cover - numba is pinned in requirements
+    numba = None
 
 #: Relative size below which a vector counts as zero (and a direction as undefined).
 EPS = 1e-9
@@ -76,8 +82,60 @@ def plane_rotation(i_demo, i_current):
     Rotations turning each row of ``i_current`` (B, d) onto the direction of ``i_demo`` (d,).
 
     Returns R with shape (B, d, d). Rows that are ~0 give the identity; d == 1 gives the 1D sign
-    rule. This is Eq. 8/10 (signed angle) in 2D and Eq. 9 (Rodrigues) in 3D.
+    rule. This is Eq. 8/10 (signed angle) in 2D and Eq. 9 (Rodrigues) in 3D. The same formula
+    row by row in numba when it is importable (an online update places a few hundred goals:
+    0.26 ms in numpy), else :func:`plane_rotation_numpy`.
     """
+    i_demo = np.asarray(i_demo, dtype=float)
+    i_current = np.atleast_2d(np.asarray(i_current, dtype=float))
+    if numba is None or i_current.shape[1] < 2:
+        return plane_rotation_numpy(i_demo, i_current)
+    n_demo = float(np.linalg.norm(i_demo))
+    e_demo = i_demo / n_demo if n_demo > 0.0 else np.zeros(len(i_demo))
+    axis = np.zeros(len(i_demo))
+    axis[int(np.argmin(np.abs(e_demo)))] = 1.0
+    return _plane_rotation_nb(np.ascontiguousarray(i_current), e_demo, n_demo > 0.0, axis, EPS)
+
+
+if numba is not None:
+    @numba.njit(cache=True, fastmath=False)
+    def _plane_rotation_nb(i_current, e_demo, demo_ok, axis, eps):  # pragma: no cover - numba
+        n, d = i_current.shape
+        R = np.zeros((n, d, d))
+        u, w = np.empty(d), np.empty(d)
+        for b in range(n):
+            for i in range(d):
+                R[b, i, i] = 1.0
+            n_cur = math.sqrt(np.sum(i_current[b] ** 2))
+            if not (n_cur > 0.0 and demo_ok):
+                continue
+            cos = 0.0
+            for i in range(d):
+                u[i] = i_current[b, i] / n_cur
+                cos += u[i] * e_demo[i]
+            cos = min(1.0, max(-1.0, cos))
+            for i in range(d):
+                w[i] = e_demo[i] - cos * u[i]
+            flat = math.sqrt(np.sum(w ** 2)) <= eps
+            if flat:    # anti-parallel (or parallel): the axis least aligned with I_D
+                along = 0.0
+                for i in range(d):
+                    along += u[i] * axis[i]
+                for i in range(d):
+                    w[i] = axis[i] - along * u[i]
+            w_norm = math.sqrt(np.sum(w ** 2))
+            for i in range(d):
+                w[i] /= w_norm
+            sin = 0.0 if flat else math.sqrt(max(0.0, 1.0 - cos ** 2))
+            for i in range(d):
+                for j in range(d):
+                    R[b, i, j] += ((cos - 1.0) * (u[i] * u[j] + w[i] * w[j])
+                                   + sin * (w[i] * u[j] - u[i] * w[j]))
+        return R
+
+
+def plane_rotation_numpy(i_demo, i_current):
+    """Compute :func:`plane_rotation` with numpy only (the reference; and d == 1)."""
     i_demo = np.asarray(i_demo, dtype=float)
     i_current = np.atleast_2d(np.asarray(i_current, dtype=float))
     n, d = i_current.shape
