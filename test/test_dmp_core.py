@@ -185,3 +185,20 @@ def test_obstacles_turn_the_path_without_stopping_it_at_the_goal():
     clearance = np.linalg.norm(X[0] - obstacle[0, 0], axis=1).min()
     assert clearance > 0.05                           # it went round
     assert np.linalg.norm(X[0, -1] - goal[0]) < 1e-3  # and still arrives (Eq. 28-29)
+
+
+def test_plane_rotation_fast_path_equals_the_numpy_formula():
+    from etdmp_ros.dmp._transform import plane_rotation, plane_rotation_numpy
+    rng = np.random.default_rng(7)
+    for d in (2, 3):
+        for _ in range(50):
+            demo = rng.normal(size=d)
+            rows = rng.normal(size=(40, d))
+            rows[0], rows[1], rows[2] = 0.0, -2.0 * demo, 3.0 * demo    # zero, anti-, parallel
+            fast = plane_rotation(demo, rows)
+            np.testing.assert_allclose(fast, plane_rotation_numpy(demo, rows), atol=1e-12)
+            turned = np.einsum('bij,bj->bi', fast[1:], rows[1:])
+            np.testing.assert_allclose(turned / np.linalg.norm(turned, axis=1)[:, None],
+                                       np.tile(demo / np.linalg.norm(demo), (39, 1)), atol=1e-12)
+        np.testing.assert_array_equal(plane_rotation(np.zeros(d), rows),
+                                      np.tile(np.eye(d), (40, 1, 1)))
