@@ -34,7 +34,7 @@ from etdmp_ros.dmp import Demonstration, load_demo, save_demo
 from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.processes import (DISCOVERY_VARIABLES, isolated_environment, module_argv,
                                  NodeProcess)
-from etdmp_ros.scenario import Scenario, stir_start
+from etdmp_ros.scenario import Scenario, stir_start, stir_start_joints
 import numpy as np
 
 NAME = 'stir_by_hand'
@@ -170,6 +170,10 @@ def record(out, env, script=None, name=None, config_dir=None, command=module_arg
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     scenario = Scenario(config_dir, 'stir')
+    # The hand takes hold of the stirrer upright (the tool pointing down), as the nodes start it
+    # for a position-only skill, not tilted as the built-in stir starts.
+    scenario.overrides['ur10_sim']['initial_joint_positions'] = stir_start_joints(
+        scenario, scenario.tool_rotation).tolist()
     if script is None:
         name = name or NAME
         t, positions = hand_stir(stir_start(scenario), scenario.bottle_mouth)

@@ -40,7 +40,8 @@ from pathlib import Path
 
 from etdmp_ros import system
 from etdmp_ros.config_files import read_node_parameters, read_parameter_file
-from etdmp_ros.dmp import builtin_demo, Demonstration
+from etdmp_ros.dmp import _quaternion as quat
+from etdmp_ros.dmp import builtin_demo, Demonstration, euclidean_transform
 from etdmp_ros.robot import quaternion_to_matrix, UR10Model
 from etdmp_ros.task_plane import TaskPlane
 import numpy as np
@@ -226,6 +227,24 @@ class Scenario:
         return quaternion_to_matrix(self.server['tool_orientation'])
 
     @property
+    def start_rotation(self):
+        """
+        Stir: the tool's orientation at the start, the plan's first (no turn before tracking).
+
+        The demonstration's first orientation turned by the plan's transform (orientation_mode
+        ``demo``, docs/orientation.md), else the tool orientation of every pose.
+        """
+        demo = self.demo
+        if demo.orientations is None or self.server.get('orientation_mode', 'demo') == 'tool':
+            return self.tool_rotation
+        transform = euclidean_transform(demo.positions[0] - demo.positions[-1],
+                                        stir_start(self) - self.explicit_goal,
+                                        self.server.get('mode', 1),
+                                        self.server.get('independent_axis', 2))
+        return quaternion_to_matrix(quat.multiply(quat.from_matrix(transform.R.T),
+                                                  demo.orientations[0]))
+
+    @property
     def obstacle_count(self):
         """Return how many obstacles the simulation shows (the layout's or the scene's)."""
         positions = self.overrides['ur10_sim'].get('obstacle_positions',
@@ -248,15 +267,20 @@ def stir_start(scenario):
     return scenario.explicit_goal + scenario.start_scale * turn @ offset
 
 
-def stir_start_joints(scenario):
-    """Return the simulation's initial joints for stir: the stirrer at :func:`stir_start`."""
+def stir_start_joints(scenario, rotation=None):
+    """
+    Return the simulation's initial joints for stir: the stirrer at :func:`stir_start`.
+
+    ``rotation``: the tool's (3, 3), default the plan's first (:attr:`Scenario.start_rotation`).
+    """
     model = UR10Model(tool_offset=scenario.scene['tool_offset'])
     q0 = np.array(scenario.scene['initial_joint_positions'], dtype=float)
     target = stir_start(scenario)
     # Turn the base towards the bottle first, so Newton starts from the same elbow-up posture.
     p0 = model.tool_position(q0)
     q0[0] += math.atan2(target[1], target[0]) - math.atan2(p0[1], p0[0])
-    q, error = model.solve_pose(target, scenario.tool_rotation, q0, iterations=200,
+    rotation = scenario.start_rotation if rotation is None else rotation
+    q, error = model.solve_pose(target, rotation, q0, iterations=200,
                                 tolerance=1e-9)
     if np.linalg.norm(error[:3]) > 1e-5 or np.any(q < model.lower) or np.any(q > model.upper):
         raise ScenarioError(f'cannot put the tool at {np.round(target, 3).tolist()}')

@@ -19,7 +19,7 @@ def stir():
     """Return (scenario, sim at the stir start, script t, script positions)."""
     scenario = Scenario(None, 'stir')
     sim = UR10Sim(SceneConfig.from_parameters(scenario.scene))
-    sim.reset(stir_start_joints(scenario))
+    sim.reset(stir_start_joints(scenario, scenario.tool_rotation))   # the hand: upright
     t, positions = hand_stir(stir_start(scenario), scenario.bottle_mouth)
     yield scenario, sim, t, positions
     sim.close()
