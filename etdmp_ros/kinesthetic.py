@@ -11,8 +11,10 @@ while ``ros2 bag record /joint_states`` runs:
    param set /ur10_sim teach_script <file>`` would): the teaching mode leads the tool along the
    script (:class:`etdmp_ros.robot.GuidedMotion`, a hand in freedrive) until ``~/teaching``
    says ``done``;
-3. writes what it received, ``/joint_states`` and the simulation's true tool tip, to
-   ``<out>/<name>.mcap`` (rosbag2 MCAP, ``metadata.yaml`` beside it).
+3. writes what it received, every topic as the demo's recorder keeps them
+   (:class:`etdmp_ros.recording.Recorder`, ``ros2 bag record -a``: ``/joint_states``, the
+   simulation's true tool tip, ...), to ``<out>/<name>.mcap`` (rosbag2 MCAP, ``metadata.yaml``
+   beside it).
 
 The script defaults to :func:`hand_stir`, a stir made here as a hand would make it, written to
 ``<out>/<name>_script.csv``: not the built-in stir, and learning never sees it, only the joint
@@ -26,16 +28,16 @@ import math
 import os
 from pathlib import Path
 import sys
-import threading
 import time
 
-from etdmp_ros import bag
 from etdmp_ros.dmp import Demonstration, load_demo, save_demo
-from etdmp_ros.nodes.background import BackgroundNode
 from etdmp_ros.processes import (DISCOVERY_VARIABLES, isolated_environment, module_argv,
                                  NodeProcess)
+from etdmp_ros.recording import Recorder, RecorderError, write_bag
 from etdmp_ros.scenario import Scenario, stir_start, stir_start_joints
 import numpy as np
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import String
 
 NAME = 'stir_by_hand'
 JOINT_STATES = '/joint_states'
@@ -82,80 +84,17 @@ def hand_stir(start, mouth, duration=6.0, rate=100.0, turns=3.0):
     return np.arange(len(positions)) / rate, positions
 
 
-class _JointStateRecorder(BackgroundNode):
-    """Receives /joint_states and the true tool tip (raw) and the teaching mode's state."""
+def _messages(recorder, topic):
+    """Return the messages ``recorder`` received on ``topic`` so far, [(receipt ns, CDR)]."""
+    with recorder.lock:
+        stream = recorder.streams.get(topic)
+        return list(stream.messages) if stream is not None else []
 
-    def __init__(self, domain_id):
-        """Subscribe; start spinning."""
-        super().__init__('etdmp_kinesthetic', domain_id)
-        from rcl_interfaces.srv import SetParameters
-        from rclpy.qos import DurabilityPolicy, QoSProfile
-        from sensor_msgs.msg import JointState
-        from geometry_msgs.msg import PointStamped
-        from std_msgs.msg import String
-        self.lock = threading.Lock()
-        self.messages = {JOINT_STATES: [], TOOL_TIP: []}
-        self.teaching = ''
-        self._wall0, self._mono0 = time.time_ns(), time.monotonic_ns()
-        self._last = 0
-        stream = QoSProfile(depth=1000)
-        for topic, msg_type in ((JOINT_STATES, JointState), (TOOL_TIP, PointStamped)):
-            self.node.create_subscription(msg_type, topic, self._keeper(topic), stream, raw=True)
-        self.node.create_subscription(
-            String, TEACHING, self._on_teaching,
-            QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self.parameters = self.node.create_client(SetParameters, '/ur10_sim/set_parameters')
-        self.start()
 
-    def _keeper(self, topic):
-        def keep(raw):
-            with self.lock:
-                now = self._wall0 + time.monotonic_ns() - self._mono0
-                self._last = now = max(now, self._last + 1)
-                self.messages[topic].append((now, raw))
-        return keep
-
-    def _on_teaching(self, msg):
-        with self.lock:
-            self.teaching = msg.data
-
-    def count(self):
-        """Return how many joint states arrived."""
-        with self.lock:
-            return len(self.messages[JOINT_STATES])
-
-    def set_script(self, path, timeout=10.0):
-        """Set ur10_sim's teach_script; raise KinestheticError with the reason if refused."""
-        from rcl_interfaces.srv import SetParameters
-        from rclpy.parameter import Parameter
-        if not self.parameters.wait_for_service(timeout_sec=timeout):
-            raise KinestheticError('ur10_sim offers no set_parameters service')
-        request = SetParameters.Request(
-            parameters=[Parameter('teach_script', value=str(path)).to_parameter_msg()])
-        future = self.parameters.call_async(request)
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        if not future.done():
-            raise KinestheticError('ur10_sim did not answer the teach_script request')
-        result = future.result().results[0]
-        if not result.successful:
-            raise KinestheticError(f'ur10_sim refused the script: {result.reason}')
-
-    def write(self, path):
-        """Write the joint states and the true tool tip to a rosbag2 MCAP; return counts."""
-        with self.lock:
-            streams = {topic: list(messages) for topic, messages in self.messages.items()}
-        types = {JOINT_STATES: 'sensor_msgs/msg/JointState',
-                 TOOL_TIP: 'geometry_msgs/msg/PointStamped'}
-        with bag.BagWriter(path) as writer:
-            for topic in streams:
-                writer.add_topic(topic, types[topic], [bag.qos_profile()])
-            merged = sorted((ns, topic, raw) for topic, messages in streams.items()
-                            for ns, raw in messages)
-            for ns, topic, raw in merged:
-                writer.write(topic, ns, raw)
-        return {topic: len(messages) for topic, messages in streams.items()}
+def _teaching(recorder):
+    """Return the latest state ur10_sim's teaching mode published, or ''."""
+    received = _messages(recorder, TEACHING)
+    return deserialize_message(received[-1][1], String).data if received else ''
 
 
 def record(out, env, script=None, name=None, config_dir=None, command=module_argv,
@@ -186,24 +125,28 @@ def record(out, env, script=None, name=None, config_dir=None, command=module_arg
     scenario.overrides['ur10_sim']['camera_rate'] = 0.0
     logs = out / 'logs'
     logs.mkdir(exist_ok=True)
-    recorder = _JointStateRecorder(env['ROS_DOMAIN_ID'])
+    recorder = Recorder(env['ROS_DOMAIN_ID'], animation=False)   # as ros2 bag record -a
     sim = NodeProcess(command('ur10_sim', scenario.param_files('ur10_sim', logs)),
                       logs / 'ur10_sim.log', env)
     try:
         progress(f'ur10_sim started (ROS_DOMAIN_ID {env["ROS_DOMAIN_ID"]}); waiting for its '
                  'joint states')
-        _wait(lambda: recorder.count() > 10, STARTUP_TIMEOUT, sim, 'no joint states')
-        recorder.set_script(script)
+        _wait(lambda: len(_messages(recorder, JOINT_STATES)) > 10, STARTUP_TIMEOUT, sim,
+              'no joint states')
+        try:
+            recorder.set_parameters('ur10_sim', teach_script=str(script))
+        except RecorderError as err:
+            raise KinestheticError(f'the script was not taken: {err}') from None
         progress(f'teaching mode: {script} leads the arm; recording {JOINT_STATES}')
         duration = float(load_demo(script).duration)
-        _wait(lambda: recorder.teaching.startswith('done'), 3 * duration + STARTUP_TIMEOUT,
-              sim, f'the script did not finish (teaching: {recorder.teaching!r})')
+        _wait(lambda: _teaching(recorder).startswith('done'), 3 * duration + STARTUP_TIMEOUT,
+              sim, f'the script did not finish (teaching: {_teaching(recorder)!r})')
         time.sleep(0.2)
     finally:
         code = sim.stop()
         recorder.close()
     path = out / f'{name}.mcap'
-    counts = recorder.write(path)
+    counts = write_bag(path, recorder)
     progress(f'ur10_sim stopped (exit code {code}); wrote {path}: {counts[JOINT_STATES]} joint '
              'states')
     return path, counts

@@ -259,11 +259,20 @@ def read_mcap_path(path, topic=None, kinematics=None):
 
 
 def _mcap_topics(reader):
-    """Return {topic: schema name} of the PoseStamped/Path channels in an mcap file."""
+    """
+    Return {topic: schema name} of the recordable channels (RECORDED_TYPES) in an mcap file.
+
+    A channel that the summary's statistics count no message on is left out: a recorder that
+    subscribed a topic nobody published (``ros2 bag record -a`` of a partial system) has
+    nothing to learn from it, and it must not make the topic to learn from ambiguous.
+    """
     summary = reader.get_summary()
     if summary is not None:
+        counts = (None if summary.statistics is None
+                  else summary.statistics.channel_message_counts)   # unlisted: none
         pairs = [(channel.topic, summary.schemas.get(channel.schema_id))
-                 for channel in summary.channels.values()]
+                 for channel_id, channel in summary.channels.items()
+                 if counts is None or counts.get(channel_id, 0) > 0]
     else:   # no summary section (e.g. an interrupted recording): scan the records once
         pairs = {channel.topic: schema for schema, channel, _ in reader.iter_messages()}.items()
     return {topic: schema.name for topic, schema in pairs

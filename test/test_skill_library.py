@@ -397,3 +397,17 @@ def test_bad_joint_state_recordings_are_refused_with_the_message(tmp_path, ur10)
     library = SkillLibrary()
     added, errors = library.add_files([tmp_path], PLANE, kinematics=ur10)
     assert added == [] and len(errors) == 3
+
+
+def test_a_recorded_topic_without_messages_does_not_make_the_choice_ambiguous(tmp_path, ur10):
+    # ros2 bag record -a of a partial system: a Path topic subscribed, never published.
+    from etdmp_ros import bag
+    joints = _freedrive_joints(n_rest=5, n_move=60)
+    _joint_state_bag(tmp_path / 'js.mcap', joints, np.arange(len(joints)) * 10**7)
+    source = list(bag.read_messages(tmp_path / 'js.mcap'))
+    with bag.BagWriter(tmp_path / 'partial.mcap') as writer:
+        writer.add_topic('/etdmp/path', 'nav_msgs/msg/Path')
+        writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
+        for topic, _, log_ns, data in source:
+            writer.write(topic, log_ns, data)
+    assert read_mcap_path(tmp_path / 'partial.mcap', kinematics=ur10).topic == '/joint_states'
