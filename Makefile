@@ -28,7 +28,7 @@ help:
 	@echo "make docs       regenerate the README pictures in docs/img/"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system"
+	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
 	@echo "make browser    headless Chromium + chromedriver for the teaching page's test (apt, as root; make test does it)"
@@ -136,6 +136,10 @@ $(BENCH_STAMP): requirements.txt $(BENCH_REQ) setup.py setup.cfg
 BENCHMARKS := core sim dmp_server controller perception system
 
 bench: $(addprefix bench-,$(BENCHMARKS))
+
+# Record a stir by hand, learn it, repeat it (issue 16; needs no peer library).
+bench-kinesthetic: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_kinesthetic.py $(BENCH_ARGS)
 
 # The closed loop as `make demo` runs it, idle and next to a busy core (needs no peer library).
 bench-system: $(STAMP)
