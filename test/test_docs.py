@@ -81,10 +81,10 @@ def test_every_relative_link_and_image_resolves(page):
 
 # ------------------------------------------------------------------ the README's commands
 
-def _readme_commands():
-    """Return every command of the README's shell code blocks, continuation lines joined."""
+def _shell_commands(page):
+    """Return every command of a page's shell code blocks, continuation lines joined."""
     commands = []
-    for block in _SHELL_FENCE.findall(README.read_text()):
+    for block in _SHELL_FENCE.findall(page.read_text()):
         for line in block.replace('\\\n', ' ').splitlines():
             line = line.split(' # ')[0].strip()
             if line and not line.startswith(('#', '>>>', '$ ')) and not line[0].isupper():
@@ -153,9 +153,11 @@ def _check_python(words):
     return None
 
 
-def test_every_readme_command_names_real_targets_executables_topics_and_parameters():
-    commands = _readme_commands()
-    assert any(c.startswith('make demo') for c in commands), 'the README lost `make demo`'
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: str(p.relative_to(REPO)))
+def test_every_command_names_real_targets_executables_topics_and_parameters(page):
+    commands = _shell_commands(page)
+    if page == README:
+        assert any(c.startswith('make demo') for c in commands), 'the README lost `make demo`'
     problems = []
     for command in commands:
         for part in re.split(r'\s*(?:&&|;|\|)\s*', command):
