@@ -27,7 +27,7 @@ help:
 	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
 	@echo "make docs       regenerate the README pictures in docs/img/"
 	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
-	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/system.py"
+	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
 	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
@@ -92,16 +92,16 @@ demo: $(STAMP)
 # Kinesthetic teaching, simulated: ur10_sim's teaching mode leads the arm through a stir as a
 # hand in freedrive would, /joint_states recorded to out/kinesthetic/stir_by_hand.mcap.
 kinesthetic: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.kinesthetic --out out/kinesthetic
+	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo.kinesthetic --out out/kinesthetic
 
-# The four nodes and the teaching page (etdmp_ros/teach_session.py); Ctrl-C stops them.
+# The four nodes and the teaching page (etdmp_ros/demo/teach_session.py); Ctrl-C stops them.
 TEACH_PORT ?= 8080
 teach: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.teach_session --port $(TEACH_PORT)
+	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo.teach_session --port $(TEACH_PORT)
 
 # config/*.yaml and the parameter tables of docs/<node>.md are written from the system description.
 config: $(STAMP)
-	$(VENV_PY) -m etdmp_ros.config_files
+	$(VENV_PY) -m etdmp_ros.ros.config_files
 
 # The paper's letter experiments, offline (Figs. 5, 7-8, 13 and metrics.json in out/reproduce/).
 reproduce: $(STAMP)
@@ -117,6 +117,7 @@ docs: reproduce
 	$(VENV)/bin/etdmp generalize --skill G --start -6 4 --goal 0 0 --obstacle -7.6 -4.4 \
 	  --plot docs/img/generalize_G.png
 	MUJOCO_GL=egl $(VENV_PY) tools/render_scene.py
+	$(VENV_PY) tools/draw_layers.py
 
 # The documentation site: docs/*.md (MyST) and the API reference from the docstrings (docs/conf.py;
 # rosdoc2.yaml points docs.ros.org's builder at the same files). Warnings are errors, as in the test.

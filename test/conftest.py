@@ -13,8 +13,8 @@ from pathlib import Path
 import subprocess
 import sys
 
-from etdmp_ros import processes, system
-from etdmp_ros.processes import installed_argv, isolated_environment, sourced  # noqa: F401
+from etdmp_ros.ros import processes, system
+from etdmp_ros.ros.processes import installed_argv, isolated_environment, sourced  # noqa: F401
 import pytest
 import yaml
 
@@ -31,14 +31,13 @@ _DOMAIN_IDS = itertools.count(1 + os.getpid() % 50)
 #: ``unit`` runs in this process without ROS processes (about 30 s in all, linters included),
 #: ``nodes`` starts installed executables, ``system`` runs the whole closed loop.
 SUITES = {
-    'unit': ('test_bag', 'test_cli', 'test_controller_sim', 'test_demos', 'test_dmp_core',
-             'test_docs', 'test_dmp_obstacles', 'test_dmp_online', 'test_dmp_orientation',
-             'test_dmp_similarity', 'test_dmp_skill', 'test_flake8', 'test_guide',
-             'test_ik', 'test_metrics', 'test_package_xml', 'test_paper_reproduction',
-             'test_pep257', 'test_planning',
-             'test_readme', 'test_robot_model', 'test_ros_conversions_geometry',
-             'test_ros_conversions_image', 'test_ros_conversions_sim',
-             'test_ros_conversions_tf', 'test_sim',
+    'unit': ('test_architecture', 'test_bag', 'test_cli', 'test_controller_sim', 'test_demos',
+             'test_dmp_core', 'test_docs', 'test_dmp_obstacles', 'test_dmp_online',
+             'test_dmp_orientation', 'test_dmp_similarity', 'test_dmp_skill', 'test_flake8',
+             'test_guide', 'test_ik', 'test_metrics', 'test_package_xml',
+             'test_paper_reproduction', 'test_pep257', 'test_planning', 'test_readme',
+             'test_robot_model', 'test_ros_conversions_geometry', 'test_ros_conversions_image',
+             'test_ros_conversions_sim', 'test_ros_conversions_tf', 'test_sim',
              'test_skill_library', 'test_system', 'test_teaching', 'test_vision'),
     'nodes': ('test_adversarial_controller', 'test_adversarial_dmp_server',
               'test_adversarial_perception',
@@ -155,10 +154,11 @@ class NodeProcess(processes.NodeProcess):
     """
     An installed node started as `ros2 run etdmp_ros <node>` would be, its output in a file.
 
-    Parameters: the system's files (:func:`etdmp_ros.system.parameter_files`: config/scene.yaml,
-    then config/<node>.yaml) from the install's share folder, then ``overrides`` written as the
-    node's own section in a third file (a `-p name:=value` would lose against the node's section
-    of its YAML), then ``extra_args`` verbatim. Stopping: :meth:`stop` (SIGINT, then kill).
+    Parameters: the system's files (:func:`etdmp_ros.ros.system.parameter_files`:
+    config/scene.yaml, then config/<node>.yaml) from the install's share folder, then ``overrides``
+    written as the node's own section in a third file (a `-p name:=value` would lose against the
+    node's section of its YAML), then ``extra_args`` verbatim. Stopping: :meth:`stop` (SIGINT, then
+    kill).
     """
 
     def __init__(self, install, env, tmp, node, overrides=None, name=None, extra_args=''):

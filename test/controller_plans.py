@@ -10,10 +10,10 @@ Reference plans and plants shared by the controller tests and benchmark (not a t
 
 from dataclasses import dataclass, field
 
-from etdmp_ros import system
 from etdmp_ros.dmp import builtin_demo, learn
+from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.robot import PoseTrajectory, UR10Model
-from etdmp_ros.task_plane import TaskPlane
+from etdmp_ros.ros import system
 import numpy as np
 
 SCENE = system.scene_defaults()
@@ -74,8 +74,8 @@ def turning_plan(name, rotate_deg=90.0, goal_orientation=None, start=None, goal=
     orientation the skill gives it (the stirrer's tilt, the sponge's yaw, turned with the
     motion), or converges to ``goal_orientation``.
     """
-    from etdmp_ros.planning import plan_path
-    from etdmp_ros.robot import quaternion_to_matrix
+    from etdmp_ros.skills.planning import plan_path
+    from etdmp_ros.geometry import quaternion as quat
     given = None if start is None else (start, goal)
     demo = builtin_demo(name)
     skill = learn(demo)
@@ -92,7 +92,8 @@ def turning_plan(name, rotate_deg=90.0, goal_orientation=None, start=None, goal=
     if given is not None:
         start, goal = given
     plan = plan_path(skill, start, goal, plane=plane, goal_orientation=goal_orientation)
-    return PoseTrajectory(plan.t, plan.positions, quaternion_to_matrix(plan.orientations)), plan
+    rotations = quat.to_matrix(quat.normalized(plan.orientations))
+    return PoseTrajectory(plan.t, plan.positions, rotations), plan
 
 
 @dataclass

@@ -20,8 +20,8 @@ import subprocess
 import sys
 import time
 
-from etdmp_ros.nodes._spin import DDS_PROFILE_VARIABLES
-from etdmp_ros.processes import isolated_environment, NodeProcess, sourced
+from etdmp_ros.ros.processes import isolated_environment, NodeProcess, sourced
+from etdmp_ros.ros.spin import DDS_PROFILE_VARIABLES
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
@@ -72,7 +72,7 @@ class Ros2:
         # profile's, whatever FASTDDS_BUILTIN_TRANSPORTS says): this test process has it set
         # once a BackgroundNode ran here, and a fresh clone's CLI tests then printed
         # "RTPS_TRANSPORT_SHM Error ... open_and_lock_file failed" into ros2 param's output.
-        # The nodes set it again themselves (etdmp_ros.nodes._spin.use_dds_profile).
+        # The nodes set it again themselves (etdmp_ros.ros.spin.use_dds_profile).
         env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
         for name in DDS_PROFILE_VARIABLES:
             env.pop(name, None)

@@ -24,7 +24,7 @@ import time
 
 from controller_plans import g_plan
 from etdmp_ros.robot import JOINT_NAMES
-from etdmp_ros.ros_conversions import joint_state_msg, ns_to_stamp, serialize_path
+from etdmp_ros.ros.conversions import joint_state_msg, ns_to_stamp, serialize_path
 import numpy as np
 import pytest
 from test_controller_node import Rig

@@ -19,7 +19,7 @@ from bad_files import big_csv, forged_npy, npz_bomb
 from conftest import NodeProcess
 from etdmp_ros import limits
 from etdmp_ros.dmp import Demonstration, save_demo
-from etdmp_ros.ros_conversions import path_from_numpy, path_to_numpy
+from etdmp_ros.ros.conversions import path_from_numpy, path_to_numpy
 from geometry_msgs.msg import PointStamped
 from nav_msgs.srv import GetPlan
 import numpy as np

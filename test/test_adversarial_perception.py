@@ -19,7 +19,9 @@ import dataclasses
 
 from conftest import NodeProcess
 import cv2
-from etdmp_ros.robot import CameraIntrinsics, UR10Sim
+from etdmp_ros.geometry.camera import CameraIntrinsics
+from etdmp_ros.ros.system import scene_config
+from etdmp_ros.sim import UR10Sim
 import numpy as np
 import pytest
 from test_perception_node import CameraFeed, Client
@@ -85,7 +87,7 @@ ATTACKS = {
 @pytest.fixture(scope='module')
 def scene():
     """Return the good frame (and the goal floating 15 cm up) and the truth, rendered here."""
-    with UR10Sim() as sim:
+    with UR10Sim(scene_config()) as sim:
         rgb, depth = sim.render_rgb_depth()
         truth = (sim.goal_position.copy(), np.asarray(sim.obstacle_positions).copy())
         sim.set_goal((0.8, 0.1, 0.15))

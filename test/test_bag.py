@@ -1,18 +1,18 @@
 """
 The demo's recording (issue 12): rosbag2 MCAP files, read back by mcap-ros2-support.
 
-Files written by etdmp_ros.bag decode with mcap-ros2-support's own decoder for every type the
-system publishes; CompressedImage bytes are what rclpy would serialize; the measured streams
-come back in the order the recorder received them.
+Files written by etdmp_ros.skills.recordings decode with mcap-ros2-support's own decoder for
+every type the system publishes; CompressedImage bytes are what rclpy would serialize; the measured
+streams come back in the order the recorder received them.
 """
 
 import cv2
-from etdmp_ros import bag
-from etdmp_ros.recording import (COMMAND_TOPIC, read_streams, REFERENCE_TOPIC, STATUS_TOPIC,
-                                 TIP_TOPIC)
-from etdmp_ros.ros_conversions import (compress_image_cdr, compressed_image_cdr,
+from etdmp_ros.demo.recording import (COMMAND_TOPIC, read_streams, REFERENCE_TOPIC, STATUS_TOPIC,
+                                      TIP_TOPIC)
+from etdmp_ros.ros.conversions import (compress_image_cdr, compressed_image_cdr,
                                        compressed_image_from_cdr, image_msg, message_class,
                                        ns_to_stamp, tf_available)
+from etdmp_ros.skills import recordings as bag
 from geometry_msgs.msg import PointStamped, PoseStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory

@@ -12,8 +12,8 @@ import subprocess
 import time
 
 from conftest import sourced
-from etdmp_ros import system
-from etdmp_ros.nodes.background import BackgroundNode
+from etdmp_ros.ros import system
+from etdmp_ros.ros.background import BackgroundNode
 from geometry_msgs.msg import PointStamped
 from nav_msgs.srv import GetPlan
 import numpy as np

@@ -2,7 +2,8 @@
 The ``etdmp`` command line: generalize, reproduce (paper Figs. 5, 7-8, 13), demos, bad input.
 
 No ROS. Commands run in-process through ``main(argv)`` (fast); one case runs the real console
-entry point through ``python -m etdmp_ros.cli`` to check exit code and stderr of a real process.
+entry point through ``python -m etdmp_ros.apps.cli`` to check exit code and stderr of a real
+process.
 """
 
 import json
@@ -12,8 +13,8 @@ from pathlib import Path
 import subprocess
 import sys
 
-from etdmp_ros._reproduce import quadrant
-from etdmp_ros.cli import main
+from etdmp_ros.apps.cli import main
+from etdmp_ros.apps.reproduce import quadrant
 import numpy as np
 import pytest
 
@@ -367,12 +368,12 @@ def test_console_entry_point_subprocess(tmp_path):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         [str(REPO)] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p]))
     bad = subprocess.run(
-        [sys.executable, '-m', 'etdmp_ros.cli', 'generalize', '--skill', 'G', '--start', '1',
+        [sys.executable, '-m', 'etdmp_ros.apps.cli', 'generalize', '--skill', 'G', '--start', '1',
          '2', '3', '--goal', '0', '0'], capture_output=True, text=True, env=env, cwd=tmp_path,
         timeout=60)
     _assert_one_line_error(bad.returncode, bad.stderr, '2 coordinates')
     good = subprocess.run(
-        [sys.executable, '-m', 'etdmp_ros.cli', 'generalize', '--skill', 'W', '--start', '5',
+        [sys.executable, '-m', 'etdmp_ros.apps.cli', 'generalize', '--skill', 'W', '--start', '5',
          '-5', '--goal', '0', '0', '--json', 'w.json'], capture_output=True, text=True, env=env,
         cwd=tmp_path, timeout=60)
     assert good.returncode == 0, good.stderr

@@ -15,25 +15,41 @@ import threading
 import time
 
 from conftest import isolate_dds, NodeProcess
+
 from controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
-from etdmp_ros.nodes._spin import normal_scheduling, set_realtime_priority
-from etdmp_ros.nodes.background import BackgroundNode
+
+from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.nodes.controller import InputWatch
-from etdmp_ros.robot import matrix_to_quaternion, PoseTrajectory, UR10Model
-from etdmp_ros.ros_conversions import (joint_state_from_cdr, joint_state_msg, ns_to_stamp,
-                                       path_from_cdr, path_from_numpy, serialize_path,
-                                       stamp_to_ns)
+
+from etdmp_ros.robot import PoseTrajectory, UR10Model
+
+from etdmp_ros.ros.background import BackgroundNode
+
+from etdmp_ros.ros.conversions import (joint_state_from_cdr, joint_state_msg, ns_to_stamp,
+                                       path_from_cdr, path_from_numpy, serialize_path, stamp_to_ns)
+
+from etdmp_ros.ros.spin import normal_scheduling, set_realtime_priority
+
 from geometry_msgs.msg import PoseStamped
+
 from nav_msgs.msg import Path
+
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+
 from rcl_interfaces.srv import SetParameters
+
 from rclpy.qos import DurabilityPolicy, QoSProfile
+
 from rclpy.serialization import serialize_message
+
 from sensor_msgs.msg import JointState
+
 from std_msgs.msg import Float64MultiArray, String
+
 from std_srvs.srv import SetBool
+
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STARTUP = 60.0
@@ -114,10 +130,10 @@ class Client(BackgroundNode):
 
     def publish_path(self, path, stamp=0, orientation=None):
         """Publish a PoseTrajectory (positions, its times) as a nav_msgs/Path."""
-        quat = matrix_to_quaternion(path.rotations[0]) if orientation is None else orientation
+        first = quat.from_matrix(path.rotations[0]) if orientation is None else orientation
         if np.allclose(path.rotations, path.rotations[0]):
             self.path_pub.publish(serialize_path(path.positions, path.t, stamp=stamp,
-                                                 orientation=quat))
+                                                 orientation=first))
             return
         msg = Path()
         msg.header.frame_id = 'base_link'
@@ -127,7 +143,7 @@ class Client(BackgroundNode):
             pose.header.frame_id = 'base_link'
             pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = map(float, p)
             o = pose.pose.orientation
-            o.x, o.y, o.z, o.w = map(float, matrix_to_quaternion(r))
+            o.x, o.y, o.z, o.w = map(float, quat.from_matrix(r))
             msg.poses.append(pose)
         self.path_pub.publish(msg)
 
@@ -276,16 +292,16 @@ def test_path_bytes_are_read_like_rclpy_reads_them():
         pose.pose.position.x, pose.pose.position.z = 0.1 * i, -0.2 * i
         pose.pose.orientation.z, pose.pose.orientation.w = 0.6, 0.8
         msg.poses.append(pose)
-    frame, frames, stamps, p, quat = path_from_cdr(serialize_message(msg))
+    frame, frames, stamps, p, quats = path_from_cdr(serialize_message(msg))
     assert frame == 'base_link' and frames == {'base_link', '', 'x'}
     np.testing.assert_array_equal(stamps, 1_700_000_000_123_456_789 + np.arange(7) * 10_000_001)
     np.testing.assert_array_equal(p[:, 0], 0.1 * np.arange(7))
-    np.testing.assert_array_equal(quat, [[0, 0, 0.6, 0.8]] * 7)
+    np.testing.assert_array_equal(quats, [[0, 0, 0.6, 0.8]] * 7)
     t = np.arange(500) * 0.004
     positions = np.random.default_rng(0).normal(size=(500, 3))
     data = serialize_message(path_from_numpy(positions, t, stamp=123, frame_id='base_link',
                                              orientation=(0, 0, 0, 1)))     # rclpy's bytes
-    frame, frames, stamps, p, quat = path_from_cdr(data)
+    frame, frames, stamps, p, quats = path_from_cdr(data)
     np.testing.assert_array_equal(p, positions)
     np.testing.assert_array_equal(stamps, 123 + np.round(t * 1e9).astype(np.int64))
     with pytest.raises(ValueError):

@@ -11,8 +11,9 @@ reference, which must itself be the plan at nominal speed.
 
 from controller_plans import (g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET,
                               turning_plan)
-from etdmp_ros.robot import (ControllerConfig, PoseTrajectory, TrajectoryController, UR10Model,
-                             UR10Sim)
+from etdmp_ros.robot import ControllerConfig, PoseTrajectory, TrajectoryController, UR10Model
+from etdmp_ros.ros.system import scene_config
+from etdmp_ros.sim import UR10Sim
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -25,7 +26,7 @@ def ur10():
 
 @pytest.fixture(scope='module')
 def sim():
-    with UR10Sim(watchdog_timeout=0.0) as s:
+    with UR10Sim(scene_config(), watchdog_timeout=0.0) as s:
         yield s
 
 

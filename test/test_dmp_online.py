@@ -10,8 +10,7 @@ stands still); phase stopping lets the plan wait for a held tool and then finish
 
 import math
 
-from etdmp_ros.dmp import (builtin_demo, GeneralizationError, learn, nrmse, OnlineGains,
-                           OnlineRun)
+from etdmp_ros.dmp import builtin_demo, GeneralizationError, learn, nrmse, OnlineGains, OnlineRun
 from etdmp_ros.dmp._online import compare_goal_jump, goal_jump_case, GOAL_JUMP_WAYS
 import numpy as np
 import pytest

@@ -2,11 +2,11 @@
 
 import itertools
 
-from etdmp_ros.dmp import _quaternion as quat
 from etdmp_ros.dmp import (builtin_demo, Demonstration, DemonstrationError, GeneralizationError,
                            learn, load_demo, ORIENTATION_MODES, save_demo)
-from etdmp_ros.skill_library import (read_mcap_path, recorded_orientations, recorded_path_demo,
-                                     SkillLibrary)
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.skills.library import (read_mcap_path, recorded_orientations, recorded_path_demo,
+                                      SkillLibrary)
 import numpy as np
 import pytest
 from test_skill_library import letter_path, PLANE, TILTED, write_mcap

@@ -10,29 +10,47 @@ keeps the demo's shape (nRMSE), avoids published obstacles.
 
 import math
 from pathlib import Path as FsPath
+
 import time
 
 from conftest import NodeProcess
-from etdmp_ros.dmp import _quaternion as quat
+
 from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains, save_demo
-from etdmp_ros.planning import plan_path
-from etdmp_ros.robot import JOINT_NAMES, quaternion_to_matrix, UR10Model
-from etdmp_ros.ros_conversions import (joint_state_msg, path_from_numpy, path_to_numpy,
+
+from etdmp_ros.geometry import quaternion as quat
+
+from etdmp_ros.geometry.task_plane import TaskPlane
+
+from etdmp_ros.robot import JOINT_NAMES, UR10Model
+
+from etdmp_ros.ros.conversions import (joint_state_msg, path_from_numpy, path_to_numpy,
                                        pose_array_from_numpy)
-from etdmp_ros.task_plane import TaskPlane
+
+from etdmp_ros.skills.planning import plan_path
+
 from geometry_msgs.msg import Point, PointStamped, PoseArray, PoseStamped
+
 from nav_msgs.msg import Path
+
 from nav_msgs.srv import GetPlan
+
 import numpy as np
 import pytest
 from rcl_interfaces.srv import SetParameters
+
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
+
 from rclpy.parameter import Parameter
+
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
 from sensor_msgs.msg import JointState
+
 from std_msgs.msg import Header
+
 from visualization_msgs.msg import MarkerArray
+
 import yaml
 
 # The scene (config/scene.yaml) the node is started with.
@@ -299,7 +317,7 @@ def test_plans_of_a_skill_with_orientations_turn_the_tool(server, client):
     # The markers of the last plan (the one to the goal orientation) show the tool's axes.
     axes = shown['orientation']
     points = np.array([(p.x, p.y, p.z) for p in axes.points]).reshape(-1, 3, 2, 3)
-    last = quaternion_to_matrix(to_goal[-1])
+    last = quat.to_matrix(quat.normalized(to_goal[-1]))
     np.testing.assert_allclose(points[-1, :, 1] - points[-1, :, 0], 0.04 * last.T, atol=1e-9)
     assert [c.r for c in axes.colors[:6]] == [1, 1, 0, 0, 0, 0]
     assert len(axes.points) == 2 * 3 * 12

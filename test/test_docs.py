@@ -17,7 +17,7 @@ import shlex
 import subprocess
 import sys
 
-from etdmp_ros import system
+from etdmp_ros.ros import system
 import pytest
 from ros2_cli import readme_topics
 

@@ -3,8 +3,8 @@ End to end (issue 7): see the goal, plan with ET-DMP, write with the simulated U
 
 The four INSTALLED nodes (``<install>/lib/etdmp_ros/<node>`` after sourcing the colcon install,
 what ``ros2 run`` runs; parameters from the install's share folder) run as separate processes
-on an isolated DDS domain, driven by the demo's code (:func:`etdmp_ros.demo.run_demo`, what
-``make demo`` runs; the nodes started by :mod:`etdmp_ros.processes`): goal and obstacles
+on an isolated DDS domain, driven by the demo's code (:func:`etdmp_ros.demo.run.run_demo`, what
+``make demo`` runs; the nodes started by :mod:`etdmp_ros.ros.processes`): goal and obstacles
 perceived from the camera images, ``/generalize`` called with empty frame ids (the DMP baseline
 without execution first), the controller executing the ET-DMP plan. Checked against the
 simulation's ground truth, for the letter G and for stirring in 3D, each on an idle machine and
@@ -19,7 +19,7 @@ sponge turns along the stroke. The true tool orientation (forward kinematics of 
 simulation's /joint_states; the model's tip is the simulation's ground-truth tip) is within
 0.5 degree RMS and 2 degrees max of the plan's at the same path time and of the controller's
 reference, and the plan's orientations are the demonstration's turned by the Euclidean
-transform (computed independently in ``etdmp_ros.metrics``) within 0.5 degree.
+transform (computed independently in ``etdmp_ros.demo.metrics``) within 0.5 degree.
 
 Online ET-DMP (issue 14), case ``G-move`` (idle only): while the pen writes G, the goal marker
 is moved by 4 cm (ur10_sim's ``goal_position``, as ``ros2 param set`` would; the demo's
@@ -42,11 +42,12 @@ import json
 
 from conftest import busy_core
 import cv2
-from etdmp_ros import demo, system
-from etdmp_ros.config_files import read_parameter_file
-from etdmp_ros.processes import installed_command
-from etdmp_ros.recording import NOT_RECORDED
-from etdmp_ros.ros_conversions import tf_available
+from etdmp_ros.demo import run as demo
+from etdmp_ros.demo.recording import NOT_RECORDED
+from etdmp_ros.ros import system
+from etdmp_ros.ros.config_files import read_parameter_file
+from etdmp_ros.ros.conversions import tf_available
+from etdmp_ros.ros.processes import installed_command
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np

@@ -2,14 +2,15 @@
 Kinesthetic teaching in the simulation (issue 16): the scripted hand and the stir it makes.
 
 :class:`etdmp_ros.robot.GuidedMotion` leads the MuJoCo UR10's tool along a script as a hand in
-freedrive would; :func:`etdmp_ros.kinesthetic.hand_stir` is the default script. Checked against
-the simulation's true tool tip: it follows the script, stays in the bottle, and scripts the arm
-cannot follow are refused before it moves.
+freedrive would; :func:`etdmp_ros.demo.kinesthetic.hand_stir` is the default script. Checked
+against the simulation's true tool tip: it follows the script, stays in the bottle, and scripts the
+arm cannot follow are refused before it moves.
 """
 
-from etdmp_ros.kinesthetic import hand_stir, REST
-from etdmp_ros.robot import GuidedMotion, GuideError, SceneConfig, UR10Sim
-from etdmp_ros.scenario import Scenario, stir_start, stir_start_joints
+from etdmp_ros.demo.kinesthetic import hand_stir, REST
+from etdmp_ros.demo.scenario import Scenario, stir_start, stir_start_joints
+from etdmp_ros.robot import GuidedMotion, GuideError, SceneConfig
+from etdmp_ros.sim import UR10Sim
 import numpy as np
 import pytest
 

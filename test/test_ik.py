@@ -6,11 +6,14 @@ and assert tracking errors, limits and states against ground truth.
 """
 
 from controller_plans import g_plan, Q_INITIAL, run_kinematic, stir_plan, tool_down, TOOL_OFFSET
+
+from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.robot import _ik_fast
+
 from etdmp_ros.robot import (ControllerConfig, DelayEstimator, DifferentialIK, JOINT_NAMES,
-                             matrix_to_quaternion, MinimumJerkMove, PoseTrajectory,
-                             quaternions_to_rotations, TrajectoryController, TrajectoryError,
-                             UR10Model)
+                             MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
+                             TrajectoryController, TrajectoryError, UR10Model)
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -90,7 +93,7 @@ def test_pose_trajectory_rejects_bad_poses():
 def test_quaternions_match_the_camera_module():
     rng = np.random.default_rng(3)
     rot = np.array([pin.exp3(rng.normal(size=3)) for _ in range(20)])
-    quat = np.array([matrix_to_quaternion(r) for r in rot])
+    quat = np.array([quat.from_matrix(r) for r in rot])
     np.testing.assert_allclose(quaternions_to_rotations(quat), rot, atol=1e-12)
 
 

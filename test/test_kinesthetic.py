@@ -1,7 +1,7 @@
 """
 Kinesthetic teaching (issue 16), through the installed ur10_sim and then the whole system.
 
-1. :func:`etdmp_ros.kinesthetic.record` (``make kinesthetic``) starts the installed ur10_sim,
+1. :func:`etdmp_ros.demo.kinesthetic.record` (``make kinesthetic``) starts the installed ur10_sim,
    sets its ``teach_script`` as ``ros2 param set`` would (the teaching mode leads the arm
    through a stir as a hand in freedrive would) and records ``/joint_states`` to a rosbag2
    ``.mcap``, with the simulation's true tool tip beside it.
@@ -15,13 +15,13 @@ Kinesthetic teaching (issue 16), through the installed ur10_sim and then the who
 
 import math
 
-from etdmp_ros import demo, kinesthetic
-from etdmp_ros.bag import read_messages
+from etdmp_ros.demo import kinesthetic, run as demo
+from etdmp_ros.demo.scenario import Scenario, TAUGHT_STIR_TURN_DEG
 from etdmp_ros.dmp import load_demo
-from etdmp_ros.processes import installed_command
 from etdmp_ros.robot import UR10Model
-from etdmp_ros.scenario import Scenario, TAUGHT_STIR_TURN_DEG
-from etdmp_ros.skill_library import _motion_span, load_demonstration
+from etdmp_ros.ros.processes import installed_command
+from etdmp_ros.skills.library import _motion_span, load_demonstration
+from etdmp_ros.skills.recordings import read_messages
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest

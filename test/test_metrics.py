@@ -1,13 +1,13 @@
-"""The closed loop's measuring functions (etdmp_ros.metrics), without ROS."""
+"""The closed loop's measuring functions (etdmp_ros.demo.metrics), without ROS."""
 
 import math
 
-from etdmp_ros.metrics import (compute_metrics, cylinder_gap, executed_plan, fit_tracking_start,
-                               FOLLOW_CONFIRMATIONS, goal_seen_after_move, Run, switch_index,
-                               switch_speeds, system_figures)
+from etdmp_ros.demo.metrics import (compute_metrics, cylinder_gap, executed_plan,
+                                    fit_tracking_start, FOLLOW_CONFIRMATIONS, goal_seen_after_move,
+                                    Run, switch_index, switch_speeds, system_figures)
+from etdmp_ros.demo.scenario import Scenario
+from etdmp_ros.geometry.task_plane import quadrant
 from etdmp_ros.nodes import dmp_server
-from etdmp_ros.scenario import Scenario
-from etdmp_ros.task_plane import quadrant
 import numpy as np
 import pytest
 

@@ -11,10 +11,10 @@ is; nothing may be published under the root names.
 import threading
 import time
 
-from etdmp_ros import config_files, system
-from etdmp_ros.nodes.background import BackgroundNode
-from etdmp_ros.processes import installed_argv, NodeProcess
-from etdmp_ros.ros_conversions import path_to_numpy, stamp_to_ns
+from etdmp_ros.ros import config_files, system
+from etdmp_ros.ros.background import BackgroundNode
+from etdmp_ros.ros.conversions import path_to_numpy, stamp_to_ns
+from etdmp_ros.ros.processes import installed_argv, NodeProcess
 from geometry_msgs.msg import PointStamped
 from nav_msgs.srv import GetPlan
 import numpy as np

@@ -72,7 +72,7 @@ def test_exec_depends_are_exactly_the_imports():
 def test_the_scan_sees_conditional_imports():
     # tf2_msgs is imported only inside functions, and only when installed; pinocchio at the top.
     modules = imported_modules()
-    assert 'etdmp_ros/ros_conversions/_tf.py' in modules['tf2_msgs']
+    assert 'etdmp_ros/ros/conversions/_tf.py' in modules['tf2_msgs']
     assert 'etdmp_ros/robot/_ur10.py' in modules['pinocchio']
     assert 'os' not in modules and 'etdmp_ros' not in modules
     assert set(PYTHON_KEYS) <= set(modules), 'PYTHON_KEYS has modules nothing imports'

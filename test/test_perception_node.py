@@ -11,9 +11,10 @@ warning and the node keeps working.
 import time
 
 from conftest import NodeProcess
-from etdmp_ros.robot import UR10Sim
-from etdmp_ros.ros_conversions import (camera_info_msg, image_msg, ns_to_stamp, point_to_numpy,
+from etdmp_ros.ros.conversions import (camera_info_msg, image_msg, ns_to_stamp, point_to_numpy,
                                        pose_array_to_numpy, stamp_to_ns)
+from etdmp_ros.ros.system import scene_config
+from etdmp_ros.sim import UR10Sim
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 import pytest
@@ -248,7 +249,7 @@ def test_bad_frames_are_skipped(colcon_install, ros_env, tmp_path, client):
     # Warnings throttled to 0.1 s instead of 2 s, so that each bad frame gets its own quickly.
     perception = NodeProcess(colcon_install, ros_env, tmp_path, 'perception',
                              {'warn_period': 0.1})
-    with UR10Sim() as sim:
+    with UR10Sim(scene_config()) as sim:
         rgb, depth = sim.render_rgb_depth()
         intrinsics = sim.intrinsics
         truth = sim.goal_position

@@ -2,12 +2,12 @@
 
 import math
 
-from etdmp_ros.dmp import _quaternion as quat
 from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains
-from etdmp_ros.planning import (FollowedPlan, place_demo, plan_path, PlanningError,
-                                PlanSettings, TOOL_DOWN, Workspace)
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.robot import UR10Model
-from etdmp_ros.task_plane import TaskPlane
+from etdmp_ros.skills.planning import (FollowedPlan, place_demo, plan_path, PlanningError,
+                                       PlanSettings, TOOL_DOWN, Workspace)
 import numpy as np
 import pytest
 

@@ -16,7 +16,7 @@ import re
 import shlex
 import time
 
-from etdmp_ros import system
+from etdmp_ros.ros import system
 import numpy as np
 import pytest
 import ros2_cli

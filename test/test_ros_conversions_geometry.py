@@ -1,7 +1,7 @@
 """Geometry conversions: the Path builder and its bytes agree with rclpy's own messages."""
 
-from etdmp_ros.ros_conversions import (ns_to_stamp, path_from_cdr, path_from_numpy,
-                                       path_to_numpy, points_from_numpy, pose_array_from_numpy,
+from etdmp_ros.ros.conversions import (ns_to_stamp, path_from_cdr, path_from_numpy, path_to_numpy,
+                                       points_from_numpy, pose_array_from_numpy,
                                        pose_array_to_numpy, serialize_path, stamp_to_ns)
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from nav_msgs.msg import Path

@@ -8,10 +8,10 @@ pinhole camera matrix in camera_info.
 import sys
 
 from builtin_interfaces.msg import Time
-from etdmp_ros.robot import CameraIntrinsics
-from etdmp_ros.ros_conversions import (camera_image_from_msg, camera_info_msg, ENCODINGS,
-                                       header_stamp_ns, image_from_cdr, image_from_msg,
-                                       image_msg, intrinsics_from_camera_info)
+from etdmp_ros.geometry.camera import CameraIntrinsics
+from etdmp_ros.ros.conversions import (camera_image_from_msg, camera_info_msg, ENCODINGS,
+                                       header_stamp_ns, image_from_cdr, image_from_msg, image_msg,
+                                       intrinsics_from_camera_info)
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message

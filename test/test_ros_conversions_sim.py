@@ -1,7 +1,8 @@
 """Image, CameraInfo, JointState and velocity-command conversions (messages, no ROS graph)."""
 
-from etdmp_ros.robot import CameraIntrinsics, JOINT_NAMES
-from etdmp_ros.ros_conversions import (camera_info_msg, image_from_msg, image_msg,
+from etdmp_ros.geometry.camera import CameraIntrinsics
+from etdmp_ros.robot import JOINT_NAMES
+from etdmp_ros.ros.conversions import (camera_info_msg, image_from_msg, image_msg,
                                        intrinsics_from_camera_info, joint_state_arrays,
                                        joint_state_from_cdr, joint_state_msg, ns_to_stamp,
                                        velocity_command_array, velocity_command_msg)

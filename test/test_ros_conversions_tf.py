@@ -4,10 +4,10 @@ The robot's frame tree (ROS-free) and its TFMessage.
 Kinematics against Pinocchio; the message bytes against the plain message rclpy builds.
 """
 
-from etdmp_ros import system
 from etdmp_ros.robot import (camera_transforms, chain_pose, FrameTree, JOINT_NAMES,
                              robot_description, UR10Model)
-from etdmp_ros.ros_conversions import MovingTransforms, ns_to_stamp, tf_available, tf_message
+from etdmp_ros.ros import system
+from etdmp_ros.ros.conversions import MovingTransforms, ns_to_stamp, tf_available, tf_message
 import numpy as np
 import pinocchio as pin
 import pytest

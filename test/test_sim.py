@@ -7,12 +7,18 @@ and the camera's geometry (pixels + depth -> base_link).
 
 import os
 
-from etdmp_ros import system
-from etdmp_ros._paths import config_path
-from etdmp_ros.config_files import read_parameter_file
-from etdmp_ros.robot import (CameraIntrinsics, CameraPose, matrix_to_quaternion, MAX_OBSTACLES,
-                             quaternion_to_matrix, SCENE_PARAMETERS, SceneConfig, UR10Model,
-                             UR10Sim)
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
+from etdmp_ros.robot import SCENE_PARAMETERS, SceneConfig, UR10Model
+
+from etdmp_ros.ros import system
+
+from etdmp_ros.ros.config_files import read_parameter_file
+
+from etdmp_ros.ros.paths import config_path
+
+from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
+
 import numpy as np
 import pytest
 
@@ -24,7 +30,7 @@ VELOCITY = np.array([0.3, -0.25, 0.4, 0.5, -0.6, 0.8])
 
 @pytest.fixture(scope='module')
 def sim():
-    with UR10Sim() as s:
+    with UR10Sim(system.scene_config()) as s:
         yield s
 
 
@@ -87,7 +93,7 @@ def test_initial_pose_is_the_scene_one(sim):
 
 # ---------------------------------------------------------------------------------- actuation
 def test_constant_velocity_is_tracked_within_2_percent():
-    with UR10Sim() as s:
+    with UR10Sim(system.scene_config()) as s:
         _run(s, VELOCITY, 0.2)                   # settle the servo
         q0, t0 = s.q, s.time
         _run(s, VELOCITY, 0.8)
@@ -104,7 +110,7 @@ def test_constant_velocity_is_tracked_within_2_percent():
 
 
 def test_watchdog_brakes_when_commands_stop():
-    with UR10Sim(watchdog_timeout=0.1) as s:
+    with UR10Sim(system.scene_config(), watchdog_timeout=0.1) as s:
         _run(s, VELOCITY, 0.3)
         stopped_sending = s.time
         s.advance(0.05)                          # within the timeout: still moving
@@ -124,7 +130,7 @@ def test_watchdog_brakes_when_commands_stop():
 
 
 def test_without_watchdog_the_last_command_applies_forever():
-    with UR10Sim(watchdog_timeout=0.0) as s:
+    with UR10Sim(system.scene_config(), watchdog_timeout=0.0) as s:
         s.set_velocity_command(VELOCITY)
         s.advance(1.0)
         assert np.allclose(s.qd, VELOCITY, rtol=0.02)
@@ -138,7 +144,7 @@ def test_arm_holds_still_without_commands(sim):
 
 
 def test_velocity_is_clamped_to_ur10_limits():
-    with UR10Sim() as s:
+    with UR10Sim(system.scene_config()) as s:
         limits = s.velocity_limits
         assert np.allclose(limits, UR10Model().velocity_limits)
         applied = s.set_velocity_command(10 * np.ones(6))
@@ -157,7 +163,7 @@ def test_velocity_is_clamped_to_ur10_limits():
 @pytest.mark.parametrize('bad', [[0.1] * 5, [0.1] * 7, [], [0.1, 0.1, float('nan'), 0, 0, 0],
                                  [0.1, 0.1, 0, float('inf'), 0, 0], 'fast', None])
 def test_bad_commands_are_rejected_and_never_applied(bad):
-    with UR10Sim() as s:
+    with UR10Sim(system.scene_config()) as s:
         s.set_velocity_command(VELOCITY)
         with pytest.raises(ValueError):
             s.set_velocity_command(bad)
@@ -307,10 +313,11 @@ def test_depth_is_z_of_the_optical_frame(sim):
 
 
 def test_depth_range_and_noise():
-    with UR10Sim(depth_range=(0.1, 1.3)) as s:
+    with UR10Sim(system.scene_config(), depth_range=(0.1, 1.3)) as s:
         _, depth = s.render_rgb_depth()
         assert depth.max() <= 1300 and (depth == 0).sum() > 1000    # far table/floor: no data
-    with UR10Sim(depth_noise=0.002, seed=3) as noisy, UR10Sim() as exact:
+    with UR10Sim(system.scene_config(), depth_noise=0.002, seed=3) as noisy, \
+            UR10Sim(system.scene_config()) as exact:
         _, d_noisy = noisy.render_rgb_depth()
         _, d_exact = exact.render_rgb_depth()
         both = (d_noisy > 0) & (d_exact > 0)
@@ -353,11 +360,11 @@ def test_quaternion_conversions_round_trip():
         q = rng.normal(size=4)
         q /= np.linalg.norm(q)
         q = q if q[3] >= 0 else -q
-        r = quaternion_to_matrix(q)
+        r = quat.to_matrix(quat.normalized(q))
         assert np.allclose(r @ r.T, np.eye(3)) and np.isclose(np.linalg.det(r), 1.0)
-        assert np.allclose(matrix_to_quaternion(r), q)
+        assert np.allclose(quat.from_matrix(r), q)
     with pytest.raises(ValueError):
-        quaternion_to_matrix([0, 0, 0, 0])
+        quat.to_matrix(quat.normalized([0, 0, 0, 0]))
 
 
 # ------------------------------------------------------------------------------------- scene

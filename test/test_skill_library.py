@@ -4,13 +4,15 @@ from pathlib import Path
 import time
 
 from bad_files import forged_npy, npz_bomb
-from etdmp_ros import limits, skill_library
+from etdmp_ros import limits
 from etdmp_ros.dmp import (builtin_demo, builtin_demo_names, Demonstration, DemonstrationError,
                            learn, load_demo, nrmse, save_demo)
-from etdmp_ros.skill_library import (default_skills_dir, demonstration_files, load_demonstration,
-                                     read_mcap_path, recorded_path_demo, save_skill_demo,
-                                     SkillExistsError, SkillLibrary, UnknownSkillError)
-from etdmp_ros.task_plane import TaskPlane
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.task_plane import TaskPlane
+from etdmp_ros.skills import library as skill_library
+from etdmp_ros.skills.library import (default_skills_dir, demonstration_files, load_demonstration,
+                                      read_mcap_path, recorded_path_demo, save_skill_demo,
+                                      SkillExistsError, SkillLibrary, UnknownSkillError)
 from mcap_ros2.writer import Writer
 import numpy as np
 import pytest
@@ -305,7 +307,7 @@ def test_a_protected_skill_is_not_replaced():
 
 def _joint_state_bag(path, joints, stamps_ns, names=None, extra=False):
     """Write (n, 6) joint positions as sensor_msgs/JointState messages, as ros2 bag record."""
-    from etdmp_ros import bag
+    from etdmp_ros.skills import recordings as bag
     from etdmp_ros.robot import JOINT_NAMES
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
@@ -356,9 +358,8 @@ def test_joint_state_recording_becomes_the_tool_path_by_forward_kinematics(tmp_p
     np.testing.assert_allclose(recorded.t, stamps[first:last + 1] * 1e-9)
     assert 39 <= first < 70 and len(joints) - 70 < last <= len(joints) - 40   # rest trimmed
     rotation = ur10.frame_pose(joints[first + 100])[1]
-    from etdmp_ros.robot import quaternion_to_matrix
-    np.testing.assert_allclose(quaternion_to_matrix(recorded.orientations[100]), rotation,
-                               atol=1e-9)
+    np.testing.assert_allclose(quat.to_matrix(quat.normalized(recorded.orientations[100])),
+                               rotation, atol=1e-9)
     demo = load_demonstration(tmp_path / 'taught.mcap', PLANE, kinematics=ur10)
     assert demo.dim == 3 and demo.name == 'taught' and demo.orientations is not None
     np.testing.assert_allclose(demo.t[0], 0.0)
@@ -401,7 +402,7 @@ def test_bad_joint_state_recordings_are_refused_with_the_message(tmp_path, ur10)
 
 def test_a_recorded_topic_without_messages_does_not_make_the_choice_ambiguous(tmp_path, ur10):
     # ros2 bag record -a of a partial system: a Path topic subscribed, never published.
-    from etdmp_ros import bag
+    from etdmp_ros.skills import recordings as bag
     joints = _freedrive_joints(n_rest=5, n_move=60)
     _joint_state_bag(tmp_path / 'js.mcap', joints, np.arange(len(joints)) * 10**7)
     source = list(bag.read_messages(tmp_path / 'js.mcap'))

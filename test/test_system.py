@@ -1,13 +1,13 @@
 """
-The system description (etdmp_ros.system) is the one place of every parameter and node.
+The system description (etdmp_ros.ros.system) is the one place of every parameter and node.
 
 The files written from it (config/*.yaml, the docs' parameter tables) must be up to date and
 give back its defaults; the nodes must declare exactly what it describes, with its descriptors.
 """
 
 from conftest import REPO
-from etdmp_ros import config_files, system
-from etdmp_ros.nodes._parameters import as_declared, declare, descriptor, list_type
+from etdmp_ros.ros import config_files, system
+from etdmp_ros.ros.parameters import as_declared, declare, descriptor, list_type
 import numpy as np
 import pytest
 import rclpy
@@ -237,7 +237,7 @@ def test_each_node_declares_exactly_its_description(context, spec, monkeypatch, 
 #: back while the controller warms up): Python prints the KeyboardInterrupt and drops it there.
 _STARTUP_SIGNAL = """
 import ctypes, os, signal, sys, time
-from etdmp_ros.nodes import _spin
+from etdmp_ros.ros import spin as _spin
 from rclpy.node import Node
 
 def make(nodes):

@@ -3,12 +3,12 @@ The teaching page in a real browser, with the whole system (issue 16, "Draw it")
 
 Headless Chromium (Debian's ``chromium`` and ``chromedriver``, driven by selenium) opens the page
 of the INSTALLED teach node, which runs beside the four installed nodes as ``make teach`` runs
-them (:class:`etdmp_ros.teach_session.TeachSession`, on a DDS domain of its own; no obstacles in
-the scene, so the letter is written without detours). The test does what a user does: draws a
-Z with pointer events (WebDriver actions, the Z's parts at a person's speed: slowing down at the
-corners), teaches it, sees dmp_server's report on the page and the skill saved, asks the robot to
-write it, and checks the TRUE pen trace (the simulation's ground truth) against the drawn Z:
-nRMSE at most 0.05 after the similarity alignment (etdmp_ros/dmp/_similarity.py). The page must
+them (:class:`etdmp_ros.demo.teach_session.TeachSession`, on a DDS domain of its own; no
+obstacles in the scene, so the letter is written without detours). The test does what a user does:
+draws a Z with pointer events (WebDriver actions, the Z's parts at a person's speed: slowing down
+at the corners), teaches it, sees dmp_server's report on the page and the skill saved, asks the
+robot to write it, and checks the TRUE pen trace (the simulation's ground truth) against the drawn
+Z: nRMSE at most 0.05 after the similarity alignment (etdmp_ros/dmp/_similarity.py). The page must
 have shown the camera image with the plan and the trace over it. Bad input from the page (no
 strokes, 10^6 points, NaN, the name ``../x``) gets its reason on the page and changes nothing in
 dmp_server. Last, with the page closed, the teach node costs next to nothing.
@@ -26,13 +26,14 @@ import shutil
 import time
 
 from drawings import letter_z
-from etdmp_ros import system, teaching
+from etdmp_ros.demo.teach_session import TeachSession
 from etdmp_ros.dmp import nrmse
-from etdmp_ros.nodes.background import BackgroundNode
-from etdmp_ros.processes import installed_command
-from etdmp_ros.ros_conversions import path_to_numpy
-from etdmp_ros.task_plane import TaskPlane
-from etdmp_ros.teach_session import TeachSession
+from etdmp_ros.geometry.task_plane import TaskPlane
+from etdmp_ros.ros import system
+from etdmp_ros.ros.background import BackgroundNode
+from etdmp_ros.ros.conversions import path_to_numpy
+from etdmp_ros.ros.processes import installed_command
+from etdmp_ros.skills import teaching
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path as PathMsg
 import numpy as np

@@ -1,8 +1,8 @@
 """
 Teaching by drawing without a browser or the system: the page's data, checked and learned.
 
-:mod:`etdmp_ros.teaching` (drawing → base_link path → the demonstration dmp_server learns, the
-Fig. 5 generalizations, the camera projection) and the teach node in this process: its
+:mod:`etdmp_ros.skills.teaching` (drawing → base_link path → the demonstration dmp_server
+learns, the Fig. 5 generalizations, the camera projection) and the teach node in this process: its
 parameters, its page files, its JSON API's answers to bad requests, its host check. The page in
 a real browser with the whole system: test_teach_page.py.
 """
@@ -16,12 +16,14 @@ import urllib.request
 
 from conftest import REPO
 from drawings import letter_z, request, stroke
-from etdmp_ros import config_files, limits, system, teaching
+from etdmp_ros import limits
 from etdmp_ros.dmp import nrmse
-from etdmp_ros.robot import CameraIntrinsics, CameraPose
-from etdmp_ros.ros_conversions import path_from_cdr, path_from_numpy
-from etdmp_ros.skill_library import recorded_path_demo, SkillLibrary
-from etdmp_ros.task_plane import TaskPlane
+from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
+from etdmp_ros.geometry.task_plane import TaskPlane
+from etdmp_ros.ros import config_files, system
+from etdmp_ros.ros.conversions import path_from_cdr, path_from_numpy
+from etdmp_ros.skills import teaching
+from etdmp_ros.skills.library import recorded_path_demo, SkillLibrary
 from geometry_msgs.msg import PointStamped, PoseStamped
 import numpy as np
 import pytest

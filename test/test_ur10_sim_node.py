@@ -14,11 +14,12 @@ import threading
 import time
 
 from conftest import NodeProcess
-from etdmp_ros._paths import config_path
-from etdmp_ros.config_files import read_parameter_file
-from etdmp_ros.nodes.background import BackgroundNode
-from etdmp_ros.robot import CameraIntrinsics, JOINT_NAMES, UR10Model
-from etdmp_ros.ros_conversions import image_from_msg, intrinsics_from_camera_info, stamp_to_ns
+from etdmp_ros.geometry.camera import CameraIntrinsics
+from etdmp_ros.robot import JOINT_NAMES, UR10Model
+from etdmp_ros.ros.background import BackgroundNode
+from etdmp_ros.ros.config_files import read_parameter_file
+from etdmp_ros.ros.conversions import image_from_msg, intrinsics_from_camera_info, stamp_to_ns
+from etdmp_ros.ros.paths import config_path
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 import pytest

@@ -12,19 +12,29 @@ import threading
 import time
 
 from conftest import NodeProcess
-from etdmp_ros import system
-from etdmp_ros.config_files import read_parameter_file
-from etdmp_ros.nodes.background import BackgroundNode
-from etdmp_ros.robot import (chain_pose, JOINT_NAMES, quaternion_to_matrix, Transform,
-                             UR10Model)
-from etdmp_ros.ros_conversions import stamp_to_ns, tf_available
+
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.robot import chain_pose, JOINT_NAMES, Transform, UR10Model
+
+from etdmp_ros.ros import system
+
+from etdmp_ros.ros.background import BackgroundNode
+
+from etdmp_ros.ros.config_files import read_parameter_file
+
+from etdmp_ros.ros.conversions import stamp_to_ns, tf_available
+
 from geometry_msgs.msg import PointStamped
+
 import numpy as np
 import pinocchio as pin
 import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile
+
 from sensor_msgs.msg import JointState
+
 from std_msgs.msg import Float64MultiArray, String
+
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STARTUP = 60.0
@@ -152,7 +162,8 @@ def test_camera_transform_is_the_camera_pose_parameter(moving_sim):
     scene = read_parameter_file(system.parameter_files('ur10_sim')[0])
     position, rotation = chain_pose(moving_sim.static, 'base_link', 'camera_color_optical_frame')
     np.testing.assert_allclose(position, scene['camera.position'], atol=1e-9)
-    np.testing.assert_allclose(rotation, quaternion_to_matrix(scene['camera.orientation']),
+    np.testing.assert_allclose(rotation,
+                               quat.to_matrix(quat.normalized(scene['camera.orientation'])),
                                atol=1e-9)
 
 

@@ -14,11 +14,14 @@ import math
 import re
 
 import cv2
-from etdmp_ros.config_files import read_node_parameters
-from etdmp_ros.robot import (CameraIntrinsics, check_frame, Detections, Detector,
-                             detector_from_parameters, DetectorSettings, FrameSynchronizer,
-                             HsvRange, ObjectModel, Rejection, UR10Sim)
-from etdmp_ros.robot._vision import check_intrinsics, fit_circle
+from etdmp_ros.geometry.camera import CameraIntrinsics
+from etdmp_ros.perception import (check_frame, Detections, Detector, detector_from_parameters,
+                                  DetectorSettings, FrameSynchronizer, HsvRange, ObjectModel,
+                                  Rejection)
+from etdmp_ros.perception._vision import check_intrinsics, fit_circle
+from etdmp_ros.ros.config_files import read_node_parameters
+from etdmp_ros.ros.system import scene_config
+from etdmp_ros.sim import UR10Sim
 import numpy as np
 import pytest
 
@@ -40,7 +43,7 @@ def parameters():
 @pytest.fixture(scope='module')
 def sim():
     """Return one simulation for the module (building it and its GL context takes ~1 s)."""
-    with UR10Sim() as simulation:
+    with UR10Sim(scene_config()) as simulation:
         yield simulation
 
 
@@ -329,7 +332,7 @@ def test_no_depth_at_all_in_a_blob(sim, detector):
 
 def test_depth_noise(detector):
     """Stereo-like depth noise (2 mm at 1 m, growing with z^2): still within 5 mm."""
-    with UR10Sim(depth_noise=0.002, seed=1) as noisy:
+    with UR10Sim(scene_config(), depth_noise=0.002, seed=1) as noisy:
         scene = noisy.scene
         rgb, depth = place(noisy, scene.goal_position, scene.obstacle_positions)
         found = detector.detect(rgb, depth, noisy.intrinsics)
@@ -591,7 +594,7 @@ def test_the_bottle_is_located_within_2_mm_moved_and_with_the_stirrer_in_it(sim,
     # demonstration inside it (it hides part of the mouth). Measured: 0.8-1.3 mm, mostly in z
     # (the top band holds a little of the walls below the 4 mm rim).
     from etdmp_ros.robot import UR10Model
-    from etdmp_ros.scenario import Scenario
+    from etdmp_ros.demo.scenario import Scenario
     scenario = Scenario(None, 'stir')
     model = UR10Model(tool_offset=scenario.scene['tool_offset'])
     q = np.array(scenario.overrides['ur10_sim']['initial_joint_positions'], dtype=float)

@@ -35,14 +35,13 @@ from dataclasses import dataclass
 import time
 
 import cv2
-
-from etdmp_ros import system
-from etdmp_ros.nodes._parameters import declare, plain, values as parameter_values
-from etdmp_ros.nodes._spin import run
-from etdmp_ros.robot import detector_from_parameters, FrameSynchronizer
-from etdmp_ros.ros_conversions import (camera_image_from_msg, image_msg,
+from etdmp_ros.perception import detector_from_parameters, FrameSynchronizer
+from etdmp_ros.ros import system
+from etdmp_ros.ros.conversions import (camera_image_from_msg, image_msg,
                                        intrinsics_from_camera_info, pose_array_from_numpy,
                                        stamp_to_ns)
+from etdmp_ros.ros.parameters import declare, plain, values as parameter_values
+from etdmp_ros.ros.spin import run
 from geometry_msgs.msg import PointStamped, PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node

@@ -15,7 +15,7 @@ from pathlib import Path
 import platform
 import subprocess
 
-from etdmp_ros.config_files import replace_block
+from etdmp_ros.ros.config_files import replace_block
 
 REPO = Path(__file__).resolve().parents[2]
 
