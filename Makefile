@@ -73,9 +73,9 @@ browser:
 test: $(STAMP) ros-tools browser
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
 
-# The suites are markers (test/conftest.py SUITES): unit, nodes, system.
+# The suites are folders: test/unit, test/nodes, test/system (test/conftest.py marks them).
 test-fast: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -m unit test
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q test/unit
 
 # The closed loop: camera -> perception -> /generalize -> controller -> MuJoCo UR10 (out/demo/).
 # MOVE_GOAL=1: the goal marker moves by 4 cm while the pen writes (online ET-DMP, --move-goal);

@@ -1,8 +1,8 @@
 """
 Draw the package's layers (docs/img/layers.png) from `.importlinter` (``make docs``).
 
-The contract that test/test_architecture.py checks: one row a layer, top to bottom, each folder
-with its modules' line count.
+The contract that test/unit/test_architecture.py checks: one row a layer, top to bottom, each
+folder with its modules' line count.
 """
 
 import configparser

@@ -42,7 +42,7 @@ Pipeline of :meth:`Detector.detect`, per object class (goal, obstacle):
    The uncorrected estimate (blob centroid pixel deprojected at the median depth) is off by
    25-40 mm for an obstacle seen at 45 degrees; the corrected one is within 3 mm of the ground
    truth on rendered 640x480 frames, also partly occluded (median about 0.5 mm, slightly towards
-   the camera: outline pixels lie up to a pixel inside the true rim; test/test_vision.py).
+   the camera: outline pixels lie up to a pixel inside the true rim; test/unit/test_vision.py).
 
 Plausibility (limits in :mod:`etdmp_ros.limits`, section perception and camera input): the
 intrinsics must be a D435 colour camera's (:func:`check_intrinsics`: image size, field of view,

@@ -3,7 +3,7 @@ The system, described once: its nodes, their parameters and how they are started
 
 Everything else is made from this module. The nodes declare their parameters from it
 (:func:`etdmp_ros.ros.parameters.declare`); ``config/*.yaml`` and the parameter tables in
-``docs/<node>.md`` are written from it (``make config``, checked by ``test/test_system.py``);
+``docs/<node>.md`` are written from it (``make config``, checked by ``test/unit/test_system.py``);
 the launch file, ``bringup``, the demo and the test fixtures start the nodes as
 :data:`NODES` and :func:`parameter_files` say. To change a default, a range or a description,
 change it here and run ``make config``.

@@ -39,7 +39,6 @@ import argparse
 import json
 import os
 from pathlib import Path
-
 import platform
 import signal
 import subprocess
@@ -51,12 +50,11 @@ import time
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
 
-from controller_plans import g_plan, Q_INITIAL, run_kinematic, TOOL_OFFSET  # noqa: E402
 from etdmp_ros.geometry import quaternion as quat  # noqa: E402
 from etdmp_ros.robot import ControllerConfig, TrajectoryController, UR10Model  # noqa: E402
-
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
+from support.controller_plans import g_plan, Q_INITIAL, run_kinematic, TOOL_OFFSET  # noqa: E402
 
 RATE = 125.0
 
@@ -291,7 +289,7 @@ def bench_ros(rate, ur10, path, duration_margin=3.0):
     tool = np.array([ur10.frame_pose(joints[s][0])[0] for s in stamps])
     # Tracking phase: reference samples moving along the path (not the approach/hold).
     t = np.array(stamps) * 1e-9
-    from controller_plans import path_time_offset
+    from support.controller_plans import path_time_offset
     tau = t - path_time_offset(path, t, ref)
     tracking = (tau > 0) & (tau < path.duration)
     errors = np.linalg.norm(tool - ref, axis=1)[tracking]

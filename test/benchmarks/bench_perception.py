@@ -7,7 +7,7 @@ A script, not a pytest test. From the repository root::
 
 1. Processing time per frame, in this process, on frames rendered by the simulation
    (:class:`etdmp_ros.robot.UR10Sim`) with random placements of the goal and 1-4 obstacles
-   (the arm turned away, every object fully in view: the placements of test/test_vision.py):
+   (the arm turned away, every object fully in view: the placements of test/unit/test_vision.py):
 
    - ``detect``: :meth:`Detector.detect` alone (HSV, blobs, depth, deprojection, fits);
    - ``node frame``: what the perception node does per frame without the transport:
@@ -42,6 +42,7 @@ import time
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
+sys.path.insert(0, str(REPO / 'test' / 'unit'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
 from etdmp_ros.perception import detector_from_parameters  # noqa: E402

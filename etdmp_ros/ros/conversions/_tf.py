@@ -48,7 +48,7 @@ class MovingTransforms:
     message with marker values found them, and the node publishes the bytes (CDR's layout
     depends only on the frame names, which do not change). Building and publishing the six
     TransformStamped messages per tick took ~80 us of CPU (500 Hz: 4 % of a core), this takes
-    ~10 us. The plain message is the reference: test/test_ros_conversions_tf.py deserializes
+    ~10 us. The plain message is the reference: test/unit/test_ros_conversions_tf.py deserializes
     these bytes and compares them with it, field for field.
     """
 

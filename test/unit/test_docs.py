@@ -19,9 +19,9 @@ import sys
 
 from etdmp_ros.ros import system
 import pytest
-from ros2_cli import readme_topics
+from support.ros2_cli import readme_topics
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 README = REPO / 'README.md'
 PAGES = (README, REPO / 'CONTRIBUTING.md', *sorted((REPO / 'docs').glob('*.md')))
 _LINK = re.compile(r'!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(([^)\s]+)(?:\s+"[^"]*")?\)')

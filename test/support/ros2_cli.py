@@ -24,7 +24,7 @@ from etdmp_ros.ros.processes import isolated_environment, NodeProcess, sourced
 from etdmp_ros.ros.spin import DDS_PROFILE_VARIABLES
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 README = REPO / 'README.md'
 #: The page with the node and topic tables (docs/ros.md); the README links to it.
 INTERFACES = REPO / 'docs' / 'ros.md'

@@ -3,7 +3,6 @@
 from pathlib import Path
 import time
 
-from bad_files import forged_npy, npz_bomb
 from etdmp_ros import limits
 from etdmp_ros.dmp import (builtin_demo, builtin_demo_names, Demonstration, DemonstrationError,
                            learn, load_demo, nrmse, save_demo)
@@ -16,6 +15,7 @@ from etdmp_ros.skills.library import (default_skills_dir, demonstration_files, l
 from mcap_ros2.writer import Writer
 import numpy as np
 import pytest
+from support.bad_files import forged_npy, npz_bomb
 
 # Message definitions as rosbag2 stores them in .mcap schemas (ros2msg, dependencies appended).
 _SEP = '=' * 80 + '\n'

@@ -5,18 +5,16 @@ Closed-loop tests run against a kinematic plant (``q += qd_cmd T``, commands one
 and assert tracking errors, limits and states against ground truth.
 """
 
-from controller_plans import g_plan, Q_INITIAL, run_kinematic, stir_plan, tool_down, TOOL_OFFSET
-
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.robot import _ik_fast
-
 from etdmp_ros.robot import (ControllerConfig, DelayEstimator, DifferentialIK, JOINT_NAMES,
                              MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
                              TrajectoryController, TrajectoryError, UR10Model)
-
 import numpy as np
 import pinocchio as pin
 import pytest
+from support.controller_plans import (g_plan, Q_INITIAL, run_kinematic, stir_plan, tool_down,
+                                      TOOL_OFFSET)
 
 
 @pytest.fixture(scope='module')
@@ -90,11 +88,11 @@ def test_pose_trajectory_rejects_bad_poses():
         PoseTrajectory.from_quaternions([0, 1], np.zeros((2, 3)), [[0, 0, 0, 1], [0, 0, 0, 0]])
 
 
-def test_quaternions_match_the_camera_module():
+def test_quaternions_match_the_geometry_module():
     rng = np.random.default_rng(3)
     rot = np.array([pin.exp3(rng.normal(size=3)) for _ in range(20)])
-    quat = np.array([quat.from_matrix(r) for r in rot])
-    np.testing.assert_allclose(quaternions_to_rotations(quat), rot, atol=1e-12)
+    quats = np.array([quat.from_matrix(r) for r in rot])
+    np.testing.assert_allclose(quaternions_to_rotations(quats), rot, atol=1e-12)
 
 
 def test_untimed_path_gets_a_minimum_jerk_profile():

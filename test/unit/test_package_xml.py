@@ -12,7 +12,7 @@ from pathlib import Path
 import sys
 from xml.etree import ElementTree
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CODE = ('etdmp_ros', 'launch')
 #: Python libraries that are not ROS packages: import name -> rosdep key.
 PYTHON_KEYS = {

@@ -11,7 +11,7 @@ from etdmp_ros.dmp import learn, load_demo, nrmse
 import numpy as np
 import pytest
 
-LETTERS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'pbdlib_2Dletters'
+LETTERS = Path(__file__).resolve().parents[2].parent / 'shared' / 'data' / 'pbdlib_2Dletters'
 
 pytestmark = pytest.mark.skipif(
     not (LETTERS / 'table2.json').is_file(),

@@ -11,7 +11,7 @@ import sys
 
 import grimp
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_imports_only_point_down_the_layers():

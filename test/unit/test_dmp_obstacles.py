@@ -58,7 +58,7 @@ def test_distance_term_decays_with_k():
     assert far == pytest.approx(100.0 * np.exp(-6.0))
 
 
-PAPER_LETTERS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'pbdlib_2Dletters'
+PAPER_LETTERS = Path(__file__).resolve().parents[2].parent / 'shared' / 'data' / 'pbdlib_2Dletters'
 
 
 def letters():

@@ -15,40 +15,25 @@ import threading
 import time
 
 from conftest import isolate_dds, NodeProcess
-
-from controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
-
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.nodes.controller import InputWatch
-
 from etdmp_ros.robot import PoseTrajectory, UR10Model
-
 from etdmp_ros.ros.background import BackgroundNode
-
 from etdmp_ros.ros.conversions import (joint_state_from_cdr, joint_state_msg, ns_to_stamp,
                                        path_from_cdr, path_from_numpy, serialize_path, stamp_to_ns)
-
 from etdmp_ros.ros.spin import normal_scheduling, set_realtime_priority
-
 from geometry_msgs.msg import PoseStamped
-
 from nav_msgs.msg import Path
-
 import numpy as np
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
-
 from rcl_interfaces.srv import SetParameters
-
 from rclpy.qos import DurabilityPolicy, QoSProfile
-
 from rclpy.serialization import serialize_message
-
 from sensor_msgs.msg import JointState
-
 from std_msgs.msg import Float64MultiArray, String
-
 from std_srvs.srv import SetBool
+from support.controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
 
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)

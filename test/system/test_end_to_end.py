@@ -52,7 +52,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
-from ros2_cli import readme_topics
+from support.ros2_cli import readme_topics
 import yaml
 
 SKILLS = ('G', 'stir')

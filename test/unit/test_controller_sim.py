@@ -9,14 +9,14 @@ joints (``UR10Sim.tool_tip_position`` is the site before the last physics step, 
 reference, which must itself be the plan at nominal speed.
 """
 
-from controller_plans import (g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET,
-                              turning_plan)
 from etdmp_ros.robot import ControllerConfig, PoseTrajectory, TrajectoryController, UR10Model
 from etdmp_ros.ros.system import scene_config
 from etdmp_ros.sim import UR10Sim
 import numpy as np
 import pinocchio as pin
 import pytest
+from support.controller_plans import (g_plan, path_time_offset, Q_INITIAL, stir_plan,
+                                      TOOL_OFFSET, turning_plan)
 
 
 @pytest.fixture(scope='module')

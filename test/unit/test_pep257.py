@@ -1,4 +1,4 @@
-# Copyright 2017 Open Source Robotics Foundation, Inc.
+# Copyright 2015 Open Source Robotics Foundation, Inc.
 # Copyright 2026 etdmp_ros maintainers
 #
 # Licensed under the Apache License, Version 2.0 (the "License");
@@ -13,24 +13,22 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""flake8 (ament_flake8 configuration) over the package, tests, launch files and tools."""
+"""Docstring conventions (ament_pep257, i.e. pydocstyle) over the package, tests, launch, tools."""
 
 from pathlib import Path
 
-from ament_flake8.main import main_with_errors
+from ament_pep257.main import main
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 # Only source paths are listed, so .venv*/, build/, install/, log/ and out/ are never visited;
-# below them, ament_flake8 skips every directory named '.*' or '_*' (run from the repository).
+# below them, pydocstyle skips every directory named '.*' or '_*'.
 CHECKED = ('setup.py', 'etdmp_ros', 'test', 'launch', 'tools')
 
 
-@pytest.mark.flake8
 @pytest.mark.linter
-def test_flake8(monkeypatch):
-    monkeypatch.chdir(REPO)
+@pytest.mark.pep257
+def test_pep257():
     paths = [str(REPO / p) for p in CHECKED if (REPO / p).exists()]
-    rc, errors = main_with_errors(argv=paths)
-    assert rc == 0, 'Found %d code style errors / warnings:\n' % len(errors) + \
-        '\n'.join(errors)
+    rc = main(argv=paths)
+    assert rc == 0, 'Found code style errors / warnings'

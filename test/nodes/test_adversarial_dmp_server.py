@@ -15,7 +15,6 @@ demo_files and in skills_dir) are files the module's one node is started with.
 from pathlib import Path as FsPath
 import time
 
-from bad_files import big_csv, forged_npy, npz_bomb
 from conftest import NodeProcess
 from etdmp_ros import limits
 from etdmp_ros.dmp import Demonstration, save_demo
@@ -26,6 +25,7 @@ import numpy as np
 import pytest
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Header
+from support.bad_files import big_csv, forged_npy, npz_bomb
 from test_dmp_server_node import Client, GOAL, request, START, TIMEOUT, wait_for_log
 
 #: The node's resident memory must stay below this (MB) through every attack. Measured here:

@@ -18,7 +18,7 @@ from etdmp_ros.apps.reproduce import quadrant
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 LETTERS = REPO.parent / 'shared' / 'data' / 'pbdlib_2Dletters'
 needs_letters = pytest.mark.skipif(
     not (LETTERS / 'table2.json').is_file(),

@@ -19,8 +19,8 @@ import time
 from etdmp_ros.ros import system
 import numpy as np
 import pytest
-import ros2_cli
-from ros2_cli import wait_for
+from support import ros2_cli
+from support.ros2_cli import wait_for
 
 SKILL = 'W'
 CONTROL_RATE = system.node('ur10_sim').parameter('control_rate').default

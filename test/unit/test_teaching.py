@@ -15,7 +15,6 @@ import urllib.error
 import urllib.request
 
 from conftest import REPO
-from drawings import letter_z, request, stroke
 from etdmp_ros import limits
 from etdmp_ros.dmp import nrmse
 from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
@@ -29,6 +28,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.serialization import serialize_message
+from support.drawings import letter_z, request, stroke
 
 PLANE = TaskPlane.create([0.75, 0.15, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.02)
 CANVAS = teaching.Canvas()

@@ -25,7 +25,6 @@ from pathlib import Path
 import shutil
 import time
 
-from drawings import letter_z
 from etdmp_ros.demo.teach_session import TeachSession
 from etdmp_ros.dmp import nrmse
 from etdmp_ros.geometry.task_plane import TaskPlane
@@ -42,6 +41,7 @@ from rcl_interfaces.srv import GetParameters
 from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, String
+from support.drawings import letter_z
 
 CHROMIUM, CHROMEDRIVER = shutil.which('chromium'), shutil.which('chromedriver')
 #: The drawn Z against the true pen trace (similarity measure, conventional nRMSE).

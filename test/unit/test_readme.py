@@ -3,7 +3,7 @@
 from pathlib import Path
 import re
 
-README = Path(__file__).resolve().parents[1] / 'README.md'
+README = Path(__file__).resolve().parents[2] / 'README.md'
 
 
 def test_readme_python_example_runs():

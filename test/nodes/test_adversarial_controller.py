@@ -22,11 +22,11 @@ import sys
 import textwrap
 import time
 
-from controller_plans import g_plan
 from etdmp_ros.robot import JOINT_NAMES
 from etdmp_ros.ros.conversions import joint_state_msg, ns_to_stamp, serialize_path
 import numpy as np
 import pytest
+from support.controller_plans import g_plan
 from test_controller_node import Rig
 
 #: How much the controller's resident memory may grow over the attacks (bytes), from what it

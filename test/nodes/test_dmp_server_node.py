@@ -54,10 +54,10 @@ from visualization_msgs.msg import MarkerArray
 import yaml
 
 # The scene (config/scene.yaml) the node is started with.
-SCENE = yaml.safe_load((FsPath(__file__).parents[1] / 'config' / 'scene.yaml').read_text())
+SCENE = yaml.safe_load((FsPath(__file__).parents[2] / 'config' / 'scene.yaml').read_text())
 SCENE = SCENE['/**']['ros__parameters']
 # The node's own settings (config/dmp_server.yaml), for the obstacle gains it plans with.
-SERVER = yaml.safe_load((FsPath(__file__).parents[1] / 'config' / 'dmp_server.yaml').read_text())
+SERVER = yaml.safe_load((FsPath(__file__).parents[2] / 'config' / 'dmp_server.yaml').read_text())
 SERVER = SERVER['dmp_server']['ros__parameters']
 PLANE = TaskPlane.create(SCENE['task_plane']['origin'], SCENE['task_plane']['x_axis'],
                          SCENE['task_plane']['y_axis'], 0.02)
