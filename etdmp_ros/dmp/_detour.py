@@ -46,12 +46,12 @@ except ImportError:  # pragma: no cover - numba is pinned in requirements
 DIRECTIONS_2D = 72
 #: Candidate directions of a detour in 3D (subdivided icosahedron: 162 points on the sphere).
 _ICOSPHERE_LEVEL = 2
-#: Within this relative amount of the smallest amplitude, the first candidate direction wins
-#: (a deterministic choice where two sides are equally good, e.g. a straight path through a
-#: centre).
-TIE = 1e-9
+#: Options within this relative amount of each other are equally good: the first candidate
+#: direction wins (a deterministic choice where two sides are equally good, e.g. a path through
+#: a centre, whatever the round-off).
+TIE = 1e-6
 #: Candidate directions (the best by their inside samples' push) tried in full per encounter.
-TOP_DIRECTIONS = 4
+TOP_DIRECTIONS = 8
 #: Bump shapes tried per direction: the plateau covers the samples that need at least this
 #: fraction of the largest push (1: a peak; 0: every sample inside a ball).
 PLATEAUS = (1.0, 0.5, 0.0)
@@ -326,22 +326,30 @@ def _encounter(t, ds, base, C, q, own, span, directions, size, fast):
     p = Wi @ directions.T
     c = np.einsum('ki,ki->k', Wi, Wi) - q[cols] ** 2
     need = np.max(-p + np.sqrt(np.maximum(p * p - c[:, None], 0.0)), axis=0)
-    # By need; a tie (two sides equally good) goes to the first candidate in the fixed order,
-    # not to round-off.
-    first = np.flatnonzero(need <= need.min() * (1.0 + TIE) + 1e-300)[0]
-    order = np.argsort(need, kind='stable')
-    order = np.concatenate([[first], order[order != first]])
+    # The best few directions by need, then (where none of them can pass) all others; within
+    # each set in the fixed order of the candidates, and a later option must beat an earlier
+    # one by more than TIE: two sides equally good (a path through a centre) go the same way
+    # whatever the round-off (the online run re-plans on a remainder computed differently).
+    cut = np.sort(need)[min(TOP_DIRECTIONS, len(need)) - 1] * (1.0 + TIE) + 1e-300
     tw, dsw = t[window], ds[window]
-    if fast and numba is not None:
-        cw = np.einsum('kmi,kmi->km', W, W) - q * q
-        i, A, lo_t, hi_t = _encounter_nb(tw, dsw, np.ascontiguousarray(W), cw, own, q,
-                                         directions, order, np.array(PLATEAUS), ts, ta, te,
-                                         size, TOP_DIRECTIONS)
-        return None if i < 0 else (A, directions[i], ts, lo_t, hi_t, te)
+    for candidates in (np.flatnonzero(need <= cut), np.flatnonzero(need > cut)):
+        if fast and numba is not None:
+            cw = np.einsum('kmi,kmi->km', W, W) - q * q
+            i, A, lo_t, hi_t = _encounter_nb(tw, dsw, np.ascontiguousarray(W), cw, own, q,
+                                             directions, candidates, np.array(PLATEAUS), ts,
+                                             ta, te, size, TIE)
+            best = None if i < 0 else (0.0, A, directions[i], ts, lo_t, hi_t, te)
+        else:
+            best = _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size)
+        if best is not None:
+            return best[1:]
+    return None
+
+
+def _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size):
+    """Return the best (cost, A, n, ts, ta, tb, te) of the candidates: the numpy reference."""
     best = None
-    for rank, i in enumerate(order):
-        if rank >= TOP_DIRECTIONS and best is not None:
-            break           # the rest only where none of the best few can pass
+    for i in candidates:
         n = directions[i]
         push = _pushes(W[:, own], q[own], n)
         for fraction in PLATEAUS:
@@ -352,9 +360,9 @@ def _encounter(t, ds, base, C, q, own, span, directions, size, fast):
             b = bump(tw, ts, lo_t, hi_t, te)[0]
             A = amplitude(W, q, n, b, own, 0.0, fast=False)
             cost = A * A * float(np.sum(b * b * dsw))
-            if A <= size and (best is None or cost < best[0]):
+            if A <= size and (best is None or cost < best[0] * (1.0 - TIE)):
                 best = (cost, A, n, ts, lo_t, hi_t, te)
-    return None if best is None else best[1:]
+    return best
 
 
 if numba is not None:
@@ -372,17 +380,14 @@ if numba is not None:
         return u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
 
     @numba.njit(cache=True, fastmath=False)
-    def _encounter_nb(tw, dsw, W, c, own, q, D, order, fractions, ts, ta, te, size,
-                      top):  # pragma: no cover - numba
-        """Run :func:`_encounter`'s loop over directions and bump shapes."""
+    def _encounter_nb(tw, dsw, W, c, own, q, D, candidates, fractions, ts, ta, te, size,
+                      tie):  # pragma: no cover - numba
+        """Run :func:`_options`' loop over directions and bump shapes."""
         k, m, d = W.shape
         push = np.zeros(k)
         b = np.empty(k)
         best_i, best_cost, best_A, best_lo, best_hi = -1, np.inf, 0.0, 0.0, 0.0
-        for rank in range(len(order)):
-            if rank >= top and best_i >= 0:
-                break
-            i = order[rank]
+        for i in candidates:
             n = D[i]
             largest = 0.0
             for kk in range(k):
@@ -413,13 +418,13 @@ if numba is not None:
                 for kk in range(k):
                     cost += b[kk] * b[kk] * dsw[kk]
                 cost *= A * A
-                if A <= size and cost < best_cost:
+                if A <= size and (best_i < 0 or cost < best_cost * (1.0 - tie)):
                     best_i, best_cost, best_A, best_lo, best_hi = i, cost, A, lo_t, hi_t
         return best_i, best_A, best_lo, best_hi
 
 
 def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t0=None,
-           blend_length=None, fast=True):
+           blend_length=None, fast=True, acceleration=None):
     """
     Plan the detour of the plan ``x`` (n, d) sampled at ``t`` (n,) around ``obstacles``.
 
@@ -430,7 +435,10 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
     force, to be blended out from ``t0`` = ``t[0]`` over the time the plan takes to travel
     ``blend_length``. Returns a :class:`Displacement`, or None when no obstacle comes within
     ``r_j + margin`` of the plan and there is nothing to carry (the plan stays as it is, bit
-    for bit). Raises GeneralizationError when the clearance cannot be kept.
+    for bit). ``acceleration``: the acceleration a ramp may add, at most (None: no bound); a
+    ramp is made long enough in time for the push its stretch needs (the deepest sample's
+    distance to the rim) to stay below it. Raises GeneralizationError when the clearance
+    cannot be kept.
     """
     n, d = x.shape
     C, r = obstacles.centres, obstacles.radii
@@ -475,8 +483,14 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
         length = ramp * q[j]
         for a, b in _runs(inside[:, j]):
             ta, tb = float(t[a]), float(t[b])
-            ts = max(_arc_time(s, t, s[a] - length), t0)
-            te = min(_arc_time(s, t, s[b] + length), t_last)
+            ts = _arc_time(s, t, s[a] - length)
+            te = _arc_time(s, t, s[b] + length)
+            if acceleration:
+                # The smoothstep's curvature peaks at 10 / sqrt(3) of amplitude / ramp^2.
+                depth = float(np.max(q[j] - dist[a:b + 1, j]))
+                least = math.sqrt(10.0 / math.sqrt(3.0) * depth / acceleration)
+                ts, te = min(ts, ta - least), max(te, tb + least)
+            ts, te = max(ts, t0), min(te, t_last)
             if carry is not None and ts <= t0:
                 # Rising from the switch as the carried displacement fades: together smooth.
                 ta = max(ta, t0 + blend)

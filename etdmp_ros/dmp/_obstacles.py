@@ -51,7 +51,8 @@ class ObstacleGains:
     k: float | None = None
     k_relative: float = 10.0
     clearance_margin: float = 0.005
-    ramp: float = 1.5
+    ramp: float = 1.0
+    detour_acceleration: float = 1.0
 
     def decay(self, length_scale):
         """
@@ -70,7 +71,8 @@ class ObstacleGains:
 
     def validate(self):
         """Raise ValueError unless every gain is finite and non-negative."""
-        for name in ('gamma', 'beta', 'gamma2', 'k_relative', 'clearance_margin', 'ramp'):
+        for name in ('gamma', 'beta', 'gamma2', 'k_relative', 'clearance_margin', 'ramp',
+                     'detour_acceleration'):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0.0:
                 raise ValueError(f'obstacle gain {name} must be finite and >= 0, got {value!r}')

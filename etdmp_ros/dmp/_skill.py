@@ -251,14 +251,16 @@ class Skill:
         """
         obstacles = Obstacles(r.obstacles, r.radii)
         directions = candidate_directions(self.dim)
-        sizes = np.max(np.linalg.norm(x - r.goals[:, None], axis=2), axis=1)
+        sizes = self._placed_size(r.starts, r.goals)
         reach = r.radii + r.gains.clearance_margin * sizes[:, None]           # (B, m)
         near = np.any(np.linalg.norm(x[:, :, None] - r.obstacles[None, None], axis=3)
                       < reach[:, None], axis=1).any(axis=1)
         for b in np.flatnonzero(near):
             try:
+                peak = float(np.max(np.linalg.norm(a[b], axis=1)))
                 shift = detour(t, x[b], obstacles, r.gains.clearance_margin * sizes[b],
-                               r.gains.ramp, directions @ R[b], sizes[b], fast=fast)
+                               r.gains.ramp, directions @ R[b], sizes[b], fast=fast,
+                               acceleration=r.gains.detour_acceleration * peak)
                 if shift is None:
                     continue
                 delta, delta_v, delta_a = shift(t)
@@ -271,20 +273,23 @@ class Skill:
                 raise GeneralizationError(f'{err}{which}') from None
 
     def online(self, start, goal, obstacles=(), method='etdmp', mode=1, independent_axis=2,
-               dt=None, tau=None, gains=None, online=None, fast=True):
+               dt=None, tau=None, gains=None, online=None, fast=True, obstacle_radii=None,
+               avoidance=None):
         """
         Start an online rollout from ``start`` to ``goal``: the goal may move while it runs.
 
         The arguments are those of :meth:`generalize` for one start (``start`` and ``goal`` of
         shape (d,)); ``online`` is an :class:`OnlineGains` (goal filter, phase stopping). Returns
-        an :class:`OnlineRun`; ``run.step(goal=None, obstacles=None, actual=None)`` advances it
-        by ``dt`` and returns ``(x, v, a)``. With a goal that never changes the samples are those
-        of :meth:`generalize`. The method: docs/design.md#online-goal. Raises
-        GeneralizationError on bad or degenerate input.
+        an :class:`OnlineRun`; ``run.step(goal=None, obstacles=None, actual=None,
+        obstacle_radii=None)`` advances it by ``dt`` and returns ``(x, v, a)``. With a goal and
+        obstacles that never change the samples are those of :meth:`generalize`. The method:
+        docs/design.md#online-goal (and #obstacles-with-a-size for the detour, which is planned
+        again on the remainder when the goal or an obstacle moves). Raises GeneralizationError
+        on bad or degenerate input.
         """
         from ._online import OnlineRun   # _online builds on this module
         return OnlineRun(self, start, goal, obstacles, method, mode, independent_axis, dt, tau,
-                         gains, online, fast)
+                         gains, online, fast, obstacle_radii, avoidance)
 
     def _placement(self, starts, goals, method, mode, independent_axis):
         """
@@ -311,6 +316,17 @@ class Skill:
             A = -self.K * (goals - virtual_start)
             M = np.full_like(starts, self.K * self.size)
         return transform, virtual_start, A, M
+
+    def _placed_size(self, starts, goals):
+        """
+        Return the size of the movement placed between ``starts`` and ``goals`` ((B,) or ()).
+
+        ``|x0 - g|`` times the demonstration's size over ``|I_D|`` (ET-DMP's uniform scale; for
+        the plain DMP, the same ratio as a measure), or ``|x0 - g|`` when ``|I_D|`` is ~0.
+        """
+        n_demo = float(np.linalg.norm(self.start - self.goal))
+        ratio = self.size / n_demo if n_demo > EPS * self.size else 1.0
+        return np.linalg.norm(np.asarray(starts) - np.asarray(goals), axis=-1) * ratio
 
     def _check_request(self, start, goal, obstacles, method, dt, tau, margin, gains,
                        obstacle_radii=None, avoidance=None):
