@@ -12,7 +12,7 @@ Nothing in the package was tuned to these shapes:
 - :func:`helix` and :func:`figure_eight_3d`: 3D shapes with a tool that turns with the stroke.
 - :func:`scribble`: random smooth strokes in 2D or 3D (a seed per shape), at rest at both ends.
 - :func:`obstacles_on_path`: disks or balls of a given size on and near a plan, for the obstacle
-  tests and ``bench_obstacles.py``.
+  tests and ``bench_obstacles.py``; :func:`shape_deviation`, how far a plan bends from another.
 """
 
 from dataclasses import dataclass, replace
@@ -218,3 +218,23 @@ def obstacles_on_path(path, rng, count, radius=(0.03, 0.15), offset=1.0, span=(0
     if len(centres) < count:
         raise ValueError(f'could not place {count} obstacles on this path')
     return np.array(centres), np.array(radii)
+
+
+def _by_arc_length(x, n):
+    """Resample the path ``x`` (m, d) to ``n`` points evenly spaced in arc length."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
+    if s[-1] <= 0.0:
+        return np.repeat(x[:1], n, axis=0)
+    u = np.linspace(0.0, s[-1], n)
+    return np.stack([np.interp(u, s, x[:, i]) for i in range(x.shape[1])], axis=1)
+
+
+def shape_deviation(x, reference, size, n=500):
+    """
+    Return the shape deviation of the plan ``x`` from ``reference`` (both (m, d)).
+
+    The RMS distance between the two, both resampled to ``n`` points by arc length, over
+    ``size`` (issue 25's measure: how much an obstacle bends the shape).
+    """
+    a, b = _by_arc_length(np.asarray(x, float), n), _by_arc_length(np.asarray(reference, float), n)
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) / size)

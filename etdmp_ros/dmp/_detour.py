@@ -52,6 +52,8 @@ _ICOSPHERE_LEVEL = 2
 TIE = 1e-6
 #: Candidate directions (the best by their inside samples' push) tried in full per encounter.
 TOP_DIRECTIONS = 8
+#: Points per segment between two samples held clear where a segment cut into an obstacle.
+REFINE = 3
 #: Bump shapes tried per direction: the plateau covers the samples that need at least this
 #: fraction of the largest push (1: a peak; 0: every sample inside a ball).
 PLATEAUS = (1.0, 0.5, 0.0)
@@ -306,7 +308,23 @@ def _pushes(W, q, n):
     return np.max(np.where(c < 0.0, -p + np.sqrt(np.maximum(p * p - c, 0.0)), 0.0), axis=1)
 
 
-def _encounter(t, ds, base, C, q, own, span, directions, size, fast):
+def chords(values, refine):
+    """
+    Append to ``values`` (k, ...) the points at ``i / (refine + 1)`` along each chord.
+
+    The displacement is linear in the samples, so a chord point of the moved polyline is the
+    chord point of the base moved by the chord point of the bump: constraints on these points
+    keep the straight segments between samples clear, not only the samples.
+    """
+    if refine <= 0 or len(values) < 2:
+        return values
+    u = np.arange(1, refine + 1) / (refine + 1.0)
+    shape = (-1,) + (1,) * (values.ndim - 1)
+    inner = (1.0 - u.reshape(shape)) * values[:-1, None] + u.reshape(shape) * values[1:, None]
+    return np.concatenate([values, inner.reshape((-1,) + values.shape[1:])])
+
+
+def _encounter(t, ds, base, C, q, own, span, directions, size, fast, refine=0):
     """
     Return the best (amplitude, direction, ts, ta, tb, te) for one encounter, or None.
 
@@ -332,21 +350,24 @@ def _encounter(t, ds, base, C, q, own, span, directions, size, fast):
     # whatever the round-off (the online run re-plans on a remainder computed differently).
     cut = np.sort(need)[min(TOP_DIRECTIONS, len(need)) - 1] * (1.0 + TIE) + 1e-300
     tw, dsw = t[window], ds[window]
+    Wc = chords(W, refine)
     for candidates in (np.flatnonzero(need <= cut), np.flatnonzero(need > cut)):
         if fast and numba is not None:
-            cw = np.einsum('kmi,kmi->km', W, W) - q * q
-            i, A, lo_t, hi_t = _encounter_nb(tw, dsw, np.ascontiguousarray(W), cw, own, q,
+            cw = np.einsum('kmi,kmi->km', Wc, Wc) - q * q
+            i, A, lo_t, hi_t = _encounter_nb(tw, dsw, np.ascontiguousarray(W), own, q,
                                              directions, candidates, np.array(PLATEAUS), ts,
-                                             ta, te, size, TIE)
+                                             ta, te, size, TIE, np.ascontiguousarray(Wc), cw,
+                                             refine)
             best = None if i < 0 else (0.0, A, directions[i], ts, lo_t, hi_t, te)
         else:
-            best = _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size)
+            best = _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size,
+                            refine)
         if best is not None:
             return best[1:]
     return None
 
 
-def _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size):
+def _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size, refine=0):
     """Return the best (cost, A, n, ts, ta, tb, te) of the candidates: the numpy reference."""
     best = None
     for i in candidates:
@@ -358,7 +379,7 @@ def _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size):
             lo_t = max(float(tw[top[0]]), ta)
             hi_t = max(float(tw[top[-1]]), lo_t)
             b = bump(tw, ts, lo_t, hi_t, te)[0]
-            A = amplitude(W, q, n, b, own, 0.0, fast=False)
+            A = amplitude(chords(W, refine), q, n, chords(b, refine), own, 0.0, fast=False)
             cost = A * A * float(np.sum(b * b * dsw))
             if A <= size and (best is None or cost < best[0] * (1.0 - TIE)):
                 best = (cost, A, n, ts, lo_t, hi_t, te)
@@ -380,12 +401,13 @@ if numba is not None:
         return u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
 
     @numba.njit(cache=True, fastmath=False)
-    def _encounter_nb(tw, dsw, W, c, own, q, D, candidates, fractions, ts, ta, te, size,
-                      tie):  # pragma: no cover - numba
+    def _encounter_nb(tw, dsw, W, own, q, D, candidates, fractions, ts, ta, te, size, tie,
+                      Wc, cc, refine):  # pragma: no cover - numba
         """Run :func:`_options`' loop over directions and bump shapes."""
         k, m, d = W.shape
         push = np.zeros(k)
-        b = np.empty(k)
+        b = np.empty(len(Wc))
+        c = cc[:k]
         best_i, best_cost, best_A, best_lo, best_hi = -1, np.inf, 0.0, 0.0, 0.0
         for i in candidates:
             n = D[i]
@@ -413,7 +435,11 @@ if numba is not None:
                 hi_t = max(tw[last], lo_t)
                 for kk in range(k):
                     b[kk] = _bump_nb(tw[kk], ts, lo_t, hi_t, te)
-                A = _amplitude_nb(W, c, n, b, own, 0.0)
+                for r in range(refine):         # the chord points, as chords() orders them
+                    u = (r + 1.0) / (refine + 1.0)
+                    for kk in range(k - 1):
+                        b[k + kk * refine + r] = (1.0 - u) * b[kk] + u * b[kk + 1]
+                A = _amplitude_nb(Wc, cc, n, b, own, 0.0)
                 cost = 0.0
                 for kk in range(k):
                     cost += b[kk] * b[kk] * dsw[kk]
@@ -424,7 +450,7 @@ if numba is not None:
 
 
 def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t0=None,
-           blend_length=None, fast=True, acceleration=None):
+           blend_length=None, fast=True, acceleration=None, refine=0):
     """
     Plan the detour of the plan ``x`` (n, d) sampled at ``t`` (n,) around ``obstacles``.
 
@@ -437,8 +463,9 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
     ``r_j + margin`` of the plan and there is nothing to carry (the plan stays as it is, bit
     for bit). ``acceleration``: the acceleration a ramp may add, at most (None: no bound); a
     ramp is made long enough in time for the push its stretch needs (the deepest sample's
-    distance to the rim) to stay below it. Raises GeneralizationError when the clearance
-    cannot be kept.
+    distance to the rim) to stay below it. ``refine``: chord points per segment that must be
+    clear too (:func:`chords`). Raises GeneralizationError when no detour can pass; the
+    result is not checked here (:func:`keep_clear` does).
     """
     n, d = x.shape
     C, r = obstacles.centres, obstacles.radii
@@ -486,9 +513,9 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
             ts = _arc_time(s, t, s[a] - length)
             te = _arc_time(s, t, s[b] + length)
             if acceleration:
-                # The smoothstep's curvature peaks at 10 / sqrt(3) of amplitude / ramp^2.
-                depth = float(np.max(q[j] - dist[a:b + 1, j]))
-                least = math.sqrt(10.0 / math.sqrt(3.0) * depth / acceleration)
+                # Long enough for the least translation that clears the stretch.
+                least = _ramp_time(_least_push(base[a:b + 1] - C[j], q[j], directions),
+                                   acceleration)
                 ts, te = min(ts, ta - least), max(te, tb + least)
             ts, te = max(ts, t0), min(te, t_last)
             if carry is not None and ts <= t0:
@@ -500,21 +527,57 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
     # (docs/design.md#obstacles-with-a-size). The encounters' windows are then disjoint, and
     # each amplitude is found on its own.
     found = []
-    for span in _joined(spans):
+    joined = _joined(spans)
+    for e, span in enumerate(joined):
         own = np.zeros(len(C), dtype=bool)
         own[sorted(span[4])] = True
-        best = _encounter(t, ds, base, C, q, own, span, directions, size, fast)
+        best = _encounter(t, ds, base, C, q, own, span, directions, size, fast, refine)
         if best is None:
             j = min(span[4])
             raise GeneralizationError(
                 f'passing obstacle #{j} (centre {_fmt(C[j])}, radius {r[j]:.4g}) needs a '
                 f"detour larger than the movement's size {size:.4g}: no detour keeps the shape")
+        if acceleration:
+            # A joined encounter may need more than its stretches' least pushes: lengthen its
+            # ramps into the free time around it (windows stay disjoint) and solve again.
+            room = (found[-1][5] if found else t0,
+                    joined[e + 1][0] if e + 1 < len(joined) else t_last)
+            best = _slower(t, base, C, q, own, best, room, acceleration, size, fast, refine)
         found.append(best)
     A = np.array([f[0] for f in found])
     N = np.array([f[1] for f in found]).reshape(-1, d)
     corners = np.array([f[2:] for f in found], dtype=float).reshape(-1, 4)
     return Displacement(corners[:, 0], corners[:, 1], corners[:, 2], corners[:, 3], A, N, t0,
                         blend, carry)
+
+
+def _least_push(W, q, directions):
+    """Return the smallest translation (over the directions) that takes ``W`` (k, d) out."""
+    p = W @ directions.T
+    c = np.einsum('ki,ki->k', W, W) - q * q
+    out = np.where(c[:, None] < 0.0, -p + np.sqrt(np.maximum(p * p - c[:, None], 0.0)), 0.0)
+    return float(np.min(np.max(out, axis=0)))
+
+
+def _ramp_time(amplitude, acceleration):
+    """Return the ramp duration whose smoothstep keeps ``amplitude`` under ``acceleration``."""
+    # The quintic smoothstep's second derivative peaks at 10 / sqrt(3) (at u = 1/2 -+ 1/sqrt(12)).
+    return math.sqrt(10.0 / math.sqrt(3.0) * amplitude / acceleration)
+
+
+def _slower(t, base, C, q, own, best, room, acceleration, size, fast, refine=0):
+    """Return ``best`` with ramps lengthened (within ``room``) to keep the acceleration bound."""
+    A, n, ts, ta, tb, te = best
+    least = _ramp_time(A, acceleration)
+    new_ts = max(min(ts, ta - least), room[0])
+    new_te = min(max(te, tb + least), room[1])
+    if new_ts == ts and new_te == te:
+        return best
+    window = np.flatnonzero((t > new_ts) & (t < new_te))
+    b = bump(t[window], new_ts, ta, tb, new_te)[0]
+    A2 = amplitude(chords(base[window][:, None] - C[None], refine), q, n, chords(b, refine), own,
+                   0.0, fast)
+    return (A2, n, new_ts, ta, tb, new_te) if A2 <= size else best
 
 
 def _joined(spans):
@@ -529,6 +592,25 @@ def _joined(spans):
         else:
             out.append(list(span[:4]) + [set(span[4])])
     return out
+
+
+def keep_clear(t, x, obstacles, *args, where='the plan', **kwargs):
+    """
+    Return :func:`detour`'s displacement for ``x`` once the moved plan is checked clear.
+
+    Arguments as :func:`detour`. Where a straight segment between two samples of the moved
+    plan cuts into an obstacle (a large, fast detour), the detour is planned again with
+    REFINE points per segment held clear. Raises GeneralizationError when the moved plan is
+    still not clear (:func:`check_clearance`): never a plan that enters an obstacle.
+    """
+    for refine in (0, REFINE):
+        shift = detour(t, x, obstacles, *args, refine=refine, **kwargs)
+        try:
+            check_clearance(x if shift is None else x + shift(t)[0], obstacles, where)
+            return shift
+        except GeneralizationError as err:
+            error = err
+    raise error
 
 
 def check_clearance(x, obstacles, where='the plan'):

@@ -35,7 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._detour import candidate_directions, check_clearance, detour, Obstacles
+from ._detour import candidate_directions, keep_clear, Obstacles
 from ._errors import GeneralizationError
 from ._integrate import chain, discretize, numba, rollout
 from ._similarity import nrmse
@@ -590,12 +590,11 @@ class OnlineRun:
         margin = self.gains.clearance_margin * size
         directions = candidate_directions(self._skill.dim) @ self._R
         peak = float(np.max(np.linalg.norm(acc, axis=1)))
-        shift = detour(theta, x, obstacles_set, margin, self.gains.ramp, directions, size,
-                       displacement=self._disp, t0=self._theta,
-                       blend_length=self._blend_length, fast=self._fast,
-                       acceleration=self.gains.detour_acceleration * peak)
-        if shift is not None:
-            check_clearance(x + shift(theta)[0], obstacles_set, 'the new plan')
+        shift = keep_clear(theta, x, obstacles_set, margin, self.gains.ramp, directions, size,
+                           displacement=self._disp, t0=self._theta,
+                           blend_length=self._blend_length, fast=self._fast,
+                           acceleration=self.gains.detour_acceleration * peak,
+                           where='the new plan')
         if len(obstacles):
             self._blend_length = self.gains.ramp * float(np.max(radii + margin))
         return shift

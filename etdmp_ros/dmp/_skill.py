@@ -6,7 +6,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._demos import Demonstration
-from ._detour import candidate_directions, check_clearance, detour, Obstacles
+from ._detour import candidate_directions, keep_clear, Obstacles
 from ._errors import DemonstrationError, GeneralizationError
 from ._forcing_term import ForcingTerm, phase
 from ._integrate import rollout
@@ -258,16 +258,15 @@ class Skill:
         for b in np.flatnonzero(near):
             try:
                 peak = float(np.max(np.linalg.norm(a[b], axis=1)))
-                shift = detour(t, x[b], obstacles, r.gains.clearance_margin * sizes[b],
-                               r.gains.ramp, directions @ R[b], sizes[b], fast=fast,
-                               acceleration=r.gains.detour_acceleration * peak)
+                shift = keep_clear(t, x[b], obstacles, r.gains.clearance_margin * sizes[b],
+                                   r.gains.ramp, directions @ R[b], sizes[b], fast=fast,
+                                   acceleration=r.gains.detour_acceleration * peak)
                 if shift is None:
                     continue
                 delta, delta_v, delta_a = shift(t)
                 x[b] += delta
                 v[b] += delta_v
                 a[b] += delta_a
-                check_clearance(x[b], obstacles)
             except GeneralizationError as err:
                 which = '' if r.single else f' (start #{b})'
                 raise GeneralizationError(f'{err}{which}') from None
