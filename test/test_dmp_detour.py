@@ -12,7 +12,7 @@ returned; the numba loop agrees with its numpy reference.
 from etdmp_ros.dmp import (AVOIDANCES, builtin_demo, GeneralizationError, learn,
                            ObstacleGains)
 from etdmp_ros.dmp._detour import (amplitude, amplitudes, bump, candidate_directions,
-                                   check_clearance, Obstacles)
+                                   check_clearance, Displacement, Obstacles)
 import numpy as np
 import pytest
 import shapes
@@ -145,7 +145,8 @@ def test_a_batch_is_its_starts_one_by_one():
 
 @pytest.mark.parametrize('name, mode', [('G', 1), ('stir', 2)])
 def test_the_detour_turns_with_the_start(name, mode):
-    """ET-DMP: start and obstacles turned about the goal give the plan turned (Eq. 23).
+    """
+    ET-DMP: start and obstacles turned about the goal give the plan turned (Eq. 23).
 
     (In 3D mode 1 the transform of a turned start is not the turned transform.)
     """
@@ -207,6 +208,22 @@ def test_the_bump_is_smooth_and_its_derivatives_are_exact():
     np.testing.assert_allclose(np.gradient(b1, h)[2:-2], b2[2:-2], atol=0.5)
     # C2: no jump in the second derivative anywhere (the quintic's ends are flat).
     assert np.max(np.abs(np.diff(b2))) < 1e-2 * np.abs(b2).max()
+
+
+def test_a_carried_displacement_starts_where_it_was_and_fades():
+    carry = np.array([[0.3, -0.2], [1.5, 0.4], [-8.0, 6.0]])      # delta, delta', delta''
+    empty = np.zeros(0)
+    shift = Displacement(empty, empty, empty, empty, empty, np.zeros((0, 2)), 1.0, 0.5, carry)
+    at = shift(np.array([1.0]))
+    for k in range(3):
+        np.testing.assert_allclose(at[k][0], carry[k], atol=1e-12)
+    assert all(np.all(part == 0.0) for part in shift(np.array([0.5, 1.5, 2.0])))
+    t = np.linspace(1.0, 1.5, 50001)
+    delta, delta_v, delta_a = shift(t)
+    h = t[1] - t[0]
+    np.testing.assert_allclose(np.gradient(delta, h, axis=0)[1:-1], delta_v[1:-1], atol=1e-3)
+    np.testing.assert_allclose(np.gradient(delta_v, h, axis=0)[2:-2], delta_a[2:-2], atol=2e-2)
+    assert shift.end == 1.5
 
 
 @pytest.mark.parametrize('name', ['G', 'stir'])

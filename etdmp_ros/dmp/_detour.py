@@ -11,12 +11,13 @@ size) the plan is displaced::
 
 with one term per *encounter* ``e`` (a stretch of consecutive samples within ``rho_j``):
 
-- ``b_e(t)``: a bump in time, 1 over the encounter, rising before it and falling after it along
-  the quintic smoothstep ``S(u) = 10 u^3 - 15 u^4 + 6 u^5`` (C2: value, slope and curvature are
-  continuous), each ramp as long as the plan takes to travel ``ramp * rho_j`` of arc length,
-  0 elsewhere, and 0 at the plan's start and end;
-- ``n_e``: a unit direction, the one of a fixed set (72 in 2D, 162 in 3D, fixed in the virtual
-  situation) that needs the smallest amplitude;
+- ``b_e(t)``: a bump in time, 1 over a plateau in the encounter, rising before it and falling
+  after it along the quintic smoothstep ``S(u) = 10 u^3 - 15 u^4 + 6 u^5`` (C2: value, slope
+  and curvature are continuous), each ramp at least as long as the plan takes to travel
+  ``ramp * rho_j`` of arc length and long enough in time to bound the acceleration it adds, 0
+  elsewhere, and 0 at the plan's start and end; encounters whose bumps overlap are one;
+- ``n_e``: a unit direction of a fixed set (72 in 2D, 162 in 3D, fixed in the virtual
+  situation), and the plateau, chosen for the least squared displacement along the plan;
 - ``A_e >= 0``: the smallest amplitude for which every sample keeps ``|x - c_j| >= rho_j`` from
   every obstacle ``j`` (found exactly: each sample and obstacle forbid an interval of amplitudes,
   a quadratic's roots);
@@ -25,12 +26,13 @@ with one term per *encounter* ``e`` (a stretch of consecutive samples within ``r
 
 Velocities and accelerations follow from ``delta``'s derivatives. Since ``R`` is orthogonal
 about the goal, the detour commutes with the Euclidean transform (Eq. 23); the plan's timing is
-the obstacle-free plan's. The result is checked: a sample (or the straight segment between two
-samples) closer to an obstacle's centre than its radius makes :func:`detour` raise
-GeneralizationError, never return.
+the obstacle-free plan's. The result is checked (:func:`keep_clear`): a sample, or the straight
+segment between two samples, closer to an obstacle's centre than its radius raises
+GeneralizationError; such a plan is never returned.
 """
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 import math
 
 import numpy as np
@@ -98,14 +100,22 @@ def _icosphere(level):
     return np.array(verts)
 
 
-def candidate_directions(d):
-    """Return the detour's candidate unit directions (n, d) in the virtual situation."""
+@lru_cache(maxsize=None)
+def _directions(d):
     if d == 2:
         angle = 2.0 * np.pi * np.arange(DIRECTIONS_2D) / DIRECTIONS_2D
-        return np.column_stack([np.cos(angle), np.sin(angle)])
-    if d == 3:
-        return _icosphere(_ICOSPHERE_LEVEL)
-    raise GeneralizationError(f'obstacles with a size need 2 or 3 dimensions, not {d}')
+        directions = np.column_stack([np.cos(angle), np.sin(angle)])
+    else:
+        directions = _icosphere(_ICOSPHERE_LEVEL)
+    directions.flags.writeable = False
+    return directions
+
+
+def candidate_directions(d):
+    """Return the detour's candidate unit directions (n, d) in the virtual situation."""
+    if d not in (2, 3):
+        raise GeneralizationError(f'obstacles with a size need 2 or 3 dimensions, not {d}')
+    return _directions(d)
 
 
 # -- the displacement ------------------------------------------------------------------------
@@ -462,8 +472,9 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
     ``blend_length``. Returns a :class:`Displacement`, or None when no obstacle comes within
     ``r_j + margin`` of the plan and there is nothing to carry (the plan stays as it is, bit
     for bit). ``acceleration``: the acceleration a ramp may add, at most (None: no bound); a
-    ramp is made long enough in time for the push its stretch needs (the deepest sample's
-    distance to the rim) to stay below it. ``refine``: chord points per segment that must be
+    ramp is made long enough in time for the least translation that clears its stretch to stay
+    below it, and a joined encounter's ramps are lengthened again for its amplitude, as far as
+    the time around it allows. ``refine``: chord points per segment that must be
     clear too (:func:`chords`). Raises GeneralizationError when no detour can pass; the
     result is not checked here (:func:`keep_clear` does).
     """
@@ -521,6 +532,7 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
             if carry is not None and ts <= t0:
                 # Rising from the switch as the carried displacement fades: together smooth.
                 ta = max(ta, t0 + blend)
+                tb, te = max(tb, ta), max(te, ta)
             spans.append([ts, ta, tb, te, {j}])
     # Stretches whose bumps overlap in time become one encounter (one direction, one bump):
     # bumps of their own, raised together, were measured to bend the shape more
