@@ -59,6 +59,7 @@ REFINE = 3
 #: Bump shapes tried per direction: the plateau covers the samples that need at least this
 #: fraction of the largest push (1: a peak; 0: every sample inside a ball).
 PLATEAUS = (1.0, 0.5, 0.0)
+_PLATEAUS = np.array(PLATEAUS)
 
 
 @dataclass(frozen=True)
@@ -193,25 +194,26 @@ class Displacement:
         return max(ends)
 
     def __call__(self, t):
-        """Return delta, delta', delta'' at times ``t`` (n,), each (n, d)."""
+        """Return delta, delta', delta'' at times ``t`` (n,), sorted, each (n, d)."""
         t = np.asarray(t, dtype=float)
         d = self.direction.shape[1]
         out = [np.zeros((len(t), d)) for _ in range(3)]
         for e in range(len(self.amplitude)):
             if self.amplitude[e] == 0.0:
                 continue
-            parts = bump(t, self.ts[e], self.ta[e], self.tb[e], self.te[e])
+            # Only the samples inside the bump's window: it is zero elsewhere.
+            lo, hi = np.searchsorted(t, [self.ts[e], self.te[e]], side='right')
+            parts = bump(t[lo:hi], self.ts[e], self.ta[e], self.tb[e], self.te[e])
             for o, part in zip(out, parts):
-                o += (self.amplitude[e] * part)[:, None] * self.direction[e]
+                o[lo:hi] += (self.amplitude[e] * part)[:, None] * self.direction[e]
         if self.blend > 0.0 and self.carry is not None:
             T = self.blend
-            h, h1, h2 = _hermite_out((t - self.t0) / T)
-            scale = np.array([1.0, T, T * T])[:, None]     # d/dt of the carry in u units
-            coeff = self.carry * scale                      # (3, d)
-            after = (t >= self.t0)[:, None]
-            out[0] += np.where(after, h.T @ coeff, 0.0)
-            out[1] += np.where(after, h1.T @ coeff / T, 0.0)
-            out[2] += np.where(after, h2.T @ coeff / T ** 2, 0.0)
+            lo, hi = np.searchsorted(t, [self.t0, self.t0 + T], side='left')
+            h, h1, h2 = _hermite_out((t[lo:hi] - self.t0) / T)
+            coeff = self.carry * np.array([1.0, T, T * T])[:, None]    # in units of u
+            out[0][lo:hi] += h.T @ coeff
+            out[1][lo:hi] += h1.T @ coeff / T
+            out[2][lo:hi] += h2.T @ coeff / T ** 2
         return out
 
 
@@ -338,22 +340,18 @@ def _encounter(t, ds, base, C, q, own, span, directions, size, fast, refine=0):
     """
     Return the best (amplitude, direction, ts, ta, tb, te) for one encounter, or None.
 
-    ``span`` = [ts, ta, tb, te, obstacles]: the window and the stretch inside the encounter's
-    balls. The directions are ranked by the push their inside samples need; for the best
+    ``span`` = [ts, ta, tb, te, obstacles, need]: the window, the stretch inside the
+    encounter's balls, and per direction the push its inside samples need (:func:`_needs`).
+    The directions are ranked by that need; for the best
     TOP_DIRECTIONS (all of them if none of those can pass), each bump shape of PLATEAUS (the
     plateau over the samples needing at least that fraction of the largest push) gets its
     exact amplitude (:func:`amplitude`); the option with the least squared displacement along
     the plan (by arc length) wins. ``fast``: one numba loop, else the numpy reference.
     """
-    ts, ta, tb, te = span[:4]
-    window = np.flatnonzero((t > ts) & (t < te))
+    ts, ta, tb, te, _, need = span
+    window = np.arange(*np.searchsorted(t, [ts, te], side='right'))
+    window = window[t[window] < te]
     W = base[window][:, None] - C[None]                                    # (k, m, d)
-    inside = (np.einsum('kmi,kmi->km', W, W) < q * q) & own
-    rows, cols = np.nonzero(inside)
-    Wi = W[rows, cols]
-    p = Wi @ directions.T
-    c = np.einsum('ki,ki->k', Wi, Wi) - q[cols] ** 2
-    need = np.max(-p + np.sqrt(np.maximum(p * p - c[:, None], 0.0)), axis=0)
     # The best few directions by need, then (where none of them can pass) all others; within
     # each set in the fixed order of the candidates, and a later option must beat an earlier
     # one by more than TIE: two sides equally good (a path through a centre) go the same way
@@ -365,7 +363,7 @@ def _encounter(t, ds, base, C, q, own, span, directions, size, fast, refine=0):
         if fast and numba is not None:
             cw = np.einsum('kmi,kmi->km', Wc, Wc) - q * q
             i, A, lo_t, hi_t = _encounter_nb(tw, dsw, np.ascontiguousarray(W), own, q,
-                                             directions, candidates, np.array(PLATEAUS), ts,
+                                             directions, candidates, _PLATEAUS, ts,
                                              ta, te, size, TIE, np.ascontiguousarray(Wc), cw,
                                              refine)
             best = None if i < 0 else (0.0, A, directions[i], ts, lo_t, hi_t, te)
@@ -491,7 +489,8 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
             carry = None
     if len(C) == 0 and carry is None:
         return None
-    ds = np.linalg.norm(np.diff(x, axis=0), axis=1)
+    step = np.diff(x, axis=0)
+    ds = np.sqrt(np.einsum('ki,ki->k', step, step))
     s = np.concatenate([[0.0], np.cumsum(ds)])
     ds = np.concatenate([[0.0], ds])                # arc length before each sample
     if carry is not None:
@@ -523,17 +522,17 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
             ta, tb = float(t[a]), float(t[b])
             ts = _arc_time(s, t, s[a] - length)
             te = _arc_time(s, t, s[b] + length)
+            need = _needs(base[a:b + 1] - C[j], q[j], directions)
             if acceleration:
                 # Long enough for the least translation that clears the stretch.
-                least = _ramp_time(_least_push(base[a:b + 1] - C[j], q[j], directions),
-                                   acceleration)
+                least = _ramp_time(float(need.min()), acceleration)
                 ts, te = min(ts, ta - least), max(te, tb + least)
             ts, te = max(ts, t0), min(te, t_last)
             if carry is not None and ts <= t0:
                 # Rising from the switch as the carried displacement fades: together smooth.
                 ta = max(ta, t0 + blend)
                 tb, te = max(tb, ta), max(te, ta)
-            spans.append([ts, ta, tb, te, {j}])
+            spans.append([ts, ta, tb, te, {j}, need])
     # Stretches whose bumps overlap in time become one encounter (one direction, one bump):
     # bumps of their own, raised together, were measured to bend the shape more
     # (docs/design.md#obstacles-with-a-size). The encounters' windows are then disjoint, and
@@ -563,12 +562,17 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
                         blend, carry)
 
 
-def _least_push(W, q, directions):
-    """Return the smallest translation (over the directions) that takes ``W`` (k, d) out."""
+def _needs(W, q, directions):
+    """
+    Return, per direction, the translation that takes every sample of ``W`` (k, d) out.
+
+    ``W``: samples minus a centre, ``q``: the target radius; a sample ``w`` inside leaves
+    along ``n`` at the larger root of ``|w + s n| = q``.
+    """
     p = W @ directions.T
     c = np.einsum('ki,ki->k', W, W) - q * q
     out = np.where(c[:, None] < 0.0, -p + np.sqrt(np.maximum(p * p - c[:, None], 0.0)), 0.0)
-    return float(np.min(np.max(out, axis=0)))
+    return np.max(out, axis=0)
 
 
 def _ramp_time(amplitude, acceleration):
@@ -593,33 +597,36 @@ def _slower(t, base, C, q, own, best, room, acceleration, size, fast, refine=0):
 
 
 def _joined(spans):
-    """Join spans ``[ts, ta, tb, te, balls]`` whose windows ``(ts, te)`` overlap."""
+    """Join spans ``[ts, ta, tb, te, balls, need]`` whose windows ``(ts, te)`` overlap."""
     out = []
     for span in sorted(spans, key=lambda span: span[0]):
         if out and span[0] <= out[-1][3]:
             last = out[-1]
             last[1], last[2] = min(last[1], span[1]), max(last[2], span[2])
             last[3] = max(last[3], span[3])
-            last[4] |= span[4]
+            last[4] = last[4] | span[4]
+            last[5] = np.maximum(last[5], span[5])
         else:
-            out.append(list(span[:4]) + [set(span[4])])
+            out.append(list(span))
     return out
 
 
 def keep_clear(t, x, obstacles, *args, where='the plan', **kwargs):
     """
-    Return :func:`detour`'s displacement for ``x`` once the moved plan is checked clear.
+    Return :func:`detour`'s displacement for ``x`` and its values at ``t``, checked clear.
 
-    Arguments as :func:`detour`. Where a straight segment between two samples of the moved
-    plan cuts into an obstacle (a large, fast detour), the detour is planned again with
+    Arguments as :func:`detour`. Returns ``(displacement, (delta, delta', delta''))``, or
+    ``(None, None)`` where nothing moves. Where a straight segment between two samples of the
+    moved plan cuts into an obstacle (a large, fast detour), the detour is planned again with
     REFINE points per segment held clear. Raises GeneralizationError when the moved plan is
     still not clear (:func:`check_clearance`): never a plan that enters an obstacle.
     """
     for refine in (0, REFINE):
         shift = detour(t, x, obstacles, *args, refine=refine, **kwargs)
+        values = None if shift is None else shift(t)
         try:
-            check_clearance(x if shift is None else x + shift(t)[0], obstacles, where)
-            return shift
+            check_clearance(x if shift is None else x + values[0], obstacles, where)
+            return shift, values
         except GeneralizationError as err:
             error = err
     raise error
@@ -635,19 +642,52 @@ def check_clearance(x, obstacles, where='the plan'):
     C, r = obstacles.centres, obstacles.radii
     if len(C) == 0:
         return
-    a, b = x[:-1], x[1:]
-    ab = b - a
-    length2 = np.einsum('ki,ki->k', ab, ab)
-    for j in range(len(C)):
-        ac = C[j] - a
-        u = np.clip(np.einsum('ki,ki->k', ac, ab) / np.maximum(length2, 1e-300), 0.0, 1.0)
-        closest = np.linalg.norm(a + u[:, None] * ab - C[j], axis=1) if len(a) else \
-            np.linalg.norm(x - C[j], axis=1)
-        gap = float(np.min(closest)) if len(closest) else float('inf')
-        if gap < r[j]:
-            raise GeneralizationError(
-                f'{where} passes {gap:.4g} from the centre of obstacle #{j} ({_fmt(C[j])}), '
-                f'inside its radius {r[j]:.4g}: refused')
+    if numba is not None and len(x) >= 2:
+        gap = _gaps_nb(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(C, float))
+    else:
+        gap = segment_gaps(x, C)
+    j = int(np.argmin(gap - r))
+    if gap[j] < r[j]:
+        raise GeneralizationError(
+            f'{where} passes {gap[j]:.4g} from the centre of obstacle #{j} ({_fmt(C[j])}), '
+            f'inside its radius {r[j]:.4g}: refused')
+
+
+def segment_gaps(x, C):
+    """Return the smallest distance of the polyline ``x`` (n, d) to each centre (m,)."""
+    if len(x) < 2:
+        return np.linalg.norm(x[:, None] - C[None], axis=2).min(axis=0)
+    a, ab = x[:-1, None], np.diff(x, axis=0)[:, None]                    # (k, 1, d)
+    ac = C[None] - a                                                      # (k, m, d)
+    length2 = np.maximum(np.sum(ab * ab, axis=2), 1e-300)                 # (k, 1)
+    u = np.clip(np.sum(ac * ab, axis=2) / length2, 0.0, 1.0)              # (k, m)
+    return np.linalg.norm(ac - u[..., None] * ab, axis=2).min(axis=0)
+
+
+if numba is not None:
+    @numba.njit(cache=True, fastmath=False)
+    def _gaps_nb(x, C):  # pragma: no cover - numba
+        """Compute :func:`segment_gaps` in one loop."""
+        n, d = x.shape
+        m = C.shape[0]
+        out = np.full(m, np.inf)
+        for k in range(n - 1):
+            for j in range(m):
+                ab2 = 0.0
+                acab = 0.0
+                for i in range(d):
+                    ab = x[k + 1, i] - x[k, i]
+                    ab2 += ab * ab
+                    acab += (C[j, i] - x[k, i]) * ab
+                u = min(max(acab / max(ab2, 1e-300), 0.0), 1.0)
+                gap2 = 0.0
+                for i in range(d):
+                    e = C[j, i] - x[k, i] - u * (x[k + 1, i] - x[k, i])
+                    gap2 += e * e
+                gap = math.sqrt(gap2)
+                if gap < out[j]:
+                    out[j] = gap
+        return out
 
 
 def _fmt(point):

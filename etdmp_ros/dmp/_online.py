@@ -590,11 +590,11 @@ class OnlineRun:
         margin = self.gains.clearance_margin * size
         directions = candidate_directions(self._skill.dim) @ self._R
         peak = float(np.max(np.linalg.norm(acc, axis=1)))
-        shift = keep_clear(theta, x, obstacles_set, margin, self.gains.ramp, directions, size,
-                           displacement=self._disp, t0=self._theta,
-                           blend_length=self._blend_length, fast=self._fast,
-                           acceleration=self.gains.detour_acceleration * peak,
-                           where='the new plan')
+        shift, _ = keep_clear(
+            theta, x, obstacles_set, margin, self.gains.ramp, directions, size,
+            displacement=self._disp, t0=self._theta, blend_length=self._blend_length,
+            fast=self._fast, acceleration=self.gains.detour_acceleration * peak,
+            where='the new plan')
         if len(obstacles):
             self._blend_length = self.gains.ramp * float(np.max(radii + margin))
         return shift

@@ -258,12 +258,13 @@ class Skill:
         for b in np.flatnonzero(near):
             try:
                 peak = float(np.max(np.linalg.norm(a[b], axis=1)))
-                shift = keep_clear(t, x[b], obstacles, r.gains.clearance_margin * sizes[b],
-                                   r.gains.ramp, directions @ R[b], sizes[b], fast=fast,
-                                   acceleration=r.gains.detour_acceleration * peak)
+                shift, values = keep_clear(
+                    t, x[b], obstacles, r.gains.clearance_margin * sizes[b], r.gains.ramp,
+                    directions @ R[b], sizes[b], fast=fast,
+                    acceleration=r.gains.detour_acceleration * peak)
                 if shift is None:
                     continue
-                delta, delta_v, delta_a = shift(t)
+                delta, delta_v, delta_a = values
                 x[b] += delta
                 v[b] += delta_v
                 a[b] += delta_a
