@@ -14,7 +14,11 @@ Notation (the paper's symbols, used in every module here):
   ``theta``: its angle;
   ``x0' = R I_C + g``: the virtual start (Eq. 12).
 - ``lambda``: obstacle coupling added to ``tau dv/dt`` (Eq. 22-27), gains ``gamma``, ``beta``,
-  ``gamma2``, ``k``.
+  ``gamma2``, ``k`` (the paper's point obstacles, ``avoidance='paper'``).
+- Obstacles with a size (``obstacle_radii``, docs/design.md#obstacles-with-a-size): ``c_j``,
+  ``r_j`` centre and radius (the clearance to keep); the default ``avoidance='detour'`` adds to
+  the obstacle-free plan a displacement ``delta(t) = sum_e A_e b_e(t) n_e``: per encounter an
+  amplitude, a C2 bump in time and a direction.
 - Online (``Skill.online``, docs/design.md#online-goal): ``g_f`` the filtered goal,
   ``tau dg_f/dt = alpha_goal (g - g_f)``; the transform is taken between ``x0`` and ``g_f``.
 - Orientation (docs/orientation.md): ``q`` unit quaternions (x, y, z, w), ``omega`` angular
@@ -36,12 +40,12 @@ from ._obstacles import obstacle_coupling, ObstacleGains
 from ._online import OnlineGains, OnlineRun
 from ._orientation import ORIENTATION_MODES
 from ._similarity import clearance, nrmse, Similarity, similarity
-from ._skill import (FORMULATIONS, learn, METHOD_LABELS, METHODS, OBSTACLE_MARGIN, Skill,
-                     Trajectory)
+from ._skill import (AVOIDANCES, FORMULATIONS, learn, METHOD_LABELS, METHODS, OBSTACLE_MARGIN,
+                     Skill, Trajectory)
 from ._transform import euclidean_transform, EuclideanTransform
 
 __all__ = [
-    'Demonstration', 'DemonstrationError', 'EuclideanTransform', 'FORMULATIONS',
+    'AVOIDANCES', 'Demonstration', 'DemonstrationError', 'EuclideanTransform', 'FORMULATIONS',
     'GeneralizationError', 'METHOD_LABELS', 'METHODS', 'OBSTACLE_MARGIN', 'ORIENTATION_MODES',
     'ObstacleGains', 'OnlineGains', 'OnlineRun', 'Similarity', 'Skill', 'Trajectory',
     'builtin_demo', 'builtin_demo_names', 'check_file_size', 'clearance', 'euclidean_transform',

@@ -18,6 +18,8 @@ fast path, used when numba is importable). Both start from a given state (``x0``
 the online rollout (``_online.py``): the DMP equations are written here once.
 """
 
+import functools
+
 import numpy as np
 
 from ._obstacles import steering_axis
@@ -46,8 +48,19 @@ def _expm(a):
     return result
 
 
+@functools.lru_cache(maxsize=64)
+def _discretized(K, D, tau, h):
+    phi, gam = _discretize(K, D, tau, h)
+    phi.flags.writeable = gam.flags.writeable = False
+    return phi, gam
+
+
 def discretize(K, D, tau, h):
     """Exact zero-order-hold step (Phi (2, 2), Gamma (2,)) of ``z = (x, v)`` over ``h`` seconds."""
+    return _discretized(float(K), float(D), float(tau), float(h))
+
+
+def _discretize(K, D, tau, h):
     aug = np.zeros((3, 3))
     aug[:2, :2] = np.array([[0.0, 1.0], [-K, -D]]) / tau
     aug[1, 2] = 1.0 / tau
@@ -154,6 +167,23 @@ if numba is not None:
             out[2] += w * r2
 
     @numba.njit(cache=True, fastmath=False)
+    def _turn_nb(x, v, obstacles, g, gamma, beta, gamma2, k, angle_scale, d, om):
+        """Turn v in place by the obstacle coupling's rotation over one sub-step."""
+        _omega_nb(x, v, obstacles, g, gamma, beta, gamma2, k, d, om)
+        norm = np.sqrt(om[0] ** 2 + om[1] ** 2 + om[2] ** 2)
+        if norm > 0.0:
+            k0, k1, k2 = om[0] / norm, om[1] / norm, om[2] / norm
+            ang = norm * angle_scale
+            ca, sa = np.cos(ang), np.sin(ang)
+            v0, v1 = v[0], v[1]
+            v2 = v[2] if d == 3 else 0.0
+            kv = k0 * v0 + k1 * v1 + k2 * v2
+            v[0] = v0 * ca + (k1 * v2 - k2 * v1) * sa + k0 * kv * (1.0 - ca)
+            v[1] = v1 * ca + (k2 * v0 - k0 * v2) * sa + k1 * kv * (1.0 - ca)
+            if d == 3:
+                v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
+
+    @numba.njit(cache=True, fastmath=False)
     def _substep_nb(x, v, g, A, M, s, f, obstacles, gamma, beta, gamma2, k, K, phi, gam,
                     angle_scale, d, om):
         """One sub-step of one system in place: the exact linear update, then the turn of v."""
@@ -163,29 +193,23 @@ if numba is not None:
             x[i] = phi[0, 0] * xi + phi[0, 1] * v[i] + gam[0] * u
             v[i] = phi[1, 0] * xi + phi[1, 1] * v[i] + gam[1] * u
         if obstacles.shape[0] > 0:
-            _omega_nb(x, v, obstacles, g, gamma, beta, gamma2, k, d, om)
-            norm = np.sqrt(om[0] ** 2 + om[1] ** 2 + om[2] ** 2)
-            if norm > 0.0:
-                k0, k1, k2 = om[0] / norm, om[1] / norm, om[2] / norm
-                ang = norm * angle_scale
-                ca, sa = np.cos(ang), np.sin(ang)
-                v0, v1 = v[0], v[1]
-                v2 = v[2] if d == 3 else 0.0
-                kv = k0 * v0 + k1 * v1 + k2 * v2
-                v[0] = v0 * ca + (k1 * v2 - k2 * v1) * sa + k0 * kv * (1.0 - ca)
-                v[1] = v1 * ca + (k2 * v0 - k0 * v2) * sa + k1 * kv * (1.0 - ca)
-                if d == 3:
-                    v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
+            _turn_nb(x, v, obstacles, g, gamma, beta, gamma2, k, angle_scale, d, om)
 
     @numba.njit(cache=True, fastmath=False)
     def _rollout_nb(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gamma, beta, gamma2,
                     k, K, D, tau, phi, gam, angle_scale, substeps, R, vel0, X, V, Acc):
+        # Scalars and indices only in the loops: an array view per sub-step (goal[b], f_mid[j])
+        # costs more than the sub-step's arithmetic (the batch ran 4x slower per system).
         B, d = x0.shape
         n = s_out.shape[0]
         n_obs = obstacles.shape[1]
         x = np.empty(d)
         v = np.empty(d)
+        acc = np.empty(d)
         om = np.zeros(3)
+        p00, p01, p10, p11 = phi[0, 0], phi[0, 1], phi[1, 0], phi[1, 1]
+        g0, g1 = gam[0], gam[1]
+        tau2 = tau * tau
         for b in range(B):
             for i in range(d):
                 x[i] = x0[b, i]
@@ -198,24 +222,34 @@ if numba is not None:
                     lam0 = om[1] * v2 - om[2] * v[1]
                     lam1 = om[2] * v[0] - om[0] * v2
                     lam2 = om[0] * v[1] - om[1] * v[0]
-                for j in range(d):
-                    X[b, step, j] = goal[b, j]
-                    V[b, step, j] = 0.0
-                    Acc[b, step, j] = 0.0
                 for i in range(d):
                     lam = lam0 if i == 0 else (lam1 if i == 1 else lam2)
-                    acc = (K * (goal[b, i] - x[i]) - D * v[i] + A[b, i] * s_out[step]
-                           + M[b, i] * f_out[step, i] + lam) / (tau * tau)
+                    acc[i] = (K * (goal[b, i] - x[i]) - D * v[i] + A[b, i] * s_out[step]
+                              + M[b, i] * f_out[step, i] + lam) / tau2
+                for j in range(d):
                     # Back to the real situation: x = R^T (x' - g) + g (Eq. 13-14).
-                    for j in range(d):
-                        X[b, step, j] += R[b, i, j] * (x[i] - goal[b, i])
-                        V[b, step, j] += R[b, i, j] * v[i] / tau
-                        Acc[b, step, j] += R[b, i, j] * acc
+                    xj = goal[b, j]
+                    vj = 0.0
+                    aj = 0.0
+                    for i in range(d):
+                        xj += R[b, i, j] * (x[i] - goal[b, i])
+                        vj += R[b, i, j] * v[i] / tau
+                        aj += R[b, i, j] * acc[i]
+                    X[b, step, j] = xj
+                    V[b, step, j] = vj
+                    Acc[b, step, j] = aj
                 if step == n - 1:
                     break
-                for j in range(step * substeps, (step + 1) * substeps):
-                    _substep_nb(x, v, goal[b], A[b], M[b], s_mid[j], f_mid[j], obstacles[b],
-                                gamma, beta, gamma2, k[b], K, phi, gam, angle_scale, d, om)
+                for jj in range(step * substeps, (step + 1) * substeps):
+                    sm = s_mid[jj]
+                    for i in range(d):
+                        u = K * goal[b, i] + A[b, i] * sm + M[b, i] * f_mid[jj, i]
+                        xi = x[i]
+                        x[i] = p00 * xi + p01 * v[i] + g0 * u
+                        v[i] = p10 * xi + p11 * v[i] + g1 * u
+                    if n_obs > 0:
+                        _turn_nb(x, v, obstacles[b], goal[b], gamma, beta, gamma2, k[b],
+                                 angle_scale, d, om)
 
     @numba.njit(cache=True, fastmath=False)
     def _chain_nb(x_real, xd_real, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles,
@@ -310,7 +344,9 @@ def rollout(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, 
     phi, gam = discretize(K, D, tau, h) if step is None else step
     B, d = x0.shape
     n = len(s_out)
-    X, V, Acc = (np.empty((B, n, d)) for _ in range(3))
+    # One block for the three outputs: above 4 MiB numpy asks the kernel for huge pages, and
+    # first touching 12 MB of 4 kB pages (a batch of 256 x 1000 steps) cost more than the loop.
+    X, V, Acc = np.empty((3, B, n, d))
     gamma, beta, gamma2, k = gains
     f64 = np.ascontiguousarray
     _rollout_nb(f64(x0, float), f64(goal, float), f64(A, float), f64(M, float), f64(s_mid),

@@ -37,6 +37,12 @@ class ObstacleGains:
     points placed on the obstacle-free ET-DMP path (36 runs): smallest clearance 7 % of the letter
     size, median nRMSE 0.23 (0.001 without obstacles), goal reached within 0.4 % of the size.
     Hoffmann's gamma = 1000 cleared no better and bent the letters more (median nRMSE 0.25).
+
+    The default avoidance of obstacles with a size, the detour (docs/design.md#obstacles-with-a-
+    size), uses only the last two: ``clearance_margin``, the extra clearance it aims for beyond
+    each radius and the distance within which an obstacle acts at all, as a fraction of the
+    movement's size (its largest distance from the goal); ``ramp``, the arc length over which
+    the detour leaves and rejoins the obstacle-free plan, in units of the radius plus margin.
     """
 
     gamma: float = 250.0
@@ -44,16 +50,29 @@ class ObstacleGains:
     gamma2: float = 300.0
     k: float | None = None
     k_relative: float = 10.0
+    clearance_margin: float = 0.005
+    ramp: float = 1.0
+    detour_acceleration: float = 1.0
 
     def decay(self, length_scale):
-        """Return ``k`` (1/length) for a movement whose start-goal distance is ``length_scale``."""
+        """
+        Return ``k`` (1/length) for movements whose start-goal distance is ``length_scale``.
+
+        A float for a number, an array for an array of them.
+        """
+        if np.ndim(length_scale):
+            scale = np.asarray(length_scale, dtype=float)
+            if self.k is not None:
+                return np.full(scale.shape, float(self.k))
+            return self.k_relative / np.maximum(scale, 1e-300)
         if self.k is not None:
             return float(self.k)
         return self.k_relative / max(float(length_scale), 1e-300)
 
     def validate(self):
         """Raise ValueError unless every gain is finite and non-negative."""
-        for name in ('gamma', 'beta', 'gamma2', 'k_relative'):
+        for name in ('gamma', 'beta', 'gamma2', 'k_relative', 'clearance_margin', 'ramp',
+                     'detour_acceleration'):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0.0:
                 raise ValueError(f'obstacle gain {name} must be finite and >= 0, got {value!r}')

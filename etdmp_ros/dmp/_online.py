@@ -19,6 +19,13 @@ state mapped in with ``x' = R (x - g_f) + g_f``, ``v' = R v``) with the one inte
 offline rollout. Phase stopping scales the rate of the whole system, phase and transformation
 system alike: a time warp, so a slowed or waiting plan stays on its path and resumes from where
 it waits.
+
+Obstacles with a size (``avoidance='detour'``, docs/design.md#obstacles-with-a-size): the DMP
+runs without them, and the run adds the detour's displacement ``delta(theta)``, a function of
+the phase time ``theta`` planned on the predicted remainder of the DMP (the same remainder
+:meth:`OnlineRun.run` computes). When the goal or the obstacles change, the displacement is
+planned again from the current state: the one in force is blended out (C2) as the new one
+takes over, and a plan that would enter an obstacle is refused with the run left as it was.
 """
 
 import copy
@@ -28,6 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._detour import candidate_directions, keep_clear, Obstacles
 from ._errors import finite_array, GeneralizationError
 from ._integrate import chain, discretize, MAX_SUBSTEP, numba, rollout
 from ._similarity import nrmse
@@ -118,7 +126,7 @@ class OnlineRun:
     """
 
     def __init__(self, skill, start, goal, obstacles, method, mode, independent_axis, dt, tau,
-                 gains, online, fast):
+                 gains, online, fast, obstacle_radii=None, avoidance=None):
         online = OnlineGains() if online is None else online
         if not isinstance(online, OnlineGains):
             raise GeneralizationError(f'online must be an OnlineGains, got {online!r}')
@@ -131,7 +139,8 @@ class OnlineRun:
             if finite_array(value, name).shape != (d,):
                 raise GeneralizationError(f'an online run is one movement: {name} must have '
                                           f'shape ({d},), got {np.shape(value)}')
-        r = skill._check_request(start, goal, obstacles, method, dt, tau, 0.0, gains)
+        r = skill._check_request(start, goal, obstacles, method, dt, tau, 0.0, gains,
+                                 obstacle_radii, avoidance)
         self._skill, self._method = skill, method
         self._mode, self._axis = mode, independent_axis
         self._fast = fast
@@ -144,9 +153,11 @@ class OnlineRun:
         self._goal = r.goals[0].copy()
         self._goal_f = self._goal.copy()
         self._obstacles = r.obstacles
-        n_demo = float(np.linalg.norm(skill.start - skill.goal))
-        # Size of the placed movement per unit of |x0 - g| (the ET-DMP's uniform scale).
-        self._size_ratio = skill.size / n_demo if n_demo > EPS * skill.size else 1.0
+        self._radii = r.radii
+        self.avoidance = r.avoidance
+        #: The detour's displacement in force (a function of the phase time), or None.
+        self._disp = None
+        self._blend_length = 0.0
         self._place(self._goal)
         self._steps = {}
         self._n = 0
@@ -156,6 +167,12 @@ class OnlineRun:
         self._v = np.zeros(d)       # scaled velocity tau dx/dt of the DMP, real situation
         self._xd = np.zeros(d)
         self._a = self._advance(1.0, 0)
+        if self._detours and len(self._obstacles):
+            self._disp = self._plan_detour(self._goal, self._obstacles, self._radii)
+
+    @property
+    def _detours(self):
+        return self.avoidance == 'detour'
 
     def __repr__(self):
         return (f'OnlineRun(method={self._method!r}, t={self.t:.3g}, phase={self.phase:.3g}, '
@@ -183,23 +200,32 @@ class OnlineRun:
         """Return whether the phase has ended and the plan rests at the goal (done_tolerance)."""
         tol = self.online.done_tolerance * self._length(self._goal)
         return bool(self._theta >= self.tau * (1.0 - 1e-12)
+                    and (self._disp is None or self._theta >= self._disp.end)
                     and np.linalg.norm(self._x - self._goal) <= tol
                     and np.linalg.norm(self._v) <= tol)
 
     @property
     def x(self):
         """Return the position of the current sample (d,)."""
-        return self._x.copy()
+        return self._sample()[0]
 
     @property
     def v(self):
         """Return the velocity dx/dt of the current sample (d,)."""
-        return self._xd.copy()
+        return self._sample()[1]
 
     @property
     def a(self):
         """Return the acceleration d2x/dt2 of the current sample (d,)."""
-        return self._a.copy()
+        return self._sample()[2]
+
+    def _sample(self):
+        """Return the current sample (x, v, a): the DMP's state plus the detour's displacement."""
+        if self._disp is None:
+            return self._x.copy(), self._xd.copy(), self._a.copy()
+        delta, delta_v, delta_a = (part[0] for part in self._disp(np.array([self._theta])))
+        rate = self._rate
+        return self._x + delta, self._xd + rate * delta_v, self._a + rate * rate * delta_a
 
     @property
     def start(self):
@@ -218,8 +244,13 @@ class OnlineRun:
 
     @property
     def obstacles(self):
-        """Return the obstacle points in force, (n_obs, d)."""
+        """Return the obstacle points (centres) in force, (n_obs, d)."""
         return self._obstacles.copy()
+
+    @property
+    def obstacle_radii(self):
+        """Return the obstacle radii in force, (n_obs,) (zeros for the paper's points)."""
+        return self._radii.copy()
 
     @property
     def rotation(self):
@@ -233,23 +264,25 @@ class OnlineRun:
 
     # -- stepping ---------------------------------------------------------------------------
 
-    def step(self, goal=None, obstacles=None, actual=None):
+    def step(self, goal=None, obstacles=None, actual=None, obstacle_radii=None):
         """
         Advance by ``dt``; return ``(x, v, a)`` of the new sample.
 
         ``goal`` (d,): a new goal, reached through the goal filter. ``obstacles`` (n, d): the
-        obstacle set from now on (replaces the previous one). ``actual`` (d,): the measured
-        position of the tool now; the farther it is from the plan's current sample, the slower
-        this step runs (phase stopping). Raises GeneralizationError for a bad argument
-        (NaN, wrong shape, goal at the start, obstacle on the goal, ...); the run is then as it
-        was.
+        obstacle set from now on (replaces the previous one), with ``obstacle_radii`` (n,)
+        (None: the radii in force, when the number of obstacles is unchanged). ``actual`` (d,):
+        the measured position of the tool now; the farther it is from the plan's current
+        sample, the slower this step runs (phase stopping). Raises GeneralizationError for a
+        bad argument (NaN, wrong shape, goal at the start, obstacle on the goal, ...) and, for
+        the detour, for a goal or obstacles that the plan cannot keep its clearance from; the
+        run is then as it was.
         """
         measured = None if actual is None else self._point(actual, 'actual')
-        self._take(goal, obstacles)     # checked: from here on the run changes
+        self._take(goal, obstacles, obstacle_radii)     # checked: from here on the run changes
         rate = 1.0
         if measured is not None:
             with np.errstate(over='ignore'):    # an absurd measurement: rate MIN_RATE
-                error = np.linalg.norm(measured - self._x) / self._length(self._goal)
+                error = np.linalg.norm(measured - self._sample()[0]) / self._length(self._goal)
                 rate = max(MIN_RATE, 1.0 / (1.0 + self.online.alpha_err * error ** 2))
         if not np.array_equal(self._goal_f, self._goal):
             keep = math.exp(-self.online.alpha_goal * self.dt / self.tau)
@@ -265,19 +298,26 @@ class OnlineRun:
         self._a = self._advance(rate, 1)
         self._n += 1
         self._theta += rate * self.dt
-        return self._x.copy(), self._xd.copy(), self._a.copy()
+        return self._sample()
 
-    def _take(self, goal=None, obstacles=None):
+    def _take(self, goal=None, obstacles=None, obstacle_radii=None):
         """
         Put a new goal and/or obstacle set in force, as :meth:`step` takes them, without a step.
 
         Raises GeneralizationError, leaving the run as it was, for what :meth:`step` refuses.
-        The next step (or :meth:`run`) then moves the filtered goal towards the new goal.
+        The next step (or :meth:`run`) then moves the filtered goal towards the new goal. A
+        detour is planned again here (from the current state) when either changes.
         """
         skill = self._skill
         target = self._goal if goal is None else self._point(goal, 'goal')
         new_goal = not np.array_equal(target, self._goal)
-        obstacles = self._obstacles if obstacles is None else self._obstacle_set(obstacles)
+        if obstacles is None:
+            if obstacle_radii is not None:
+                raise GeneralizationError('obstacle_radii given without obstacles')
+            obstacles, radii = self._obstacles, self._radii
+        else:
+            obstacles = self._obstacle_set(obstacles)
+            radii = self._radii_for(obstacles, obstacle_radii)
         if new_goal:
             gap = np.linalg.norm(self._x0 - target)
             if not gap > EPS * skill.size:
@@ -290,10 +330,24 @@ class OnlineRun:
             if self._method != 'etdmp':
                 skill._placement(self._x0[None], target[None], self._method, self._mode,
                                  self._axis)
-        if len(obstacles) and (new_goal or obstacles is not self._obstacles):
+        moved = obstacles is not self._obstacles and not (
+            np.array_equal(obstacles, self._obstacles) and np.array_equal(radii, self._radii))
+        if len(obstacles) and (new_goal or moved):
             if np.any(np.linalg.norm(obstacles - target, axis=1) <= EPS * skill.size):
                 raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
-        self._goal, self._obstacles = target, obstacles
+            if self._detours:
+                gap = np.linalg.norm(obstacles - target, axis=1) - radii
+                if np.any(gap < 0.0):
+                    j = int(np.argmin(gap))
+                    raise GeneralizationError(
+                        f'the goal lies inside obstacle #{j} (radius {radii[j]:.4g}, '
+                        f'{gap[j] + radii[j]:.4g} from its centre): the plan cannot keep its '
+                        'clearance')
+        disp = self._disp
+        if self._detours and (new_goal or moved) and (len(obstacles) or disp is not None):
+            disp = self._plan_detour(target, obstacles, radii)     # raises: nothing changed
+        self._goal, self._obstacles, self._radii = target, obstacles, radii
+        self._disp = disp
 
     def copy(self):
         """Return an independent copy of the run (for a what-if rollout; the skill is shared)."""
@@ -320,7 +374,14 @@ class OnlineRun:
         n = len(rows.t)
         if n:
             self._set_row(rows, n - 1)
-        return rows.t, rows.x, rows.v, rows.a
+        return (rows.t,) + self._outputs(rows)
+
+    def _outputs(self, rows):
+        """Return the samples (x, v, a) of ``rows``: the DMP's plus the detour's displacement."""
+        if self._disp is None or not len(rows.t):
+            return rows.x, rows.v, rows.a
+        delta, delta_v, delta_a = self._disp(rows.theta)
+        return rows.x + delta, rows.v + delta_v, rows.a + delta_a
 
     def _rows(self, n_max):
         """
@@ -369,7 +430,7 @@ class OnlineRun:
         if step is None:
             step = self._steps[self.tau] = discretize(skill.K, skill.D, self.tau, self._h)
         X, V, Acc = chain(self._x, self._xd, goal_f, A, M, R, k, s_mid, f_mid, s_out, f_out,
-                          self._obstacles,
+                          self._coupled(),
                           (self.gains.gamma, self.gains.beta, self.gains.gamma2, None),
                           skill.K, skill.D, self.tau, self._h, sub, step=step)
         # Where step() would have said done: the phase ended and at rest at the goal.
@@ -377,6 +438,8 @@ class OnlineRun:
         ended = theta + self.dt >= self.tau * (1.0 - 1e-12)
         rest = (np.linalg.norm(X - g, axis=1) <= tol) & \
             (np.linalg.norm(V * self.tau, axis=1) <= tol)
+        if self._disp is not None:
+            rest &= theta + self.dt >= self._disp.end
         done = np.flatnonzero(ended & rest)
         n = int(done[0]) + 1 if len(done) else n_max
         t = self.t + self.dt * np.arange(1, n + 1)
@@ -395,6 +458,9 @@ class OnlineRun:
             return None
         n, d = np.shape(x)
         steps = np.arange(1, n + 1)
+        if self._disp is not None:      # the plan's samples carry the detour; rows do not
+            delta, delta_v, delta_a = self._disp(self._theta + self.dt * steps)
+            x, v, a = x - delta, v - delta_v, a - delta_a
         return _Rows(self.t + self.dt * steps, x, v, a,
                      np.broadcast_to(self._goal_f, (n, d)), np.broadcast_to(self._R, (n, d, d)),
                      np.broadcast_to(self._A, (n, d)), np.broadcast_to(self._M, (n, d)),
@@ -471,9 +537,70 @@ class OnlineRun:
             raise GeneralizationError(f'obstacle avoidance needs 2 or 3 dimensions, skill has {d}')
         return obs.reshape(-1, d).copy()
 
+    def _radii_for(self, obstacles, obstacle_radii):
+        """Check the radii of a new obstacle set; None keeps those in force (same count)."""
+        if obstacle_radii is None:
+            if not self._detours:
+                return np.zeros(len(obstacles))
+            if len(obstacles) != len(self._radii):
+                raise GeneralizationError(
+                    f'{len(obstacles)} obstacles given without obstacle_radii, and there were '
+                    f'{len(self._radii)}: give their radii')
+            return self._radii
+        return self._skill._check_radii(obstacle_radii, len(obstacles))
+
+    def _coupled(self):
+        """Return the obstacles the integrator couples to (the paper's), (n, d)."""
+        return self._obstacles if not self._detours else self._obstacles[:0]
+
+    def _plan_detour(self, goal, obstacles, radii):
+        """
+        Plan the detour's displacement for the remainder with ``goal`` and ``obstacles``.
+
+        The remainder of the DMP is predicted from the current state with no further input
+        (:meth:`_rows`, or stepped by the reference), over the phase time up to
+        ``max(tau, theta + tau / 2)``; the displacement in force is carried and blended out.
+        Returns the new :class:`Displacement` (or None: nothing to avoid, nothing to carry).
+        Raises GeneralizationError when the clearance cannot be kept; the run is unchanged.
+        """
+        trial = self.copy()
+        trial._goal, trial._disp = goal, None
+        horizon = max(self.tau, self._theta + 0.5 * self.tau)
+        n_max = max(1, int(math.ceil((horizon - self._theta) / self.dt - 1e-9)))
+        rows = trial._rows(n_max) if self._fast and numba is not None else None
+        if rows is not None:
+            theta = np.concatenate([[self._theta], rows.theta])
+            x = np.vstack([self._x[None], rows.x])
+            acc = np.vstack([self._a[None], rows.a])
+        else:
+            x, theta, acc = [self._x.copy()], [self._theta], [self._a.copy()]
+            for _ in range(n_max):
+                trial.step()
+                x.append(trial._x.copy())
+                theta.append(trial._theta)
+                acc.append(trial._a.copy())
+                if trial.done:
+                    break
+            x, theta, acc = np.array(x), np.array(theta), np.array(acc)
+        if len(x) < 2:
+            return None
+        obstacles_set = Obstacles(obstacles, radii)
+        size = self._length(goal)
+        margin = self.gains.clearance_margin * size
+        directions = candidate_directions(self._skill.dim) @ self._R
+        peak = float(np.max(np.linalg.norm(acc, axis=1)))
+        shift, _ = keep_clear(
+            theta, x, obstacles_set, margin, self.gains.ramp, directions, size,
+            displacement=self._disp, t0=self._theta, blend_length=self._blend_length,
+            fast=self._fast, acceleration=self.gains.detour_acceleration * peak,
+            where='the new plan')
+        if len(obstacles):
+            self._blend_length = self.gains.ramp * float(np.max(radii + margin))
+        return shift
+
     def _length(self, goal):
         """Size ``l`` of the movement placed between x0 and ``goal``."""
-        return float(np.linalg.norm(self._x0 - goal)) * self._size_ratio
+        return float(self._skill._placed_size(self._x0, goal))
 
     def _place(self, goal_f):
         """Put the placement of the skill between x0 and ``goal_f`` in force."""
@@ -504,7 +631,7 @@ class OnlineRun:
                 self._steps[tau] = step
         x_virtual = R @ (self._x - g) + g
         v_virtual = R @ self._v
-        obstacles = (self._obstacles - g) @ R.T + g
+        obstacles = (self._coupled() - g) @ R.T + g
         X, V, Acc = rollout(x_virtual[None], g[None], self._A[None], self._M[None], s[:n_sub],
                             f[:n_sub], s[n_sub:], f[n_sub:], obstacles[None],
                             (self.gains.gamma, self.gains.beta, self.gains.gamma2,

@@ -7,6 +7,7 @@ from etdmp_ros import limits
 import numpy as np
 
 from ._demos import Demonstration
+from ._detour import candidate_directions, keep_clear, Obstacles
 from ._errors import DemonstrationError, finite_array, GeneralizationError
 from ._forcing_term import ForcingTerm, phase
 from ._integrate import MAX_SUBSTEP, rollout
@@ -22,8 +23,15 @@ METHOD_LABELS = {'etdmp': 'ET-DMP', 'dmp': 'DMP'}
 #: Below this fraction of the demonstration's size, ``(g_D - x0_D)_i`` counts as zero for the
 #: plain Ijspeert DMP, whose per-dimension scaling would divide by it.
 PLAIN_DMP_MIN_OFFSET = 1e-3
-#: Default extra time, as a fraction of tau, given to a movement that avoids obstacles.
+#: Default extra time, as a fraction of tau, given to a movement that avoids obstacles with the
+#: paper's coupling (avoidance "paper"): its detour delays arrival at the goal. The default
+#: avoidance ("detour") keeps the obstacle-free timing and needs none.
 OBSTACLE_MARGIN = 0.5
+#: How obstacles are avoided (docs/design.md#obstacles-with-a-size): "detour", obstacles with a
+#: size (``obstacle_radii``) passed by a local smooth detour of the obstacle-free plan whose
+#: clearance is checked (the default when radii are given); "paper", the paper's point-obstacle
+#: coupling Eq. 22-27 (the baseline, and the default without radii: today's behaviour).
+AVOIDANCES = ('detour', 'paper')
 #: Most output samples one rollout may produce (guards against absurd dt).
 MAX_SAMPLES = 2_000_000
 
@@ -60,6 +68,8 @@ class _Request(NamedTuple):
     starts: np.ndarray
     goals: np.ndarray
     obstacles: np.ndarray
+    radii: np.ndarray
+    avoidance: str
     single: bool
     gains: ObstacleGains
     tau: float
@@ -161,37 +171,51 @@ class Skill:
         return self.generalize(self.start, self.goal, method='dmp', dt=dt)
 
     def generalize(self, start, goal, obstacles=(), method='etdmp', mode=1, independent_axis=2,
-                   dt=None, tau=None, margin=None, gains=None, fast=True, goal_orientation=None):
+                   dt=None, tau=None, margin=None, gains=None, fast=True, goal_orientation=None,
+                   obstacle_radii=None, avoidance=None):
         """
         Generalize the skill from ``start`` to ``goal``.
 
         ``start``: (d,) for one movement or (B, d) for a batch; ``goal``: (d,) or (B, d);
-        ``obstacles``: (n_obs, d) points (2D/3D). ``method``: "etdmp" (Euclidean transformation,
-        ``mode`` 1 or 2 in 3D) or "dmp" (the plain baseline). The output is sampled every ``dt``
-        (default: the demonstration's mean sample period) from 0 to ``tau * (1 + margin)``; the
-        default margin is 0 without obstacles (the output is phase-aligned with the demonstration)
-        and OBSTACLE_MARGIN with them, since a detour delays arrival at the goal.
+        ``obstacles``: (n_obs, d) centres (2D/3D); ``obstacle_radii``: (n_obs,) the clearance the
+        plan must keep from each centre (the caller adds the tool's radius and a safety margin),
+        or None for the paper's point obstacles. ``avoidance`` (AVOIDANCES): "detour", the
+        default with radii (docs/design.md#obstacles-with-a-size: no sample closer to a centre
+        than its radius, checked; obstacles farther than their radius plus
+        ``gains.clearance_margin`` from the obstacle-free plan change nothing), or "paper", the
+        paper's coupling Eq. 22-27, the default without radii (radii are then not used).
+        ``method``: "etdmp" (Euclidean transformation, ``mode`` 1 or 2 in 3D) or "dmp" (the plain
+        baseline). The output is sampled every ``dt`` (default: the demonstration's mean sample
+        period) from 0 to ``tau * (1 + margin)``; the default margin is 0 (the output is
+        phase-aligned with the demonstration), OBSTACLE_MARGIN with the paper's coupling, since
+        its detour delays arrival at the goal.
         For a skill with orientations the output also carries ``q`` and ``omega``: the
         demonstrated orientations turned with the motion or, given ``goal_orientation``
         (x, y, z, w), (4,) or (B, 4), converging to it (docs/orientation.md).
-        Raises GeneralizationError on bad or degenerate input.
+        Raises GeneralizationError on bad or degenerate input, and when the detour cannot keep
+        the clearance (never a plan that enters an obstacle).
         """
-        r = self._check_request(start, goal, obstacles, method, dt, tau, margin, gains)
+        r = self._check_request(start, goal, obstacles, method, dt, tau, margin, gains,
+                                obstacle_radii, avoidance)
         if goal_orientation is not None or self.orientation is not None:
             goal_q = check_goal_orientation(self.orientation, goal_orientation, len(r.starts))
         B = len(r.starts)
         transform, virtual_start, A, M = self._placement(r.starts, r.goals, method, mode,
                                                          independent_axis)
         i_current = r.starts - r.goals
-        virtual_obs = transform.to_virtual(np.broadcast_to(r.obstacles, (B,) + r.obstacles.shape),
+        coupled = r.obstacles if r.avoidance == 'paper' else r.obstacles[:0]
+        virtual_obs = transform.to_virtual(np.broadcast_to(coupled, (B,) + coupled.shape),
                                            r.goals[:, None])
         substeps = max(1, int(np.ceil(r.dt / (MAX_SUBSTEP * r.tau))))
         s_mid, f_mid, s_out, f_out = self._forcing_table(r.tau, r.dt, r.n_out, substeps)
-        k = np.array([r.gains.decay(gap) for gap in np.linalg.norm(i_current, axis=1)])
+        gaps = np.linalg.norm(i_current, axis=1)
+        k = r.gains.decay(gaps) if len(coupled) else np.zeros(B)
         x, v, a = rollout(virtual_start, r.goals, A, M, s_mid, f_mid, s_out, f_out, virtual_obs,
                           (r.gains.gamma, r.gains.beta, r.gains.gamma2, k), self.K, self.D,
                           r.tau, r.dt / substeps, substeps, transform.R, fast=fast)
         t = np.arange(r.n_out) * r.dt
+        if r.avoidance == 'detour' and len(r.obstacles):
+            self._detour(t, x, v, a, r, transform.R, fast)
         q = omega = None
         if self.orientation is not None:
             q, omega = self.orientation.generalize(
@@ -204,20 +228,55 @@ class Skill:
         return Trajectory(t, x, v, a, r.starts, r.goals, method, transform.R, virtual_start, q,
                           omega)
 
+    def _detour(self, t, x, v, a, r, R, fast=True):
+        """
+        Displace the obstacle-free rollouts ``x``, ``v``, ``a`` (B, n, d) around the obstacles.
+
+        In place, system by system; a system that no obstacle comes near is left as it is, bit
+        for bit. The candidate directions are fixed in the virtual situation (row form of
+        ``R^T n``), so the detour commutes with the Euclidean transform. Raises
+        GeneralizationError (naming the start) when a clearance cannot be kept.
+        """
+        obstacles = Obstacles(r.obstacles, r.radii)
+        directions = candidate_directions(self.dim)
+        sizes = self._placed_size(r.starts, r.goals)
+        reach = r.radii + r.gains.clearance_margin * sizes[:, None]           # (B, m)
+        near = np.any(np.linalg.norm(x[:, :, None] - r.obstacles[None, None], axis=3)
+                      < reach[:, None], axis=1).any(axis=1)
+        for b in np.flatnonzero(near):
+            try:
+                peak = float(np.max(np.linalg.norm(a[b], axis=1)))
+                shift, values = keep_clear(
+                    t, x[b], obstacles, r.gains.clearance_margin * sizes[b], r.gains.ramp,
+                    directions @ R[b], sizes[b], fast=fast,
+                    acceleration=r.gains.detour_acceleration * peak)
+                if shift is None:
+                    continue
+                delta, delta_v, delta_a = values
+                x[b] += delta
+                v[b] += delta_v
+                a[b] += delta_a
+            except GeneralizationError as err:
+                which = '' if r.single else f' (start #{b})'
+                raise GeneralizationError(f'{err}{which}') from None
+
     def online(self, start, goal, obstacles=(), method='etdmp', mode=1, independent_axis=2,
-               dt=None, tau=None, gains=None, online=None, fast=True):
+               dt=None, tau=None, gains=None, online=None, fast=True, obstacle_radii=None,
+               avoidance=None):
         """
         Start an online rollout from ``start`` to ``goal``: the goal may move while it runs.
 
         The arguments are those of :meth:`generalize` for one start (``start`` and ``goal`` of
         shape (d,)); ``online`` is an :class:`OnlineGains` (goal filter, phase stopping). Returns
-        an :class:`OnlineRun`; ``run.step(goal=None, obstacles=None, actual=None)`` advances it
-        by ``dt`` and returns ``(x, v, a)``. With a goal that never changes the samples are those
-        of :meth:`generalize`. The method: docs/design.md#online-goal. Raises
-        GeneralizationError on bad or degenerate input.
+        an :class:`OnlineRun`; ``run.step(goal=None, obstacles=None, actual=None,
+        obstacle_radii=None)`` advances it by ``dt`` and returns ``(x, v, a)``. With a goal and
+        obstacles that never change the samples are those of :meth:`generalize`. The method:
+        docs/design.md#online-goal (and #obstacles-with-a-size for the detour, which is planned
+        again on the remainder when the goal or an obstacle moves). Raises GeneralizationError
+        on bad or degenerate input.
         """
         return OnlineRun(self, start, goal, obstacles, method, mode, independent_axis, dt, tau,
-                         gains, online, fast)
+                         gains, online, fast, obstacle_radii, avoidance)
 
     def _placement(self, starts, goals, method, mode, independent_axis):
         """
@@ -245,12 +304,25 @@ class Skill:
             M = np.full_like(starts, self.K * self.size)
         return transform, virtual_start, A, M
 
-    def _check_request(self, start, goal, obstacles, method, dt, tau, margin, gains):
+    def _placed_size(self, starts, goals):
+        """
+        Return the size of the movement placed between ``starts`` and ``goals`` ((B,) or ()).
+
+        ``|x0 - g|`` times the demonstration's size over ``|I_D|`` (ET-DMP's uniform scale; for
+        the plain DMP, the same ratio as a measure), or ``|x0 - g|`` when ``|I_D|`` is ~0.
+        """
+        n_demo = float(np.linalg.norm(self.start - self.goal))
+        ratio = self.size / n_demo if n_demo > EPS * self.size else 1.0
+        return np.linalg.norm(np.asarray(starts) - np.asarray(goals), axis=-1) * ratio
+
+    def _check_request(self, start, goal, obstacles, method, dt, tau, margin, gains,
+                       obstacle_radii=None, avoidance=None):
         """
         Validate the arguments of :meth:`generalize` and return them as a :class:`_Request`.
 
-        Shapes become batches: ``starts`` and ``goals`` (B, d), ``obstacles`` (n_obs, d). The
-        defaults of ``dt``, ``tau``, ``margin`` and ``gains`` are filled in. ``mode`` and
+        Shapes become batches: ``starts`` and ``goals`` (B, d), ``obstacles`` (n_obs, d),
+        ``radii`` (n_obs,). The defaults of ``dt``, ``tau``, ``margin``, ``gains`` and
+        ``avoidance`` are filled in. ``mode`` and
         ``independent_axis`` are checked by the transform, which alone uses them. Raises
         GeneralizationError for the first problem found.
         """
@@ -279,6 +351,12 @@ class Skill:
             raise GeneralizationError(f'obstacle avoidance needs 2 or 3 dimensions, skill has {d}')
         if method not in METHODS:
             raise GeneralizationError(f'method must be one of {METHODS}, got {method!r}')
+        radii = self._check_radii(obstacle_radii, len(obs))
+        if avoidance is None:
+            avoidance = 'paper' if obstacle_radii is None else 'detour'
+        if avoidance not in AVOIDANCES:
+            raise GeneralizationError(f'avoidance must be one of {AVOIDANCES}, got '
+                                      f'{avoidance!r}')
         gains = ObstacleGains() if gains is None else gains
         try:
             gains.validate()
@@ -290,7 +368,7 @@ class Skill:
             if not (np.isfinite(value) and value > 0.0):
                 raise GeneralizationError(f'{name} must be a positive number, got {value!r}')
         if margin is None:
-            margin = OBSTACLE_MARGIN if len(obs) else 0.0
+            margin = OBSTACLE_MARGIN if len(obs) and avoidance == 'paper' else 0.0
         if not (np.isfinite(margin) and margin >= 0.0):
             raise GeneralizationError(f'margin must be >= 0, got {margin!r}')
         n_out = int(round(tau * (1.0 + margin) / dt)) + 1
@@ -311,7 +389,33 @@ class Skill:
             to_goal = np.linalg.norm(obs[None] - goals[:, None], axis=2)
             if np.any(to_goal <= EPS * self.size):
                 raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
-        return _Request(starts, goals, obs, single, gains, tau, dt, n_out)
+            if avoidance == 'detour':
+                for name, points in (('goal', goals), ('start', starts)):
+                    gap = np.linalg.norm(obs[None] - points[:, None], axis=2) - radii
+                    if np.any(gap < 0.0):
+                        b, j = (int(i[0]) for i in np.nonzero(gap < 0.0))
+                        which = '' if single else f' #{b}'
+                        raise GeneralizationError(
+                            f'the {name}{which} lies inside obstacle #{j} (centre '
+                            f'{np.round(obs[j], 4).tolist()}, radius {radii[j]:.4g}: '
+                            f'{gap[b, j] + radii[j]:.4g} from its centre): the plan cannot keep '
+                            'its clearance')
+        return _Request(starts, goals, obs, radii, avoidance, single, gains, tau, dt, n_out)
+
+    @staticmethod
+    def _check_radii(obstacle_radii, n_obs):
+        """Return the obstacle radii as (n_obs,) (zeros for None); raise for bad ones."""
+        if obstacle_radii is None:
+            return np.zeros(n_obs)
+        radii = finite_array(obstacle_radii, 'obstacle_radii')
+        if radii.ndim == 0:
+            radii = np.full(n_obs, float(radii))
+        if radii.shape != (n_obs,):
+            raise GeneralizationError(f'obstacle_radii must have one radius per obstacle, shape '
+                                      f'({n_obs},), got {radii.shape}')
+        if np.any(radii < 0.0):
+            raise GeneralizationError(f'obstacle_radii must be >= 0, got {radii.tolist()}')
+        return radii
 
     def _plain_scale(self, i_current):
         """

@@ -7,13 +7,19 @@ ET-DMP core and map the result back.
 
 - 2D skills (2 coordinates, demo units) run in the task plane (:class:`TaskPlane`): start, goal
   and obstacles are projected onto it, the path lies on it. 3D skills use base_link directly.
+- Obstacles: centres, and optionally radii in metres (the clearance the path must keep from each
+  centre: the caller adds the tool's radius and a margin), divided by the task plane's scale for
+  2D skills. With radii the core's detour avoids them (the ``avoidance`` setting, empty: the
+  detour with radii, the paper's point obstacles without; docs/design.md#obstacles-with-a-size).
 - Checks, each a :class:`PlanningError` whose message is the reason given to the user: NaN or inf,
   start = goal (closer than ``min_distance``), an obstacle on the goal (closer than
   ``goal_clearance``), a goal or a path point outside the :class:`Workspace`, and whatever the
-  core refuses (``GeneralizationError``).
+  core refuses (``GeneralizationError``: for the detour, also a start or goal inside an obstacle
+  and a clearance it cannot keep).
 - Timing: samples every ``output_period`` seconds from 0 to ``tau (1 + margin)``, with ``tau`` the
   ``duration`` setting (0: the demonstration's own duration) and ``margin`` the
-  ``obstacle_margin`` when there are obstacles (a detour arrives later), else 0.
+  ``obstacle_margin`` when the paper's coupling avoids obstacles (its detour arrives later), else
+  0 (the detour keeps the obstacle-free timing).
 - Orientation (docs/orientation.md#modes): a skill with orientations gives every pose its own,
   the core's ``Trajectory.q`` (mode ``demo``: the demonstrated orientations turned with the
   motion; ``goal``: converging to a requested goal orientation), in base_link: a 2D skill's
@@ -26,7 +32,8 @@ ET-DMP core and map the result back.
 from dataclasses import dataclass, field, replace
 import math
 
-from etdmp_ros.dmp import euclidean_transform, GeneralizationError, METHODS, ObstacleGains
+from etdmp_ros.dmp import (AVOIDANCES, euclidean_transform, GeneralizationError, METHODS,
+                           ObstacleGains)
 import numpy as np
 
 #: Tool orientation (x, y, z, w) in base_link that points the tool's z axis down (-z of
@@ -122,6 +129,8 @@ class PlanSettings:
     How to plan (every field is a dmp_server parameter of the same name).
 
     ``obstacle_k`` is in 1/m; 0 keeps the core's default, ``k = gains.k_relative / |x0 - g|``.
+    ``avoidance``: one of the core's AVOIDANCES, or empty for the detour when the obstacles have
+    radii and the paper's coupling when they do not.
     ``orientation`` is normalised; ``orientation_mode`` one of PLAN_ORIENTATION_MODES.
     Construction raises ValueError for bad values.
     """
@@ -134,6 +143,7 @@ class PlanSettings:
     gains: ObstacleGains = field(default_factory=ObstacleGains)
     obstacle_k: float = 0.0
     obstacle_margin: float = 0.5
+    avoidance: str = ''
     goal_clearance: float = 0.02
     min_distance: float = 0.005
     orientation: tuple = TOOL_DOWN
@@ -144,6 +154,9 @@ class PlanSettings:
         """Validate and normalise."""
         if self.method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {self.method!r}')
+        if self.avoidance not in ('',) + AVOIDANCES:
+            raise ValueError(f"avoidance must be '' or one of {AVOIDANCES}, got "
+                             f'{self.avoidance!r}')
         if self.orientation_mode not in PLAN_ORIENTATION_MODES:
             raise ValueError(f'orientation_mode must be one of {PLAN_ORIENTATION_MODES}, got '
                              f'{self.orientation_mode!r}')
@@ -172,7 +185,8 @@ class Plan:
     one (x, y, z, w) tuple for every pose (mode ``tool``) or an (n, 4) array, one unit
     quaternion per pose (a skill with orientations), base_link; :attr:`orientations` is (n, 4)
     either way. ``start``, ``goal`` and ``obstacles`` (m, 3) as used (projected onto the task
-    plane for 2D skills); ``trajectory``: the core's result in the skill's space.
+    plane for 2D skills); ``trajectory``: the core's result in the skill's space;
+    ``obstacle_radii`` (m,) metres (zeros for points) and ``avoidance`` as used.
     """
 
     t: np.ndarray
@@ -184,6 +198,8 @@ class Plan:
     obstacles: np.ndarray
     method: str
     trajectory: object
+    obstacle_radii: np.ndarray = None
+    avoidance: str = 'paper'
 
     @property
     def orientations(self):
@@ -210,6 +226,26 @@ def _points(value, what, shape):
     if not np.all(np.isfinite(array)):
         raise PlanningError(f'{what} contains NaN or inf')
     return array
+
+
+def _radii(value, count):
+    """Return obstacle radii in metres (count,), zeros for None; PlanningError if bad."""
+    if value is None:
+        return np.zeros(count)
+    try:
+        radii = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise PlanningError(f'obstacle radii must be numbers, got {value!r}') from None
+    if radii.shape != (count,):
+        raise PlanningError(f'{count} obstacles need {count} radii, got {radii.size}')
+    if not np.all(np.isfinite(radii)) or np.any(radii < 0.0):
+        raise PlanningError(f'obstacle radii must be finite and >= 0 m, got {radii.tolist()}')
+    return radii
+
+
+def _avoidance(settings, radii):
+    """Return the avoidance a plan uses: the setting, or by whether radii were given."""
+    return settings.avoidance or ('paper' if radii is None else 'detour')
 
 
 class _Space:
@@ -289,11 +325,12 @@ def _fmt(point):
 
 
 def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
-              goal_orientation=None):
+              goal_orientation=None, obstacle_radii=None):
     """
     Plan ``skill`` (an ``etdmp_ros.dmp.Skill``) from ``start`` to ``goal`` around ``obstacles``.
 
-    ``start``, ``goal``: base_link points (3,); ``obstacles``: (m, 3) base_link points;
+    ``start``, ``goal``: base_link points (3,); ``obstacles``: (m, 3) base_link points (the
+    centres); ``obstacle_radii``: None or (m,) metres, the clearance to keep from each centre;
     ``settings``: PlanSettings; ``plane``: the TaskPlane (needed for 2D skills);
     ``goal_orientation``: None or (x, y, z, w) in base_link (see :func:`goal_orientation_of`:
     all zeros for none). Returns a Plan; raises PlanningError with the reason when the request
@@ -304,6 +341,8 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
     start = _points(start, 'start', (3,))
     goal = _points(goal, 'goal', (3,))
     obstacles = _points(obstacles, 'obstacles', None)
+    radii = _radii(obstacle_radii, len(obstacles))
+    avoidance = _avoidance(settings, obstacle_radii)
     space = _Space(skill, plane)
     start_s, goal_s, obstacles_s = (space.inward(p) for p in (start, goal, obstacles))
     start_b, goal_b, obstacles_b = (space.outward(p) for p in (start_s, goal_s, obstacles_s))
@@ -334,7 +373,8 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
             start_s, goal_s, obstacles_s, method=settings.method, mode=settings.mode,
             independent_axis=settings.independent_axis, dt=settings.output_period,
             tau=settings.duration or None,
-            margin=settings.obstacle_margin if len(obstacles_s) else 0.0, gains=gains,
+            margin=settings.obstacle_margin if len(obstacles_s) and avoidance == 'paper' else 0.0,
+            gains=gains, obstacle_radii=radii / space.scale, avoidance=avoidance,
             goal_orientation=None if goal_q is None else space.inward_orientations(goal_q))
     except GeneralizationError as err:
         raise PlanningError(str(err)) from None
@@ -350,7 +390,7 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
         raise PlanningError(f"the plan leaves the UR10's reach at t = {traj.t[i]:.2f} s, "
                             f'{_fmt(positions[i])}: {reason}')
     return Plan(traj.t, positions, space.outward_vectors(traj.v), orientation,
-                start_b, goal_b, obstacles_b, settings.method, traj)
+                start_b, goal_b, obstacles_b, settings.method, traj, radii, avoidance)
 
 
 def place_demo(skill, start, goal, plane=None, mode=1, independent_axis=2):
@@ -410,17 +450,21 @@ class FollowedPlan:
         gains = settings.gains
         if settings.obstacle_k > 0.0:
             gains = replace(gains, k=settings.obstacle_k * space.scale)
+        radii = np.zeros(len(plan.obstacles)) if plan.obstacle_radii is None else \
+            plan.obstacle_radii
         try:
             self._run = skill.online(
                 space.inward(plan.start), space.inward(plan.goal), space.inward(plan.obstacles),
                 method=settings.method, mode=settings.mode,
                 independent_axis=settings.independent_axis, dt=settings.output_period,
-                tau=settings.duration or None, gains=gains)
+                tau=settings.duration or None, gains=gains,
+                obstacle_radii=radii / space.scale, avoidance=plan.avoidance)
         except GeneralizationError as err:
             raise PlanningError(str(err)) from None
         self.t, self.positions = plan.t.copy(), plan.positions.copy()
         self.velocities = plan.velocities.copy()
         self.goal, self.obstacles = plan.goal.copy(), plan.obstacles.copy()
+        self.obstacle_radii = np.array(radii, dtype=float)
         self.orientation = plan.orientation
         self._plan_t, self._plan_orientation = plan.t, plan.orientation
         self.updates = 0
@@ -472,22 +516,26 @@ class FollowedPlan:
         self._run.run(t)
         return self._run
 
-    def update(self, t_switch, goal=None, obstacles=None, t_max=None):
+    def update(self, t_switch, goal=None, obstacles=None, t_max=None, obstacle_radii=None):
         """
         Move the goal to ``goal`` and/or the obstacles to ``obstacles`` from ``t_switch`` on.
 
         ``goal`` (3,) and ``obstacles`` (m, 3) are base_link points (projected onto the task
-        plane for 2D skills), None for unchanged. Return the index of the first changed pose:
-        the path from there on (``t``, ``positions``, ``velocities``) is new; before it, it is
-        as it was. The new path runs until the online run is done or ``t_max`` (default: the
-        old end plus the skill's duration). Raises PlanningError, leaving the path as it was,
-        for a goal out of reach or on the start, an obstacle on the goal, or a new path that
-        leaves the workspace.
+        plane for 2D skills), None for unchanged; ``obstacle_radii`` (m,) metres, None for
+        those in force (the same number of obstacles) or, for the paper's points, none. Return
+        the index of the first changed pose: the path from there on (``t``, ``positions``,
+        ``velocities``) is new; before it, it is as it was. The new path runs until the online
+        run is done or ``t_max`` (default: the old end plus the skill's duration). Raises
+        PlanningError, leaving the path as it was, for a goal out of reach or on the start, an
+        obstacle on the goal, a new path that leaves the workspace or, for the detour, a
+        clearance it cannot keep.
         """
         space, settings = self._space, self.settings
         goal_s = None if goal is None else space.inward(_points(goal, 'goal', (3,)))
         obstacles_s = None if obstacles is None else space.inward(
             _points(obstacles, 'obstacles', None))
+        radii = None if obstacle_radii is None or obstacles_s is None else \
+            _radii(obstacle_radii, len(obstacles_s))
         if goal_s is not None:
             goal_b = space.outward(goal_s)
             outside = settings.workspace.violation(goal_b)
@@ -502,17 +550,20 @@ class FollowedPlan:
             with np.errstate(over='raise', invalid='raise', divide='raise'):
                 # The step that takes the new input and the rest of the movement in one
                 # call of the numba loop (what a step() and a run() give, to rounding).
-                trial._take(goal=goal_s, obstacles=obstacles_s)
+                trial._take(goal=goal_s, obstacles=obstacles_s,
+                            obstacle_radii=None if radii is None else radii / space.scale)
                 rows = trial._rows(int(math.floor((t_max - trial.t) / trial.dt + 0.5)))
                 if rows is not None and len(rows.t):
                     after = trial.copy()
                     after._set_row(rows, 0)
-                    xs, vs = rows.x, rows.v
+                    xs, vs, _ = trial._outputs(rows)
                     kept = trial, rows
                 else:           # only step() can (the filtered goal passes by the start)
                     kept = None, None
                     trial = run.copy()
-                    x, v, _ = trial.step(goal=goal_s, obstacles=obstacles_s)
+                    x, v, _ = trial.step(
+                        goal=goal_s, obstacles=obstacles_s,
+                        obstacle_radii=None if radii is None else radii / space.scale)
                     after = trial.copy()
                     _, xs, vs, _ = trial.run(t_max)
                     xs, vs = np.vstack([x[None], xs]), np.vstack([v[None], vs])
@@ -539,5 +590,6 @@ class FollowedPlan:
             self.goal = space.outward(goal_s)
         if obstacles_s is not None:
             self.obstacles = space.outward(obstacles_s)
+            self.obstacle_radii = self._run.obstacle_radii * space.scale
         self.updates += 1
         return keep

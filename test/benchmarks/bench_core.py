@@ -68,6 +68,7 @@ TABLE2_GOAL = np.array([0.11, -0.51])
 N_BATCH = 256
 OBSTACLE_FRACTIONS = (0.3, 0.6)
 OBSTACLE_OFFSET = 0.02   # sideways offset from the path, as a fraction of |start - goal|
+OBSTACLE_RADIUS = 0.05   # radius of the same obstacles for the detour, same unit
 
 PEERS = ('movement-primitives', 'pydmps')
 ONLINE_LIMIT_MS = 2.0
@@ -178,12 +179,13 @@ class _Ours:
         self.skill = learn(self.positions, t=self.t, n_basis=N_BASIS, K=K, D=D, alpha=ALPHA)
         return self.skill
 
-    def rollout(self, start, goal, obstacles=(), method='etdmp'):
+    def rollout(self, start, goal, obstacles=(), method='etdmp', radii=None):
         return self.skill.generalize(start, goal, obstacles=obstacles, method=method,
-                                     dt=DT, tau=TAU).x
+                                     dt=DT, tau=TAU, obstacle_radii=radii).x
 
-    def batch(self, starts, goal, method='etdmp'):
-        return self.skill.generalize(starts, goal, method=method, dt=DT, tau=TAU).x
+    def batch(self, starts, goal, method='etdmp', obstacles=(), radii=None):
+        return self.skill.generalize(starts, goal, method=method, dt=DT, tau=TAU,
+                                     obstacles=obstacles, obstacle_radii=radii).x
 
 
 # --------------------------------------------------------------------------------------------
@@ -687,7 +689,9 @@ def _print_sanity(sanity):
 NOTES = """\
 Parameters (same workload for every library; where a peer cannot match, it says so):
 - ours: K = 156.25, D = 25, n_basis = 100, alpha = 4, tau = 1 s, generalize(dt = 1 ms):
-  1001 samples = 1000 steps. Obstacle coupling = paper Eq. 24 + Eq. 26 (default ObstacleGains).
+  1001 samples = 1000 steps. Obstacle coupling = paper Eq. 24 + Eq. 26 (default ObstacleGains);
+  the detour row: the same two obstacles with a radius (docs/design.md#obstacles-with-a-size;
+  the peers' columns there are their point-obstacle rollouts, for scale).
 - movement-primitives: alpha_y = 25, beta_y = 6.25 (same K and D), 100 weights per dim,
   execution_time = 1, dt = int_dt = 1 ms (1000 RK4 Cython steps, its default step function).
   Cannot match: canonical alpha_z is fixed so that z(tau) = 0.01 (alpha_z = 4.61 vs ours 4),
@@ -760,6 +764,9 @@ def main(argv=None):
             obstacles = _obstacles_near(free_path, start, goal)
         cold[f'rollout {method}, 2 obstacles'], _ = _cold(
             lambda m=method: ours.rollout(start, goal, obstacles, method=m))
+    radii = np.full(len(obstacles), OBSTACLE_RADIUS * np.linalg.norm(start - goal))
+    cold['rollout etdmp, 2 obstacles with radii'], _ = _cold(
+        lambda: ours.rollout(start, goal, obstacles, radii=radii))
     starts = _batch_starts(start, goal, N_BATCH)
     for method in ('etdmp', 'dmp'):
         cold[f'batch {method}'], _ = _cold(lambda m=method: ours.batch(starts, goal, method=m))
@@ -796,6 +803,15 @@ def main(argv=None):
             rows.append(_evaluate({
                 'name': f'rollout {N_STEPS} steps, {n_obs} obstacles (ours: {method})',
                 'limit_ms': limit, 'ours': stat, 'peers': peer_stats}))
+            if n_obs and method == 'etdmp':
+                # Obstacles with a size: the default detour (docs/design.md#obstacles-with-a-size).
+                stat = _time(lambda: ours.rollout(start, goal, obs, radii=radii), args.repeats)
+                sanity[case]['ours (etdmp, detour)'] = _sanity(
+                    ours.rollout(start, goal, obs, radii=radii), goal, positions, obs)
+                rows.append(_evaluate({
+                    'name': f'rollout {N_STEPS} steps, {n_obs} obstacles of radius '
+                            f'{OBSTACLE_RADIUS:g} |x0 - g| (ours: etdmp, detour)',
+                    'limit_ms': 1.0, 'ours': stat, 'peers': peer_stats}))
 
     # Batch of starts: ours batched, peers looped.
     peer_stats, case = {}, f'batch of {N_BATCH} starts, 0 obstacles (worst over the batch)'
@@ -817,7 +833,20 @@ def main(argv=None):
         rows.append(_evaluate({
             'name': f'batch {N_BATCH} starts x {N_STEPS} steps, 0 obstacles (ours: {method}; '
                     f'peers: loop of {N_BATCH})',
-            'limit_ms': 20.0, 'ours': stat, 'peers': peer_stats}))
+            'limit_ms': 10.0, 'ours': stat, 'peers': peer_stats}))
+    # The batch's cost per system beside a single rollout's, in this process.
+    single = _time(lambda: ours.rollout(start, goal), args.repeats)
+    batch = next(r for r in rows if r['name'].startswith(f'batch {N_BATCH}'))['ours']
+    per_system = (f"batch of {N_BATCH}: {batch['median_ms']:.2f} ms = "
+                  f"{batch['median_ms'] / N_BATCH * 1e3:.1f} us per system; a single rollout "
+                  f"(its Python call included): {single['median_ms'] * 1e3:.1f} us (ET-DMP, "
+                  f'{N_STEPS} steps, medians)')
+    clear = starts[np.all(np.linalg.norm(starts[:, None] - obstacles[None], axis=2)
+                          > 1.1 * radii, axis=1)]
+    detour_batch = _time(lambda: ours.batch(clear, goal, obstacles=obstacles, radii=radii),
+                         max(args.batch_repeats, 3))
+    per_system += (f'; with the 2 obstacles of radius {OBSTACLE_RADIUS:g} |x0 - g| (detour, the '
+                   f"{len(clear)} starts outside them): {detour_batch['median_ms']:.2f} ms")
 
     # Print.
     print('# etdmp_ros core benchmark\n')
@@ -835,6 +864,7 @@ def main(argv=None):
     print(f'timing: median and p90 of {args.repeats} calls per row '
           f'({args.batch_repeats} for the peer batch rows), after warm-up\n')
     print(_table(rows))
+    print('\n' + per_system)
     print('\nFirst (cold) call of ours in this process, ms (numba compile or cache load): '
           + ', '.join(f'{k} {v:.1f}' for k, v in cold.items()))
     _print_sanity(sanity)

@@ -10,6 +10,9 @@ Nothing in the package was tuned to these shapes:
   while it still moves), :func:`starts_moving`, :func:`abrupt_stop` (the hand halts within a few
   samples, just before the end), :func:`uneven` (jittered sample times).
 - :func:`helix` and :func:`figure_eight_3d`: 3D shapes with a tool that turns with the stroke.
+- :func:`scribble`: random smooth strokes in 2D or 3D (a seed per shape), at rest at both ends.
+- :func:`obstacles_on_path`: disks or balls of a given size on and near a plan, for the obstacle
+  tests and ``bench_obstacles.py``; :func:`shape_deviation`, how far a plan bends from another.
 """
 
 from dataclasses import dataclass, replace
@@ -150,3 +153,88 @@ def figure_eight_3d(size=0.1, duration=3.0, n=400):
 def with_turning_tool(rec):
     """Add a tool that turns with the stroke (orientations from the tangent)."""
     return replace(rec, orientations=_tangent_frames(rec.positions, rec.t))
+
+
+def scribble(seed, dim=2, duration=2.0, n=400):
+    """Return a random smooth stroke: three sinusoids per axis plus a drift, at rest at ends."""
+    rng = np.random.default_rng(seed)
+    s = _minimum_jerk(n)
+    k = np.arange(1, 4)
+    amplitude = rng.normal(size=(dim, 3)) / k
+    phase = rng.uniform(0.0, 2.0 * np.pi, size=(dim, 3))
+    waves = np.sin(np.pi * k * s[:, None, None] + phase)           # (n, dim, 3)
+    drift = np.outer(s, rng.normal(size=dim))
+    positions = np.sum(amplitude * (waves - waves[:1]), axis=2) + drift
+    return Recording(f'scribble{dim}d/{seed}', positions, np.linspace(0.0, duration, n))
+
+
+def _normals(tangent, rng):
+    """Return a unit vector perpendicular to ``tangent`` (2D: its left normal; 3D: random)."""
+    tangent = tangent / max(np.linalg.norm(tangent), 1e-300)
+    if len(tangent) == 2:
+        return np.array([-tangent[1], tangent[0]])
+    side = rng.normal(size=3)
+    side -= (side @ tangent) * tangent
+    return side / np.linalg.norm(side)
+
+
+def obstacles_on_path(path, rng, count, radius=(0.03, 0.15), offset=1.0, span=(0.15, 0.85),
+                      keep_clear=(), far=False):
+    """
+    Return ``(centres (count, d), radii (count,))``: obstacles on and near the plan ``path``.
+
+    Radii are drawn uniformly in ``radius`` times the plan's size (its largest distance from
+    its last sample); each centre is a point of the plan at a random fraction of its arc length
+    in ``span``, moved sideways by up to ``offset`` radii. No obstacle comes within 1.2 radii
+    plus 2 % of the size of a point in ``keep_clear`` (the start and goal, say). With ``far``,
+    each is instead moved sideways until the whole plan keeps at least its radius plus 3 % of
+    the size from it (an obstacle beside the plan that must change nothing).
+    """
+    path = np.asarray(path, dtype=float)
+    size = float(np.max(np.linalg.norm(path - path[-1], axis=1)))
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    centres, radii = [], []
+    for _ in range(1000):
+        if len(centres) == count:
+            break
+        r = rng.uniform(*radius) * size
+        i = int(np.searchsorted(arc, rng.uniform(*span) * arc[-1]))
+        i = min(max(i, 1), len(path) - 2)
+        side = _normals(path[i + 1] - path[i - 1], rng)
+        if far:
+            sign = rng.choice([-1.0, 1.0])
+            for step in np.linspace(1.0, 4.0, 31):
+                c = path[i] + sign * side * (r + step * 0.03 * size)
+                if np.min(np.linalg.norm(path - c, axis=1)) >= r + 0.03 * size:
+                    break
+            else:
+                continue
+        else:
+            c = path[i] + side * rng.uniform(-offset, offset) * r
+        if any(np.linalg.norm(np.asarray(p) - c) < 1.2 * r + 0.02 * size for p in keep_clear):
+            continue
+        centres.append(c)
+        radii.append(r)
+    if len(centres) < count:
+        raise ValueError(f'could not place {count} obstacles on this path')
+    return np.array(centres), np.array(radii)
+
+
+def _by_arc_length(x, n):
+    """Resample the path ``x`` (m, d) to ``n`` points evenly spaced in arc length."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
+    if s[-1] <= 0.0:
+        return np.repeat(x[:1], n, axis=0)
+    u = np.linspace(0.0, s[-1], n)
+    return np.stack([np.interp(u, s, x[:, i]) for i in range(x.shape[1])], axis=1)
+
+
+def shape_deviation(x, reference, size, n=500):
+    """
+    Return the shape deviation of the plan ``x`` from ``reference`` (both (m, d)).
+
+    The RMS distance between the two, both resampled to ``n`` points by arc length, over
+    ``size`` (issue 25's measure: how much an obstacle bends the shape).
+    """
+    a, b = _by_arc_length(np.asarray(x, float), n), _by_arc_length(np.asarray(reference, float), n)
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) / size)

@@ -110,6 +110,52 @@ def test_obstacles_are_projected_avoided_and_k_is_in_metres(g_skill):
     np.testing.assert_allclose(weaker.positions[:201], free.positions, atol=1e-9)
 
 
+def test_obstacle_radii_are_metres_kept_clear_and_followed(g_skill):
+    """Radii in metres (2D: over the plane's scale); the detour; a followed plan keeps them."""
+    free = plan_path(g_skill, START, GOAL, plane=PLANE)
+    tops = free.positions[[60, 120]] + [0.0, 0.0, 0.08]         # cylinder tops on the path
+    centres = tops * [1, 1, 0]
+    radii = np.array([0.004, 0.006])                            # metres: pen + margin included
+    plan = plan_path(g_skill, START, GOAL, tops, plane=PLANE, obstacle_radii=radii)
+    assert plan.avoidance == 'detour' and len(plan.t) == len(free.t)    # no obstacle_margin
+    gaps = np.linalg.norm(plan.positions[:, None] - centres[None], axis=2).min(axis=0) - radii
+    assert np.all(gaps >= 0.0) and np.all(gaps < 0.01 * np.ptp(free.positions, axis=0).max())
+    np.testing.assert_allclose(plan.obstacle_radii, radii)
+    assert np.linalg.norm(plan.positions[-1] - GOAL) < 1e-3
+    # The same in demo units: the plane's 0.02 m per unit.
+    core = g_skill.generalize(PLANE.to_plane(START), PLANE.to_plane(GOAL),
+                              obstacles=PLANE.to_plane(tops), obstacle_radii=radii / 0.02,
+                              dt=0.01)
+    np.testing.assert_allclose(plan.positions, PLANE.from_plane(core.x), atol=1e-12)
+    # The baseline on demand: the paper's points, its timing.
+    paper = plan_path(g_skill, START, GOAL, tops, plane=PLANE, obstacle_radii=radii,
+                      settings=PlanSettings(avoidance='paper'))
+    assert paper.t[-1] == pytest.approx(1.5 * g_skill.tau)
+    # An obstacle moves onto the remaining path while the plan runs: kept clear, continuous.
+    followed = FollowedPlan(g_skill, plan, plane=PLANE)
+    moved = tops.copy()
+    moved[1] += [0.01, -0.01, 0.0]
+    k = followed.update(0.5, obstacles=moved)
+    after = followed.positions[k:]
+    gaps = np.linalg.norm(after[:, None] - (moved * [1, 1, 0])[None], axis=2).min(axis=0)
+    assert np.all(gaps >= radii)
+    np.testing.assert_allclose(followed.obstacle_radii, radii)
+    steps = np.linalg.norm(np.diff(followed.velocities, axis=0), axis=1)
+    assert steps.max() <= 1.5 * np.linalg.norm(np.diff(plan.velocities, axis=0), axis=1).max()
+    with pytest.raises(PlanningError, match='contains the plan'):
+        followed.update(followed.t[k + 5], obstacles=[followed.positions[k + 6]],
+                        obstacle_radii=[0.01])
+    with pytest.raises(PlanningError, match='2 obstacles need 2 radii'):
+        plan_path(g_skill, START, GOAL, tops, plane=PLANE, obstacle_radii=[0.01])
+    with pytest.raises(PlanningError, match='finite and >= 0'):
+        plan_path(g_skill, START, GOAL, tops, plane=PLANE, obstacle_radii=[0.01, -1.0])
+    with pytest.raises(PlanningError, match='goal lies inside obstacle'):
+        plan_path(g_skill, START, GOAL, [GOAL + [0.03, 0.0, 0.0]], plane=PLANE,
+                  obstacle_radii=[0.04])
+    with pytest.raises(ValueError, match='avoidance must be'):
+        PlanSettings(avoidance='magic')
+
+
 @pytest.mark.parametrize('start, goal, obstacles, message', [
     ([math.nan, 0.2, 0.0], GOAL, (), 'start contains NaN or inf'),
     (START, [0.7, -math.inf, 0.0], (), 'goal contains NaN or inf'),
