@@ -35,7 +35,6 @@ from collections import deque
 import contextlib
 from dataclasses import dataclass
 import importlib.resources
-import json
 import struct
 import threading
 import time
@@ -46,7 +45,7 @@ from etdmp_ros import limits
 from etdmp_ros.dmp import builtin_demo, learn
 from etdmp_ros.geometry.camera import CameraPose
 from etdmp_ros.geometry.task_plane import TaskPlane
-from etdmp_ros.nodes._web import WebServer
+from etdmp_ros.nodes._web import one_line, WebServer
 from etdmp_ros.ros import system
 from etdmp_ros.ros.conversions import (image_from_cdr, intrinsics_from_camera_info, path_from_cdr,
                                        path_from_numpy)
@@ -54,9 +53,10 @@ from etdmp_ros.ros.conversions._cdr import CdrReader
 from etdmp_ros.ros.parameters import declared_settings, InvalidConfiguration
 from etdmp_ros.ros.spin import run
 from etdmp_ros.skills.library import check_skill_name
-from etdmp_ros.skills.teaching import (Canvas, generalizations, learn_drawing, parse_drawing,
-                                       project, taught_path, teaching_outcome, TeachInputError,
-                                       Trace)
+from etdmp_ros.skills.teaching import (Canvas, decode_json, generalizations, is_local,
+                                       learn_drawing, LOCAL_NAMES, MalformedRequest,
+                                       parse_drawing, project, taught_path, teaching_outcome,
+                                       TeachInputError, Trace)
 from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
@@ -82,8 +82,6 @@ WATCH_PERIOD = 0.5
 SERVICE_WAIT = 2.0
 #: A parameter request without an answer after this long is sent again (s).
 RETRY_PERIOD = 1.0
-#: Host names a page served on a loopback address may be asked for (else: DNS rebinding).
-LOCAL_NAMES = ('localhost', '127.0.0.1', '::1')
 #: Plan poses projected for the page at most.
 PLAN_POINTS = 600
 _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -241,7 +239,7 @@ class TeachNode(Node):
         self._generalize = self.create_client(GetPlan, 'generalize')
         self.create_timer(WATCH_PERIOD, self._update_view)
         threading.Thread(target=_warm_up, daemon=True, name='warm_up').start()
-        self._web = WebServer(make_app(self), settings.address, settings.port)
+        self._web = WebServer(make_app(self), settings.address, settings.port, self._web_log)
         try:
             self._web.start()
         except OSError as err:
@@ -259,6 +257,19 @@ class TeachNode(Node):
     def loopback(self):
         """Return True if the page is served to this machine only."""
         return self._settings.address in LOCAL_NAMES
+
+    def said(self, request, status, text):
+        """Log the answer ``status`` (4xx: WARN, 5xx: ERROR) to ``request``, one line."""
+        self._web_log('warn' if status < 500 else 'error',
+                      f'{request.method} {request.path}: {status}: {text}')
+
+    def _web_log(self, level, text):
+        text = f'teaching page: {one_line(text, 2 * limits.MAX_REASON_CHARS)}'
+        # Two call sites: rclpy refuses a call site whose severity changes between calls.
+        if level == 'warn':
+            self.get_logger().warn(text)
+        else:
+            self.get_logger().error(text)
 
     def stop(self):
         """Stop the web server (called before the node is destroyed)."""
@@ -545,10 +556,6 @@ def _warm_up():
 
 # ------------------------------------------------------------------------------ the web side
 
-def _no_constant(name):
-    raise ValueError(f'{name} is not a number JSON allows')
-
-
 def _error(status, text):
     return web.json_response({'ok': False, 'error': text}, status=status)
 
@@ -559,13 +566,29 @@ def make_app(node):
     files = {route: ((page / name).read_bytes(), kind)
              for route, (name, kind) in PAGE_FILES.items()}
 
+    def refused(request, status, text):
+        node.said(request, status, text)
+        return _error(status, text)
+
     @web.middleware
-    async def local_only(request, handler):
+    async def guarded(request, handler):
         # A page served to this machine only answers to this machine's names: a web site that
-        # points its own name at 127.0.0.1 (DNS rebinding) gets nothing.
-        if node.loopback and (request.url.host or '').strip('[]') not in LOCAL_NAMES:
+        # points its own name at 127.0.0.1 (DNS rebinding) gets nothing. And whatever goes
+        # wrong in a handler is one line in the log and a JSON answer, never a traceback.
+        try:
+            local = is_local(request.headers.get('Host'))
+        except MalformedRequest as err:
+            return refused(request, 400, str(err))
+        if node.loopback and not local:
+            node.said(request, 403, 'Host is not this machine')
             return web.Response(status=403, text='this page answers on localhost only')
-        return await handler(request)
+        try:
+            return await handler(request)
+        except web.HTTPException:
+            raise   # aiohttp's own answers: 404, 405
+        except Exception as err:   # noqa: B902 - a bug must not be a traceback per request
+            return refused(request, 500, f'internal error: {type(err).__name__}: '
+                                         f'{_message(err)}')
 
     async def page_file(request):
         body, kind = files[request.path]
@@ -574,26 +597,29 @@ def make_app(node):
     def post(action):
         async def handler(request):
             if request.content_type != 'application/json':
-                return _error(415, 'send the request as application/json (as the page does)')
+                return refused(request, 415, 'send the request as application/json (as the '
+                                             'page does)')
             try:
                 body = await request.read()
             except web.HTTPRequestEntityTooLarge:
-                return _error(413, f'the request is larger than MAX_TEACH_REQUEST_BYTES = '
-                                   f'{limits.MAX_TEACH_REQUEST_BYTES} bytes (a drawing may have '
-                                   f'{limits.MAX_DRAWN_POINTS} points): nothing was taught')
+                return refused(request, 413, f'the request is larger than '
+                                             f'MAX_TEACH_REQUEST_BYTES = '
+                                             f'{limits.MAX_TEACH_REQUEST_BYTES} bytes (a drawing '
+                                             f'may have {limits.MAX_DRAWN_POINTS} points): '
+                                             'nothing was taught')
             try:
-                data = json.loads(body, parse_constant=_no_constant)
-            except ValueError as err:   # JSONDecodeError and UnicodeDecodeError are ValueErrors
-                return _error(400, f'the request is not valid JSON: {_message(err)}')
+                data = decode_json(body)
+            except MalformedRequest as err:
+                return refused(request, 400, _message(err))
             loop = asyncio.get_running_loop()
             try:
                 return web.json_response(await loop.run_in_executor(None, action, data))
             except TeachInputError as err:
-                return _error(422, _message(err))
+                return refused(request, 422, _message(err))
             except Busy as err:
-                return _error(409, str(err))
+                return refused(request, 409, str(err))
             except Unavailable as err:
-                return _error(503, str(err))
+                return refused(request, 503, str(err))
         return handler
 
     async def config(request):
@@ -611,7 +637,7 @@ def make_app(node):
         return web.json_response(node.overlay(), headers={'Cache-Control': 'no-store'})
 
     app = web.Application(client_max_size=limits.MAX_TEACH_REQUEST_BYTES,
-                          middlewares=[local_only])
+                          middlewares=[guarded])
     for route in files:
         app.router.add_get(route, page_file)
     app.router.add_get('/api/config', config)

@@ -368,6 +368,82 @@ def test_the_teach_node_answers_bad_requests_with_the_reason(teach_node):
     assert status == 403 and b'localhost only' in body
 
 
+def _raw(url, data):
+    """Send raw bytes to the node's port; return the answer's status and body."""
+    port = int(url.rsplit(':', 1)[1].strip('/'))
+    with socket.create_connection(('127.0.0.1', port), timeout=10) as connection:
+        connection.sendall(data)
+        answer = b''
+        while chunk := connection.recv(65536):
+            answer += chunk
+    head, _, body = answer.partition(b'\r\n\r\n')
+    return int(head.split()[1]), body
+
+
+def _post(path, body, host='localhost'):
+    return (f'POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\n'
+            f'Content-Length: {len(body)}\r\nConnection: close\r\n\r\n').encode() + body
+
+
+def _get(path, *headers):
+    lines = ''.join(f'{h}\r\n' for h in headers)
+    return f'GET {path} HTTP/1.1\r\n{lines}Connection: close\r\n\r\n'.encode()
+
+
+#: Requests that broke the page's server (HTTP 500 and a traceback of 10-27 lines each), or
+#: were let through: (what, raw request, status, fragment of the answer).
+HTTP_ATTACKS = [
+    ('[ x 100000 to /api/teach', _post('/api/teach', b'[' * 100_000), 400,
+     'nests lists or objects deeper'),
+    ('{"a": x 50000 to /api/write', _post('/api/write', b'{"a": ' * 50_000), 400,
+     'nests lists or objects deeper'),
+    ('Host ::1 without brackets', _get('/api/config', 'Host: ::1'), 400,
+     "the Host header '::1' is not host[:port]"),
+    ('Host localhost:8080:evil', _get('/api/config', 'Host: localhost:8080:evil'), 400,
+     'is not host[:port]'),
+    ('Host with port 99999', _get('/api/config', 'Host: 127.0.0.1:99999'), 400,
+     'is not host[:port]'),
+    ('Host [::1 unclosed (was let through)', _get('/api/config', 'Host: [::1'), 400,
+     'is not host[:port]'),
+    ('Host attacker.example', _get('/api/config', 'Host: attacker.example'), 403,
+     'localhost only'),
+    ('two Host headers', _get('/api/config', 'Host: localhost', 'Host: evil.example'), 400,
+     "Duplicate 'Host'"),
+    ('a header of 100 kB', _get('/', 'Host: localhost', 'X: ' + 'a' * 100_000), 400,
+     'Got more than'),
+]
+
+
+@pytest.mark.parametrize('what, data, status, fragment', HTTP_ATTACKS,
+                         ids=[row[0] for row in HTTP_ATTACKS])
+def test_malformed_requests_get_a_4xx_and_one_log_line(teach_node, capfd, what, data, status,
+                                                       fragment):
+    capfd.readouterr()
+    got, body = _raw(teach_node.url, data)
+    assert (got, fragment in body.decode()) == (status, True), body[:300]
+    time.sleep(0.1)
+    log = capfd.readouterr().err
+    assert 'Traceback' not in log, log
+    lines = [line for line in log.splitlines() if 'teaching page' in line]
+    assert len(lines) == 1 and '[WARN]' in lines[0], log
+    for good in ('Host: localhost:8080', 'Host: [::1]:8080', 'Host: LOCALHOST', 'Host: 127.0.0.1'):
+        assert _raw(teach_node.url, _get('/api/config', good))[0] == 200, good
+
+
+def test_a_failing_handler_is_one_error_line_and_a_json_answer(teach_node, capfd, monkeypatch):
+    def broken():
+        raise KeyError('a bug')
+    monkeypatch.setattr(teach_node, 'config', broken)
+    capfd.readouterr()
+    status, body = _http(teach_node.url + 'api/config')
+    assert status == 500
+    assert json.loads(body) == {'ok': False, 'error': "internal error: KeyError: 'a bug'"}
+    time.sleep(0.1)
+    log = capfd.readouterr().err
+    lines = [line for line in log.splitlines() if 'teaching page' in line]
+    assert 'Traceback' not in log and len(lines) == 1 and '[ERROR]' in lines[0], log
+
+
 def test_a_port_in_use_is_a_clear_start_up_error(teach_node, monkeypatch):
     from etdmp_ros.nodes.teach import InvalidConfiguration, TeachNode
     from rclpy.parameter import Parameter
