@@ -50,8 +50,9 @@ from etdmp_ros.ros.spin import run
 from etdmp_ros.skills.library import (BASE_FRAMES, check_skill_name, default_skills_dir,
                                       RECORDED_DIMS, recorded_orientations, recorded_path_demo,
                                       save_skill_demo, SkillLibrary)
-from etdmp_ros.skills.planning import (FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo, Plan,
-                                       PLAN_ORIENTATION_MODES, plan_path, PlanSettings, Workspace)
+from etdmp_ros.skills.planning import (bounded, FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo,
+                                       Plan, PLAN_ORIENTATION_MODES, plan_path, PlanSettings,
+                                       Workspace)
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
@@ -85,20 +86,6 @@ def _short(text):
     if len(text) <= limits.MAX_REASON_CHARS:
         return text
     return text[:limits.MAX_REASON_CHARS - 3] + '...'
-
-
-def _bounded(point, what):
-    """Raise ValueError unless every coordinate of ``point`` is within MAX_REQUEST_COORDINATE."""
-    point = np.asarray(point, dtype=float)
-    if not np.all(np.isfinite(point)):
-        raise ValueError(f'{what} contains NaN or inf')
-    big = np.abs(point) > limits.MAX_REQUEST_COORDINATE
-    if np.any(big):
-        value = point[np.flatnonzero(big)[0]]
-        raise ValueError(f'{what} has a coordinate of {value:.3g} m, beyond '
-                         f'{limits.MAX_REQUEST_COORDINATE:g} m (MAX_REQUEST_COORDINATE): no '
-                         'place of the workcell')
-    return point
 
 
 def _choice(values, name, choices):
@@ -142,9 +129,10 @@ class Settings:
         check_skill_name(values['skill'])
         check_skill_name(values['teach_skill_name'])
         static = np.asarray(values['static_obstacles'], dtype=float)
-        if static.size % 3 or not np.all(np.isfinite(static)):
-            raise ValueError('static_obstacles must be finite numbers x1, y1, z1, x2, ... '
-                             f'(a multiple of 3), got {len(static)} values')
+        if static.size % 3:
+            raise ValueError('static_obstacles must be numbers x1, y1, z1, x2, ... (a multiple '
+                             f'of 3), got {len(static)} values')
+        bounded(static, 'static_obstacles')
         gains = ObstacleGains(gamma=values['obstacle_gamma'], beta=values['obstacle_beta'],
                               gamma2=values['obstacle_gamma2'],
                               k_relative=values['obstacle_k_relative'])
@@ -388,7 +376,7 @@ class DmpServer(Node):
                 raise ValueError(f'{len(stamps)} poses, more than MAX_DEMO_SAMPLES = '
                                  f'{limits.MAX_DEMO_SAMPLES}')
             if len(positions):
-                _bounded(positions[np.argmax(np.abs(positions).max(axis=1))], 'a pose')
+                bounded(positions[np.argmax(np.abs(positions).max(axis=1))], 'a pose')
             t = (stamps - stamps[0]) * 1e-9 if len(stamps) else None
             with np.errstate(over='raise', invalid='raise', divide='raise'):
                 demo = recorded_path_demo(name, positions, t, settings.plane,
@@ -448,9 +436,19 @@ class DmpServer(Node):
 
     def _on_tool_pose(self, msg):
         p = point_to_numpy(msg.pose.position)
-        if self._frame_ok(msg.header.frame_id, '/etdmp/tool_pose') and np.all(np.isfinite(p)):
+        if self._frame_ok(msg.header.frame_id, '/etdmp/tool_pose') and \
+                self._bounded_ok(p, '/etdmp/tool_pose'):
             with self._state_lock:
                 self._tool_pose.update(p)
+
+    def _bounded_ok(self, points, topic):
+        """Return whether a message's points are finite and bounded, else WARN (throttled)."""
+        try:
+            bounded(points, topic)
+        except ValueError as err:
+            self.get_logger().warn(f'{err}: ignored', throttle_duration_sec=_THROTTLE)
+            return False
+        return True
 
     def _on_goal(self, msg):
         self._on_goal_object(msg, 'marker', '/etdmp/goal', self._goal)
@@ -461,16 +459,7 @@ class DmpServer(Node):
     def _on_goal_object(self, msg, kind, topic, latest):
         """Keep a perceived goal object; follow it if it is the goal_object of the plan."""
         p = point_to_numpy(msg.point)
-        if not self._frame_ok(msg.header.frame_id, topic):
-            return
-        if not np.all(np.isfinite(p)):
-            self.get_logger().warn(f'{topic}: NaN or inf point ignored',
-                                   throttle_duration_sec=_THROTTLE)
-            return
-        try:
-            _bounded(p, topic)
-        except ValueError as err:
-            self.get_logger().warn(f'{err}: ignored', throttle_duration_sec=_THROTTLE)
+        if not self._frame_ok(msg.header.frame_id, topic) or not self._bounded_ok(p, topic):
             return
         settings = self._settings
         with self._state_lock:
@@ -487,11 +476,8 @@ class DmpServer(Node):
 
     def _on_obstacles(self, msg):
         points = pose_array_to_numpy(msg)
-        if not self._frame_ok(msg.header.frame_id, '/etdmp/obstacles'):
-            return
-        if not np.all(np.isfinite(points)):
-            self.get_logger().warn('/etdmp/obstacles: message with NaN or inf ignored',
-                                   throttle_duration_sec=_THROTTLE)
+        if not self._frame_ok(msg.header.frame_id, '/etdmp/obstacles') or \
+                not self._bounded_ok(points, '/etdmp/obstacles'):
             return
         with self._state_lock:
             self._obstacles.update(points)
@@ -550,7 +536,7 @@ class DmpServer(Node):
             meaning = 'the tool position' if what == 'start' else 'the perceived goal'
             raise ValueError(f'{what}.header.frame_id {frame!r} is not base_link; only base_link '
                              f'is accepted (or an empty frame id for {meaning})')
-        return _bounded(point_to_numpy(pose_stamped.pose.position), what)
+        return bounded(point_to_numpy(pose_stamped.pose.position), what)
 
     def _check_goal(self, goal, skill, settings):
         """Refuse a goal out of the arm's reach, or too far from the task plane (2D skills)."""

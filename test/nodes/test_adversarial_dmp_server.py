@@ -26,7 +26,8 @@ import pytest
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Header
 from support.bad_files import big_csv, forged_npy, npz_bomb
-from test_dmp_server_node import Client, GOAL, request, START, TIMEOUT, wait_for_log
+from test_dmp_server_node import (Client, GOAL, obstacles_msg, request, START, TIMEOUT,
+                                  wait_for_log)
 
 #: The node's resident memory must stay below this (MB) through every attack. Measured here:
 #: about 230-260 MB after start-up; the .npz attack alone took 11.8 GB before the limits.
@@ -124,6 +125,17 @@ def _request(start, goal, **params):
     return attack
 
 
+def _goal_orientation(q):
+    """Request a plan to GOAL with goal orientation ``q`` (x, y, z, w)."""
+    def attack(env):
+        msg = request(START, GOAL)
+        o = msg.goal.pose.orientation
+        o.x, o.y, o.z, o.w = (float(c) for c in q)
+        future = env['client'].generalize.call_async(msg)
+        return path_to_numpy(env['client']._result(future).plan)[1]
+    return attack
+
+
 def _perceived_goal(goal):
     """Publish ``goal`` on /etdmp/goal, then request a plan to the perceived goal."""
     def attack(env):
@@ -196,6 +208,9 @@ ATTACKS = [
     ('start of 1e200', _request([1e200, 0.2, 0.0], GOAL), ('start', 'MAX_REQUEST_COORDINATE')),
     ('finite start of 1e308', _request([1e308, 0.2, 0.0], GOAL),
      ('1e+308 m', 'MAX_REQUEST_COORDINATE')),
+    # Refused before as "overflow encountered in dot".
+    ('goal orientation (1e308, 1e308, 0, 1)', _goal_orientation((1e308, 1e308, 0.0, 1.0)),
+     ('goal orientation (1e+308, 1e+308, 0.000, 1.000) is not a unit quaternion',)),
 ]
 
 
@@ -216,6 +231,34 @@ def test_attack_is_refused_and_the_node_keeps_serving(attacked, what, attack, fr
     assert len(client.call(START, GOAL)[1]) == 201      # the next good request succeeds
     _nothing_lost(attacked)
     assert rss_mb(node.pid) < RSS_BOUND_MB, rss_mb(node.pid)
+
+
+@pytest.mark.parametrize('name, value, reason', [
+    ('static_obstacles', [1e308, 0.0, 0.0], 'static_obstacles has a coordinate of 1e+308 m'),
+    ('task_plane.origin', [1e308, 0.0, 0.0], 'task_plane.origin has a coordinate of 1e+308 m'),
+    ('tool_orientation', [0.0, 0.0, 0.0, 0.0], 'non-zero quaternion'),
+])
+def test_parameters_beyond_the_workcell_are_refused(attacked, name, value, reason):
+    # Before: accepted, and then every /generalize was refused with "overflow encountered in
+    # divide" until someone set them back.
+    client = attacked['client']
+    [result] = client.set_parameters(**{name: value})
+    assert not result.successful and reason in result.reason, result.reason
+    np.testing.assert_allclose(client.call(START, GOAL)[1], attacked['baseline'], atol=1e-12)
+
+
+def test_a_perceived_obstacle_beyond_the_workcell_is_ignored(attacked):
+    # Before: kept, and every /generalize failed ("overflow encountered in divide") until the
+    # obstacle was older than obstacle_max_age.
+    client, node = attacked['client'], attacked['node']
+    client.publish('obstacles', obstacles_msg([1e308, 0.0, 0.0]))
+    deadline = time.monotonic() + TIMEOUT
+    while '/etdmp/obstacles has a coordinate of 1e+308 m' not in node.log():
+        assert time.monotonic() < deadline, node.log()
+        client.spin_for(0.1)
+    assert '[WARN]' in next(line for line in node.log().splitlines()
+                            if '/etdmp/obstacles has a coordinate' in line)
+    np.testing.assert_allclose(client.call(START, GOAL)[1], attacked['baseline'], atol=1e-12)
 
 
 def test_startup_with_every_bad_file_is_fast_and_bounded(attacked):
