@@ -157,7 +157,7 @@ JOINT_STATE_QUEUE = 1000
 MAX_JOINT_STATE_JOINTS = 256
 
 # ur10_sim, the simulated workcell --------------------------------------------------------------
-# The scene's sizes are ranges in etdmp_ros/system.py (docs/ur10_sim.md); where its objects may
+# The scene's sizes are ranges in etdmp_ros/ros/system.py (docs/ur10_sim.md); where its objects may
 # stand is checked by etdmp_ros.robot.SceneConfig, at start-up and when they are moved.
 
 #: Radius (m) about base_link's z axis of what the UR10 occupies at its foot: its base (0.095 m,

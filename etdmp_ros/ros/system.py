@@ -454,6 +454,112 @@ DMP_SERVER = (
       value_range=(0.01, 60.0), **_RUNTIME),
 )
 
+# -------------------------------------------------------------------- dmp_server's services
+#: The type of dmp_server's services whose request carries what it needs, so that concurrent
+#: clients cannot mix (docs/dmp_server.md, "Requests that carry their settings"): named, typed
+#: arguments (rcl_interfaces/Parameter) answered with successful and a reason. Standard types
+#: only: the package builds no message package of its own.
+ARGUMENTS_SERVICE_TYPE = 'rcl_interfaces/srv/SetParametersAtomically'
+
+
+@dataclass(frozen=True)
+class ServiceSpec:
+    """
+    A service whose request is named, typed arguments (:data:`ARGUMENTS_SERVICE_TYPE`).
+
+    ``name`` is relative to the node (``~/<name>``). Each argument is a :class:`Parameter`: its
+    default gives its type (and is its value when not given, unless it is ``required``); an
+    argument named like one of the node's parameters is that parameter's value for this one
+    request, with its range and choices.
+    """
+
+    name: str
+    summary: str
+    arguments: tuple
+    required: tuple = ()
+
+    def argument(self, name):
+        """Return the argument :class:`Parameter` called ``name``; KeyError if none."""
+        for a in self.arguments:
+            if a.name == name:
+                return a
+        raise KeyError(f'~/{self.name} has no argument {name!r}')
+
+    def values(self, given):
+        """
+        Return ``{argument: value}`` of a request's ``given`` arguments ({name: plain value}).
+
+        Arguments not given are absent (the caller's defaults apply). Raises ValueError naming
+        an unknown argument, a missing required one, a value of the wrong type, or one outside
+        its range or choices (:meth:`Parameter.check`).
+        """
+        known = {a.name: a for a in self.arguments}
+        unknown = sorted(set(given) - set(known))
+        if unknown:
+            raise ValueError(f'~/{self.name} has no argument {unknown[0]!r}; its arguments are '
+                             f'{", ".join(known)}')
+        missing = [name for name in self.required if name not in given]
+        if missing:
+            raise ValueError(f'~/{self.name} needs the argument {missing[0]!r}')
+        values = {}
+        for name, value in given.items():
+            values[name] = _typed(known[name], value, self.name)
+            known[name].check(values[name])
+        return values
+
+
+def _typed(argument, value, service):
+    """Return ``value`` as the type of ``argument``'s default; ValueError if it is not one."""
+    default = [] if argument.array_type == DOUBLE_ARRAY else argument.default
+    number = (int, float)
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, number) and not isinstance(value, bool)
+        value = float(value) if ok else value
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
+    else:   # a list of floats
+        ok = isinstance(value, (list, tuple)) and all(
+            isinstance(v, number) and not isinstance(v, bool) for v in value)
+        value = [float(v) for v in value] if ok else value
+    if not ok:
+        raise ValueError(f'~/{service} argument {argument.name!r} must be a {argument.type_name}, '
+                         f'got {type(value).__name__}')
+    return value
+
+
+_SERVER = {p.name: p for p in DMP_SERVER}
+DMP_SERVER_SERVICES = (
+    ServiceSpec('teach', 'Learn a demonstration as the skill it names, saved like every taught '
+                'one; the answer says what was learned, or why not.', (
+                    P('name', '', 'Name of the skill (1-64 letters, digits, _ or -); a taught '
+                      'skill of that name is replaced.'),
+                    P('t', [], 'Time of each sample (s), rising.', unit='s',
+                      array_type=DOUBLE_ARRAY),
+                    P('positions', [], 'Position of each sample in base_link, flat [x1, y1, '
+                      'z1, x2, ...].', unit='m', value_range=_WORKCELL,
+                      array_type=DOUBLE_ARRAY),
+                    P('orientations', [], 'Tool orientation of each sample in base_link, flat '
+                      '[x1, y1, z1, w1, ...]; none: position only.', array_type=DOUBLE_ARRAY),
+                    _SERVER['recorded_dim']),
+                required=('name', 't', 'positions')),
+    ServiceSpec('generalize_with', '/generalize with its skill and settings in the request: '
+                'the plan goes to /etdmp/path (unless execute is false); the answer says what '
+                'was planned, or why not. No parameter of the node changes.', (
+                    _SERVER['skill'], _SERVER['method'], _SERVER['duration'],
+                    _SERVER['execute'],
+                    P('start', [], "Start [x, y, z] in base_link; none: the tool's position "
+                      '(as an empty start frame id of /generalize).', unit='m',
+                      value_range=_WORKCELL, array_type=DOUBLE_ARRAY),
+                    P('goal', [], 'Goal [x, y, z] in base_link; none: the perceived goal object '
+                      'plus goal_offset (as an empty goal frame id).', unit='m',
+                      value_range=_WORKCELL, array_type=DOUBLE_ARRAY),
+                    P('goal_orientation', [], 'Goal orientation [x, y, z, w] in base_link; none '
+                      'or all zeros: none.', array_type=DOUBLE_ARRAY))),
+)
+
+
 # ------------------------------------------------------------------------------- controller
 CONTROLLER_SCENE = _scene('tool_offset', 'initial_joint_positions')
 CONTROLLER = (
@@ -555,11 +661,10 @@ TEACH = (
       'task_plane.origin, robot base at the top as the camera sees it).', unit='m',
       value_range=(0.01, 10.0), section='Teaching'),
     P('dmp_server', 'dmp_server', "The DMP server node (relative to this node's namespace) whose "
-      'parameters the page reads (task plane, formulation, n_basis) and sets (teach_skill_name, '
-      'skill, duration, execute).'),
-    P('report_timeout', 10.0, "Longest wait for dmp_server's answer: a service call, or its "
-      'report on /rosout of a taught demonstration or a refused plan.', unit='s',
-      value_range=(0.1, 120.0)),
+      'parameters the page reads (task plane, formulation, n_basis) and whose ~/teach and '
+      '~/generalize_with services it calls (the page changes none of its parameters).'),
+    P('report_timeout', 10.0, "Longest wait for dmp_server's answer to a service call (reading "
+      'its parameters, teaching, writing).', unit='s', value_range=(0.1, 120.0)),
     P('camera_rate', 5.0, 'Camera images per second a page gets at most (JPEG).', unit='Hz',
       value_range=(0.1, 30.0), section='Camera view'),
     P('jpeg_quality', 80, 'JPEG quality of the camera images sent to the page.',
@@ -593,6 +698,7 @@ class NodeSpec:
     node_class: str
     sim_time: bool = False
     config_header: str = field(default='', repr=False)
+    services: tuple = ()
 
     @property
     def executable(self):
@@ -620,6 +726,13 @@ class NodeSpec:
         """Return ``{name: default}`` of every parameter the node declares."""
         return {p.name: p.default for p in self.all_parameters}
 
+    def service(self, name):
+        """Return the :class:`ServiceSpec` called ``name``; KeyError if the node has none."""
+        for spec in self.services:
+            if spec.name == name:
+                return spec
+        raise KeyError(f'{self.name} has no service {name!r}')
+
 
 #: The nodes in start order (the simulation first: the others wait for its topics).
 NODES = (
@@ -633,7 +746,7 @@ NODES = (
              '(ros2 param set /perception <name> <value>).'),
     NodeSpec('dmp_server', 'learns skills from demonstrations and serves /generalize',
              DMP_SERVER_SCENE, DMP_SERVER, 'etdmp_ros.nodes.dmp_server:DmpServer',
-             sim_time=True),
+             sim_time=True, services=DMP_SERVER_SERVICES),
     NodeSpec('controller', 'follows /etdmp/path with the UR10 tool tip (closed-loop IK)',
              CONTROLLER_SCENE, CONTROLLER, 'etdmp_ros.nodes.controller:ControllerNode',
              sim_time=True),

@@ -458,23 +458,3 @@ class Trace:
         """Return the points kept, (n, 3)."""
         with self._lock:
             return np.array(self._points, dtype=float).reshape(-1, 3)
-
-
-#: What dmp_server logs (its /rosout) when it has learned a taught demonstration, and when it
-#: has refused one (etdmp_ros/nodes/dmp_server.py, _on_demonstration).
-LEARNED = 'learned skill {name!r} ('
-REJECTED = 'taught demonstration for skill {name!r} rejected: '
-
-
-def teaching_outcome(name, message):
-    """
-    Return True (learned), False (refused) or None (another line) for a dmp_server log line.
-
-    ``message``: the text of one of dmp_server's log lines after a demonstration was taught as
-    skill ``name``.
-    """
-    if message.startswith(LEARNED.format(name=name)) and '/etdmp/demonstrations' in message:
-        return True
-    if message.startswith(REJECTED.format(name=name)):
-        return False
-    return None

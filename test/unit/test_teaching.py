@@ -231,19 +231,6 @@ def test_the_trace_keeps_points_a_spacing_apart_and_at_most_its_size():
     assert trace.points().shape == (0, 3)
 
 
-def test_dmp_server_s_teaching_reports_are_recognised():
-    learned = ("learned skill 'Z' (2D, 77 samples) from /etdmp/demonstrations, saved to "
-               '/tmp/skills/Z.csv')
-    refused = ("taught demonstration for skill 'Z' rejected: skill 'Z' exists already "
-               '(built-in) and is not replaced; the skills already learned are kept')
-    assert teaching.teaching_outcome('Z', learned) is True
-    assert teaching.teaching_outcome('Z', refused) is False
-    assert teaching.teaching_outcome('Zed', learned) is None
-    assert teaching.teaching_outcome('Z', "learned skill 'Z' (2D, 7 samples) from x.csv") \
-        is None
-    assert teaching.teaching_outcome('Z', '/generalize with skill ...') is None
-
-
 # --------------------------------------------------------------------------------- the node
 
 @pytest.mark.parametrize('kind', (PointStamped, PoseStamped))
@@ -258,24 +245,6 @@ def test_the_trace_reader_reads_a_point_at_every_frame_id_length(kind):
         assert point_from_cdr(serialize_message(msg)) == (0.1, -0.2, 0.3), frame
     with pytest.raises(ValueError):
         point_from_cdr(serialize_message(kind())[:20])
-
-
-def test_reports_wait_for_the_line_asked_for():
-    from etdmp_ros.nodes.teach import Reports
-    reports = Reports()
-    reports.add(20, 'old line')
-    mark = reports.mark()
-    reports.add(20, 'something else')
-    reports.add(40, 'the one')
-    found = reports.wait(mark, lambda level, text: level if text == 'the one' else None, 1.0)
-    assert found == (40, 'the one')
-    started = time.monotonic()
-    assert reports.wait(mark, lambda level, text: None, 0.2) is None
-    assert 0.15 < time.monotonic() - started < 1.0
-    reports.close()
-    started = time.monotonic()
-    assert reports.wait(mark, lambda level, text: None, 10.0) is None
-    assert time.monotonic() - started < 0.5
 
 
 def test_the_parameter_file_gives_back_every_default():
