@@ -218,6 +218,11 @@ def test_points_project_into_the_camera_image_or_are_left_out_behind_it():
     assert len(pixels) == 2
     assert np.allclose(pixels[0], [319.5, 239.5])
     assert teaching.project(np.zeros((0, 3)), intrinsics, camera) == []
+    # A plan or trace point at 1e308 m (or NaN) is no pixel (it was inf: no JSON for the page).
+    with np.errstate(over='raise', invalid='raise'):
+        pixels = teaching.project([[0.0, 0.0, 0.0], [1e308, 0.0, 0.0], [np.nan, 0.0, 0.0]],
+                                  intrinsics, camera)
+    assert np.allclose(pixels, [[319.5, 239.5]])
 
 
 def test_the_trace_keeps_points_a_spacing_apart_and_at_most_its_size():
