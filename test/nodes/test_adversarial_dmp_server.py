@@ -382,8 +382,8 @@ def test_teaching_a_builtin_name_needs_teach_overwrite(attacked):
 @pytest.fixture(scope='module')
 def page(attacked, colcon_install, module_ros_env, tmp_path_factory):
     """Return the page of the installed teach node beside the module's dmp_server."""
-    from drawings import request
-    from etdmp_ros.teach_session import READY
+    from support.drawings import request
+    from etdmp_ros.demo.teach_session import READY
     tmp = tmp_path_factory.mktemp('page')
     node = NodeProcess(colcon_install, module_ros_env, tmp, 'teach', {'port': 0})
     deadline = time.monotonic() + 60.0
@@ -447,7 +447,7 @@ def test_a_teaching_from_the_page_cannot_be_saved_under_another_client_s_name(at
     # setting it to its own name meanwhile, 2 of 10 drawings were saved under that name
     # (silently replacing that skill), and the page answered 503 after 10 s. Now the name comes
     # in the request (~/teach).
-    from drawings import request
+    from support.drawings import request
     skills = attacked['skills']
     with Meddler(teach_skill_name=['other', 'taught']) as meddler:
         answers = [_post(page + 'api/teach', request(f'page{k}')) for k in range(10)]
@@ -467,7 +467,7 @@ def test_a_teaching_from_the_page_cannot_be_saved_under_another_client_s_name(at
 def test_a_writing_from_the_page_uses_its_skill_and_leaves_the_parameters_alone(attacked, page):
     # Before: the page set skill and duration, then called /generalize: another client's skill
     # could be written, and a refused plan left both changed for everyone.
-    from etdmp_ros.ros_conversions import joint_state_msg
+    from etdmp_ros.ros.conversions import joint_state_msg
     from test_dmp_server_node import point_msg, Q_INIT, SCENE
     client = attacked['client']
     client.publish('joint_states', joint_state_msg(Q_INIT))
