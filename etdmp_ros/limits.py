@@ -54,8 +54,12 @@ MIN_DEMO_EXTENT = 1e-6
 #: node spends on one taught path (10^5 poses blocked /generalize for 4.7 s).
 MAX_TAUGHT_PATH_BYTES = MAX_DEMO_SAMPLES * 128 + 4096
 
-#: Largest absolute coordinate of a request's start or goal and of a received goal (m, base_link):
-#: anything beyond is no place on the workcell (and 1e308 overflows when projected).
+#: Largest absolute coordinate (m, base_link) of a point given from outside: a request's start
+#: or goal; a received goal, obstacle or tool position; dmp_server's static_obstacles; the scene's
+#: positions (task plane origin, camera, table, goal marker, obstacles, bottle). Anything beyond
+#: is no place on the workcell, and 1e308 overflows: when projected, and in every later plan
+#: when it is an obstacle or the plane's origin (they were accepted, then every /generalize was
+#: refused with "overflow encountered in divide").
 MAX_REQUEST_COORDINATE = 100.0
 
 #: Longest text of a number or reason in a log line (characters).
@@ -151,6 +155,16 @@ JOINT_STATE_QUEUE = 1000
 #: Most joints one JointState may name (a whole robot with grippers and sensors: generous);
 #: bounds reading a forged message.
 MAX_JOINT_STATE_JOINTS = 256
+
+# ur10_sim, the simulated workcell --------------------------------------------------------------
+# The scene's sizes are ranges in etdmp_ros/ros/system.py (docs/ur10_sim.md); where its objects may
+# stand is checked by etdmp_ros.robot.SceneConfig, at start-up and when they are moved.
+
+#: Radius (m) about base_link's z axis of what the UR10 occupies at its foot: its base (0.095 m,
+#: up to 0.04 m high) and the shoulder turning above it (0.114 m, up to 0.22 m), from the
+#: collision meshes. The goal marker, an obstacle or the bottle standing nearer (their own
+#: radius included) would stand inside the robot: refused.
+ROBOT_BASE_RADIUS = 0.115
 
 # teach, the teaching page ----------------------------------------------------------------------
 

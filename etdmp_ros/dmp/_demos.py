@@ -48,7 +48,7 @@ from pathlib import Path
 import zipfile
 
 from etdmp_ros import limits
-from etdmp_ros.geometry.quaternion import MIN_NORM
+from etdmp_ros.geometry.quaternion import MIN_NORM, unit_and_norm
 import numpy as np
 
 from ._errors import DemonstrationError
@@ -598,7 +598,7 @@ def unit_quaternions(values, n, where, locate):
         raise DemonstrationError(f'{where}: the orientation at {locate(bad[0])} is '
                                  f'{q[bad[0]].tolist()}; quaternions must be finite '
                                  f'({bad.size} bad sample(s))')
-    norm = np.linalg.norm(q, axis=1)
+    unit, norm = unit_and_norm(q)   # no overflow: (1e308, 0, 0, 1e308) is a rotation too
     bad = np.flatnonzero(norm < MIN_NORM)
     if bad.size:
         raise DemonstrationError(f'{where}: the orientation at {locate(bad[0])} is the zero '
@@ -607,4 +607,4 @@ def unit_quaternions(values, n, where, locate):
                                  '(x, y, z, w)')
     # Quaternions already unit to round-off are kept as they are, so that normalising is
     # idempotent (a file written and read back keeps every bit).
-    return np.where(np.abs(norm - 1.0)[:, None] <= 4e-16, q, q / norm[:, None])
+    return np.where(np.abs(norm - 1.0)[:, None] <= 4e-16, q, unit)

@@ -59,11 +59,11 @@ def check_goal_orientation(orientation, goal_orientation, batch):
                                   f'(4,) or ({batch}, 4), got {q.shape}')
     if not np.all(np.isfinite(q)):
         raise GeneralizationError('goal_orientation contains NaN or inf')
-    norm = np.linalg.norm(q, axis=1)
+    unit, norm = quat.unit_and_norm(q)
     if np.any(norm < quat.MIN_NORM):
         raise GeneralizationError('goal_orientation is the zero quaternion, which is no '
                                   'rotation; give a unit quaternion (x, y, z, w) or None')
-    return q / norm[:, None]
+    return unit
 
 
 def turn_quaternions(R, method, mode, independent_axis):

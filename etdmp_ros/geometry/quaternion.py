@@ -18,6 +18,24 @@ SMALL_ANGLE = 1e-4
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 
+def unit_and_norm(v):
+    """
+    Return ``(v / |v|, |v|)`` of vectors (..., k) without overflow; a zero vector stays zero.
+
+    ``np.linalg.norm`` squares the components: one of 1e308 gives inf (or FloatingPointError
+    under ``np.errstate(over='raise')``, "overflow encountered in dot"), and ``v / inf`` is the
+    zero vector. Here ``v`` is divided by its largest component first. ``|v|`` itself is inf
+    where it exceeds the largest float (components of 1.7e308), which the caller may refuse.
+    """
+    v = np.asarray(v, dtype=float)
+    scale = np.max(np.abs(v), axis=-1, keepdims=True)
+    scaled = v / np.where(scale > 0.0, scale, 1.0)
+    length = np.linalg.norm(scaled, axis=-1, keepdims=True)
+    with np.errstate(over='ignore'):
+        norm = (scale * length)[..., 0]
+    return scaled / np.where(length > 0.0, length, 1.0), norm
+
+
 def multiply(p, q):
     """Return the Hamilton products ``p q`` of quaternions (..., 4) (broadcast)."""
     p = np.asarray(p, dtype=float)
@@ -187,12 +205,12 @@ def normalized(q):
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (4,):
         raise ValueError(f'quaternions [x, y, z, w] must have 4 values, got shape {q.shape}')
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
-    bad = ~np.isfinite(n) | (n < MIN_NORM)
+    unit, n = unit_and_norm(q)      # (1e308, 1e308, 0, 1) is a rotation too
+    bad = ~np.isfinite(n) | (n < MIN_NORM) | ~np.all(np.isfinite(q), axis=-1)
     if np.any(bad):
         raise ValueError(f'not a rotation quaternion [x, y, z, w]: '
                          f'{q.reshape(-1, 4)[int(np.argmax(bad.ravel()))].tolist()}')
-    return q / n
+    return unit
 
 
 def from_rpy(roll, pitch, yaw):

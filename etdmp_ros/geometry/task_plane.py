@@ -25,6 +25,7 @@ sector that begins there.
 from dataclasses import dataclass
 import math
 
+from etdmp_ros import limits
 from etdmp_ros.geometry import quaternion as quat
 import numpy as np
 
@@ -66,7 +67,8 @@ class TaskPlane:
         """
         Validate and build a plane; raise ValueError saying what is wrong.
 
-        The axes are normalised; they must be finite, non-zero and orthogonal (within
+        The origin must be within MAX_REQUEST_COORDINATE of base_link's. The axes are
+        normalised; they must be finite, non-zero and orthogonal (within
         ORTHOGONALITY_TOLERANCE after normalisation). ``scale`` is metres per demo unit, > 0.
         """
         vectors = {}
@@ -78,11 +80,17 @@ class TaskPlane:
             if array.shape != (3,) or not np.all(np.isfinite(array)):
                 raise ValueError(f'task_plane.{name} must be 3 finite numbers, got {value!r}')
             vectors[name] = array
+        far = np.abs(vectors['origin']).max()
+        if far > limits.MAX_REQUEST_COORDINATE:
+            # [1e308, 0, 0] was accepted, then every plan failed: "overflow in divide".
+            raise ValueError(f'task_plane.origin has a coordinate of {far:.3g} m, beyond '
+                             f'{limits.MAX_REQUEST_COORDINATE:g} m (MAX_REQUEST_COORDINATE): '
+                             'no place of the workcell')
         for name in ('x_axis', 'y_axis'):
-            norm = np.linalg.norm(vectors[name])
+            unit, norm = quat.unit_and_norm(vectors[name])
             if not norm > 1e-9:
                 raise ValueError(f'task_plane.{name} must not be zero')
-            vectors[name] = vectors[name] / norm
+            vectors[name] = unit
         dot = float(vectors['x_axis'] @ vectors['y_axis'])
         if abs(dot) > ORTHOGONALITY_TOLERANCE:
             raise ValueError(f'task_plane.x_axis and y_axis must be orthogonal '

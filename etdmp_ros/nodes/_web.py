@@ -12,9 +12,11 @@ the loop stays free and the node's executor is never blocked by the web side.
 
 import asyncio
 from concurrent.futures import ThreadPoolExecutor
+import logging
 import threading
 
 from aiohttp import web
+from aiohttp.http_exceptions import HttpProcessingError
 
 #: Threads for the handlers' blocking work (ROS calls, JPEG encoding).
 WORKERS = 4
@@ -22,6 +24,41 @@ WORKERS = 4
 START_TIMEOUT = 10.0
 #: Time open requests get to finish when the server stops (s).
 SHUTDOWN_TIMEOUT = 1.0
+#: Longest text of one log line about a request (characters).
+MAX_LOG_CHARS = 300
+
+
+def one_line(text, limit=MAX_LOG_CHARS):
+    """Return ``text`` on one line, cut to ``limit`` characters."""
+    text = ' '.join(str(text).split())
+    return text if len(text) <= limit else text[:limit - 3] + '...'
+
+
+class _OneLine(logging.Handler):
+    """
+    Hand aiohttp's server log to ``log(level, text)`` as one line, without a traceback.
+
+    aiohttp logs a request it cannot parse (a malformed request line or header, a duplicate
+    Host header, a header longer than 8190 bytes) with the exception's traceback, some 10 lines
+    per request, before it answers 400. The client's mistake is one WARN line here
+    ('warn'); anything else aiohttp reports is one ERROR line ('error').
+    """
+
+    def __init__(self, log):
+        super().__init__(logging.INFO)
+        self._log = log
+
+    def emit(self, record):
+        err = record.exc_info[1] if record.exc_info else None
+        text = record.getMessage()
+        if err is not None:
+            text = f'{text}: {type(err).__name__}: {err}'
+        level = 'warn' if isinstance(err, HttpProcessingError) or \
+            record.levelno < logging.ERROR else 'error'
+        try:
+            self._log(level, one_line(text))
+        except Exception:   # noqa: B902 - logging must never take the server down
+            pass
 
 
 class WebServer:
@@ -33,9 +70,20 @@ class WebServer:
     connections and ends the thread.
     """
 
-    def __init__(self, app, host, port):
-        """Prepare (nothing is bound yet)."""
+    def __init__(self, app, host, port, log=None):
+        """
+        Prepare (nothing is bound yet).
+
+        ``log(level, text)`` ('warn' or 'error') receives what aiohttp itself reports about a
+        request, one line each (default: Python's logging, as aiohttp does).
+        """
         self.app, self.host, self.port = app, host, int(port)
+        self._logger = None
+        if log is not None:
+            self._logger = logging.getLogger(f'{__name__}.{id(self)}')
+            self._logger.propagate = False
+            self._logger.setLevel(logging.INFO)
+            self._logger.addHandler(_OneLine(log))
         self._loop = None
         self._runner = None
         self._ready = threading.Event()
@@ -81,8 +129,9 @@ class WebServer:
             loop.close()
 
     async def _bind(self):
+        extra = {} if self._logger is None else {'logger': self._logger}
         self._runner = web.AppRunner(self.app, access_log=None, handle_signals=False,
-                                     shutdown_timeout=SHUTDOWN_TIMEOUT)
+                                     shutdown_timeout=SHUTDOWN_TIMEOUT, **extra)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port)
         try:

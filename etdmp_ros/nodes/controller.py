@@ -485,6 +485,13 @@ class ControllerNode(Node):
     def _accept_path(self, generation, stamps, positions, quaternions):
         """Time, check and hand over a received path (worker thread; the newest path wins)."""
         normal_scheduling()         # not real-time work (the thread inherits the executor's)
+        try:
+            self._take_path(generation, stamps, positions, quaternions)
+        except Exception as exc:   # noqa: B902 - a path the checks missed: said, never a traceback
+            self.get_logger().error(f'path ignored: it could not be checked: '
+                                    f'{type(exc).__name__}: {str(exc)[:limits.MAX_REASON_CHARS]}')
+
+    def _take_path(self, generation, stamps, positions, quaternions):
         q, rotation = self._wait_for_robot()
         if q is None:
             self.get_logger().error(f'path ignored: no joint states for {WAIT_FOR_JOINT_STATES:g}'

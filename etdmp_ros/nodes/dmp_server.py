@@ -12,8 +12,10 @@ parameters and keeps the latest inputs.
 
 Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward kinematics) or
 ``/etdmp/tool_pose``, ``/etdmp/goal``, ``/etdmp/obstacles``, ``/etdmp/demonstrations`` (teaching);
-serves ``/generalize`` (nav_msgs/srv/GetPlan); publishes ``/etdmp/path`` (transient local) and
-``/etdmp/markers``.
+serves ``/generalize`` (nav_msgs/srv/GetPlan) and, for clients that must not share parameters
+with others, ``~/teach`` and ``~/generalize_with`` (rcl_interfaces/srv/SetParametersAtomically:
+the skill's name and settings in the request, described in etdmp_ros.ros.system); publishes
+``/etdmp/path`` (transient local) and ``/etdmp/markers``.
 
 Threads: the executor (``_spin.make_executor``) runs the input callbacks and parameters;
 /generalize is served by a thread of its own, first come first served, one call at a time
@@ -43,22 +45,25 @@ from etdmp_ros.ros import system
 from etdmp_ros.ros.conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr,
                                        path_from_numpy, point_to_numpy, points_from_numpy,
                                        pose_array_to_numpy, serialize_path)
-from etdmp_ros.ros.parameters import (declared_settings, InvalidConfiguration,
+from etdmp_ros.ros.parameters import (declared_settings, InvalidConfiguration, plain,
                                       values as parameter_values)
 from etdmp_ros.ros.queued_service import QueuedService
 from etdmp_ros.ros.spin import run
 from etdmp_ros.skills.library import (BASE_FRAMES, check_skill_name, default_skills_dir,
                                       RECORDED_DIMS, recorded_orientations, recorded_path_demo,
                                       save_skill_demo, SkillLibrary)
-from etdmp_ros.skills.planning import (FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo, Plan,
-                                       PLAN_ORIENTATION_MODES, plan_path, PlanSettings, Workspace)
+from etdmp_ros.skills.planning import (bounded, FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo,
+                                       Plan, PLAN_ORIENTATION_MODES, plan_path, PlanSettings,
+                                       Workspace)
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
+from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
@@ -71,7 +76,8 @@ TOOL_SOURCES = DESCRIPTION.parameter('tool_position_source').choices
 _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _THROTTLE = 5.0   # s between repeated warnings about the same bad input
-_TAUGHT = 'taught on /etdmp/demonstrations'
+#: Where a skill taught at runtime came from (its source in the library): it may be re-taught.
+_TAUGHT = 'taught on '
 #: Seconds between two reports of requests refused as busy (each report counts them).
 BUSY_LOG_PERIOD = 2.0
 #: /generalize keeps up to MAX_QUEUED_REQUESTS requests waiting (rclpy's default: 10).
@@ -85,20 +91,6 @@ def _short(text):
     if len(text) <= limits.MAX_REASON_CHARS:
         return text
     return text[:limits.MAX_REASON_CHARS - 3] + '...'
-
-
-def _bounded(point, what):
-    """Raise ValueError unless every coordinate of ``point`` is within MAX_REQUEST_COORDINATE."""
-    point = np.asarray(point, dtype=float)
-    if not np.all(np.isfinite(point)):
-        raise ValueError(f'{what} contains NaN or inf')
-    big = np.abs(point) > limits.MAX_REQUEST_COORDINATE
-    if np.any(big):
-        value = point[np.flatnonzero(big)[0]]
-        raise ValueError(f'{what} has a coordinate of {value:.3g} m, beyond '
-                         f'{limits.MAX_REQUEST_COORDINATE:g} m (MAX_REQUEST_COORDINATE): no '
-                         'place of the workcell')
-    return point
 
 
 def _choice(values, name, choices):
@@ -142,9 +134,10 @@ class Settings:
         check_skill_name(values['skill'])
         check_skill_name(values['teach_skill_name'])
         static = np.asarray(values['static_obstacles'], dtype=float)
-        if static.size % 3 or not np.all(np.isfinite(static)):
-            raise ValueError('static_obstacles must be finite numbers x1, y1, z1, x2, ... '
-                             f'(a multiple of 3), got {len(static)} values')
+        if static.size % 3:
+            raise ValueError('static_obstacles must be numbers x1, y1, z1, x2, ... (a multiple '
+                             f'of 3), got {len(static)} values')
+        bounded(static, 'static_obstacles')
         gains = ObstacleGains(gamma=values['obstacle_gamma'], beta=values['obstacle_beta'],
                               gamma2=values['obstacle_gamma2'],
                               k_relative=values['obstacle_k_relative'])
@@ -257,8 +250,18 @@ class DmpServer(Node):
         self.create_subscription(PoseArray, 'etdmp/obstacles', self._on_obstacles, 10,
                                  callback_group=inputs)
         # Raw: the size is checked before the bytes are decoded (numpy, not message objects).
+        # One teaching at a time, from the topic or the service.
+        teaching = MutuallyExclusiveCallbackGroup()
         self.create_subscription(Path, 'etdmp/demonstrations', self._on_demonstration, 10,
-                                 callback_group=MutuallyExclusiveCallbackGroup(), raw=True)
+                                 callback_group=teaching, raw=True)
+        # Requests that carry their skill and settings (docs/dmp_server.md): concurrent clients
+        # cannot mix, and no parameter changes.
+        self.create_service(SetParametersAtomically, '~/teach', self._on_teach,
+                            callback_group=teaching)
+        with_settings = self.create_service(SetParametersAtomically, '~/generalize_with',
+                                            self._on_generalize_with,
+                                            callback_group=MutuallyExclusiveCallbackGroup())
+        self._generalize_with_name = self.resolve_service_name(with_settings.srv_name)
         self._path_pub = self.create_publisher(Path, 'etdmp/path', _LATCHED)
         self._marker_pub = self.create_publisher(MarkerArray, 'etdmp/markers', _LATCHED)
         self._pending_markers = None
@@ -363,7 +366,7 @@ class DmpServer(Node):
     def _protected_sources(self, name, settings):
         """Return the sources a taught skill ``name`` must not replace (teach_overwrite)."""
         source = self._library.source(name)
-        if source is None or settings.teach_overwrite or source == _TAUGHT:
+        if source is None or settings.teach_overwrite or source.startswith(_TAUGHT):
             return ()
         skills_dir = pathlib.Path(self._skills_dir).expanduser()
         if source != 'built-in' and pathlib.Path(source).parent == skills_dir:
@@ -371,9 +374,8 @@ class DmpServer(Node):
         return (source,)
 
     def _on_demonstration(self, data):
+        """Learn a Path on /etdmp/demonstrations as teach_skill_name (ros2 topic pub)."""
         settings = self._settings
-        name = settings.teach_skill_name
-        log = self.get_logger()
         try:
             if len(data) > limits.MAX_TAUGHT_PATH_BYTES:
                 raise ValueError(f'the Path is {len(data)} bytes, more than '
@@ -384,34 +386,86 @@ class DmpServer(Node):
             wrong = sorted(({frame} | pose_frames) - set(BASE_FRAMES))
             if wrong:
                 raise ValueError(f'frame {_short(repr(wrong[0]))} is not base_link (no TF here)')
-            if len(stamps) > limits.MAX_DEMO_SAMPLES:
-                raise ValueError(f'{len(stamps)} poses, more than MAX_DEMO_SAMPLES = '
+            t = (stamps - stamps[0]) * 1e-9 if len(stamps) else None
+            quaternions = recorded_orientations(quaternions)
+        except ValueError as err:
+            self._taught(settings.teach_skill_name, err)
+            return
+        self._teach(settings.teach_skill_name, t, positions, quaternions, settings,
+                    '/etdmp/demonstrations')
+
+    def _on_teach(self, request, response):
+        """Serve ~/teach: the skill's name and its demonstration are in the request."""
+        settings = self._settings
+        name = next((a.value.string_value for a in request.parameters if a.name == 'name'), '')
+        try:
+            given = self._service_values('teach', request)
+            name = check_skill_name(given['name'])
+            if len(given['t']) > limits.MAX_DEMO_SAMPLES:
+                raise ValueError(f'{len(given["t"])} samples, more than MAX_DEMO_SAMPLES = '
+                                 f'{limits.MAX_DEMO_SAMPLES}')
+            t = np.asarray(given['t'], dtype=float)
+            positions = np.asarray(given['positions'], dtype=float)
+            quaternions = np.asarray(given.get('orientations', []), dtype=float)
+            if positions.size != 3 * t.size or quaternions.size not in (0, 4 * t.size):
+                raise ValueError(f'{t.size} times need {3 * t.size} position values (x, y, z '
+                                 f'each) and none or {4 * t.size} orientation values, got '
+                                 f'{positions.size} and {quaternions.size}')
+            positions = positions.reshape(-1, 3)
+            quaternions = recorded_orientations(quaternions.reshape(-1, 4)) \
+                if quaternions.size else None
+            if 'recorded_dim' in given:
+                settings = replace(settings, recorded_dim=given['recorded_dim'])
+        except ValueError as err:
+            response.result.reason = self._taught(name, err)
+            return response
+        response.result.successful, response.result.reason = self._teach(
+            name, t - t[0] if t.size else t, positions, quaternions, settings,
+            f'/{self.get_name()}/teach')
+        return response
+
+    def _teach(self, name, t, positions, quaternions, settings, where):
+        """
+        Learn a demonstration as skill ``name`` and save it; return (learned, what was done).
+
+        What happened is logged too (INFO, or ERROR with the reason); a refused demonstration
+        replaces nothing.
+        """
+        try:
+            if len(positions) > limits.MAX_DEMO_SAMPLES:
+                raise ValueError(f'{len(positions)} poses, more than MAX_DEMO_SAMPLES = '
                                  f'{limits.MAX_DEMO_SAMPLES}')
             if len(positions):
-                _bounded(positions[np.argmax(np.abs(positions).max(axis=1))], 'a pose')
-            t = (stamps - stamps[0]) * 1e-9 if len(stamps) else None
+                bounded(positions[np.argmax(np.abs(positions).max(axis=1))], 'a pose')
             with np.errstate(over='raise', invalid='raise', divide='raise'):
                 demo = recorded_path_demo(name, positions, t, settings.plane,
                                           settings.recorded_dim, settings.plane_tolerance,
-                                          recorded_orientations(quaternions))
+                                          quaternions)
                 self._check_usable(demo, settings)
-                entry = self._library.add(name, demo, _TAUGHT,
+                entry = self._library.add(name, demo, _TAUGHT + where,
                                           protected=self._protected_sources(name, settings))
         except (ValueError, ArithmeticError) as err:
-            hint = ''
-            if 'exists already' in str(err):
-                hint = ' (set teach_overwrite to true to replace it, or choose another ' \
-                    'teach_skill_name)'
-            log.error(f'taught demonstration for skill {name!r} rejected: {_short(err)}{hint}; '
-                      'the skills already learned are kept')
-            return
+            return False, self._taught(name, err)
+        log = self.get_logger()
         try:
             saved = f'saved to {save_skill_demo(self._skills_dir, entry.demo)}'
         except (OSError, ValueError) as err:
             saved = f'NOT saved (it is lost on restart): {err}'
             log.error(f'taught skill {name!r} {saved}')
-        log.info(f'learned skill {name!r} ({demo.dim}D, {demo.n_samples} samples) from '
-                 f'/etdmp/demonstrations, {saved}')
+        text = (f'learned skill {name!r} ({demo.dim}D, {demo.n_samples} samples) from {where}, '
+                f'{saved}')
+        log.info(text)
+        return True, text
+
+    def _taught(self, name, err):
+        """Log (ERROR) and return why a taught demonstration of skill ``name`` is refused."""
+        hint = ''
+        if 'exists already' in str(err):
+            hint = ' (set teach_overwrite to true to replace it, or choose another name)'
+        text = (f'taught demonstration for skill {name!r} rejected: {_short(err)}{hint}; the '
+                'skills already learned are kept')
+        self.get_logger().error(text)
+        return text
 
     @staticmethod
     def _check_usable(demo, settings):
@@ -448,9 +502,19 @@ class DmpServer(Node):
 
     def _on_tool_pose(self, msg):
         p = point_to_numpy(msg.pose.position)
-        if self._frame_ok(msg.header.frame_id, '/etdmp/tool_pose') and np.all(np.isfinite(p)):
+        if self._frame_ok(msg.header.frame_id, '/etdmp/tool_pose') and \
+                self._bounded_ok(p, '/etdmp/tool_pose'):
             with self._state_lock:
                 self._tool_pose.update(p)
+
+    def _bounded_ok(self, points, topic):
+        """Return whether a message's points are finite and bounded, else WARN (throttled)."""
+        try:
+            bounded(points, topic)
+        except ValueError as err:
+            self.get_logger().warn(f'{err}: ignored', throttle_duration_sec=_THROTTLE)
+            return False
+        return True
 
     def _on_goal(self, msg):
         self._on_goal_object(msg, 'marker', '/etdmp/goal', self._goal)
@@ -461,16 +525,7 @@ class DmpServer(Node):
     def _on_goal_object(self, msg, kind, topic, latest):
         """Keep a perceived goal object; follow it if it is the goal_object of the plan."""
         p = point_to_numpy(msg.point)
-        if not self._frame_ok(msg.header.frame_id, topic):
-            return
-        if not np.all(np.isfinite(p)):
-            self.get_logger().warn(f'{topic}: NaN or inf point ignored',
-                                   throttle_duration_sec=_THROTTLE)
-            return
-        try:
-            _bounded(p, topic)
-        except ValueError as err:
-            self.get_logger().warn(f'{err}: ignored', throttle_duration_sec=_THROTTLE)
+        if not self._frame_ok(msg.header.frame_id, topic) or not self._bounded_ok(p, topic):
             return
         settings = self._settings
         with self._state_lock:
@@ -487,11 +542,8 @@ class DmpServer(Node):
 
     def _on_obstacles(self, msg):
         points = pose_array_to_numpy(msg)
-        if not self._frame_ok(msg.header.frame_id, '/etdmp/obstacles'):
-            return
-        if not np.all(np.isfinite(points)):
-            self.get_logger().warn('/etdmp/obstacles: message with NaN or inf ignored',
-                                   throttle_duration_sec=_THROTTLE)
+        if not self._frame_ok(msg.header.frame_id, '/etdmp/obstacles') or \
+                not self._bounded_ok(points, '/etdmp/obstacles'):
             return
         with self._state_lock:
             self._obstacles.update(points)
@@ -550,7 +602,7 @@ class DmpServer(Node):
             meaning = 'the tool position' if what == 'start' else 'the perceived goal'
             raise ValueError(f'{what}.header.frame_id {frame!r} is not base_link; only base_link '
                              f'is accepted (or an empty frame id for {meaning})')
-        return _bounded(point_to_numpy(pose_stamped.pose.position), what)
+        return bounded(point_to_numpy(pose_stamped.pose.position), what)
 
     def _check_goal(self, goal, skill, settings):
         """Refuse a goal out of the arm's reach, or too far from the task plane (2D skills)."""
@@ -599,35 +651,90 @@ class DmpServer(Node):
         try:
             start = self._request_point(request.start, 'start', settings)
             goal = self._request_point(request.goal, 'goal', settings)
-            obstacles = self._current_obstacles(settings)
-            skill = self._library.skill(settings.skill, settings.formulation, settings.n_basis)
-            self._check_goal(goal, skill, settings)
-            goal_q = request.goal.pose.orientation
-            goal_q = (goal_q.x, goal_q.y, goal_q.z, goal_q.w)
-            with self._core_lock, np.errstate(over='raise', invalid='raise', divide='raise'):
-                plan = plan_path(skill, start, goal, obstacles, settings.plan, settings.plane,
-                                 goal_orientation=goal_q)
-                if settings.check_timing:
-                    self._check_timing(plan, skill, settings)
+            q = request.goal.pose.orientation
+            skill, plan = self._plan(settings, start, goal, (q.x, q.y, q.z, q.w))
         except (ValueError, ArithmeticError) as err:   # PlanningError, UnknownSkillError, ...
             self.get_logger().error(f'/generalize with skill {settings.skill!r}: {_short(err)}')
             response.plan = path_from_numpy(np.zeros((0, 3)), stamp=stamp)
             return response
         response.plan = path_from_numpy(plan.positions, plan.t, stamp, 'base_link',
                                         plan.orientation)
-        self._planned += 1
+        self._execute(settings, skill, plan, stamp, request.goal.header.frame_id == '',
+                      response.plan.header)
+        return response
+
+    def _on_generalize_with(self, request, response):
+        """Serve ~/generalize_with: /generalize with the skill and settings in the request."""
+        settings = self._settings
+        stamp = self.get_clock().now().nanoseconds
+        try:
+            given = self._service_values('generalize_with', request)
+            changes = [Parameter(name, value=given[name]) for name in
+                       ('skill', 'method', 'duration', 'execute') if name in given]
+            if changes:   # this request's settings, checked as ros2 param set checks them
+                settings = Settings.from_values(self._values(changes))
+            start = given.get('start')
+            start = self._tool_position(settings) if start is None else bounded(start, 'start')
+            goal = given.get('goal')
+            goal = self._perceived_goal(settings) if goal is None else bounded(goal, 'goal')
+            if start.shape != (3,) or goal.shape != (3,):
+                raise ValueError(f'start and goal must be 3 numbers [x, y, z], got '
+                                 f'{start.size} and {goal.size}')
+            skill, plan = self._plan(settings, start, goal, given.get('goal_orientation'))
+        except (ValueError, ArithmeticError) as err:
+            reason = f'with skill {settings.skill!r}: {_short(err)}'
+            self.get_logger().error(f'{self._generalize_with_name}: {reason}')
+            response.result.reason = reason
+            return response
+        self._execute(settings, skill, plan, stamp, 'goal' not in given,
+                      Header(stamp=ns_to_stamp(stamp), frame_id='base_link'))
+        response.result.successful = True
+        response.result.reason = (
+            f'planned skill {settings.skill!r} ({plan.method}): {len(plan.t)} poses over '
+            f'{plan.t[-1]:.2f} s' + (', published on /etdmp/path' if settings.execute else
+                                     ' (execute false: not published)'))
+        return response
+
+    def _service_values(self, service, request):
+        """Return {argument: value} of a request to ``service`` (DESCRIPTION); ValueError."""
+        given = {}
+        for argument in request.parameters:
+            value = parameter_value_to_python(argument.value)
+            if value is not None:
+                given[argument.name] = plain(value)
+        return DESCRIPTION.service(service).values(given)
+
+    def _plan(self, settings, start, goal, goal_orientation):
+        """
+        Return (skill, Plan) of ``settings.skill`` from ``start`` to ``goal`` (base_link).
+
+        Raises ValueError or ArithmeticError with the reason: the goal's checks, the planning's
+        and the timing check's.
+        """
+        obstacles = self._current_obstacles(settings)
+        skill = self._library.skill(settings.skill, settings.formulation, settings.n_basis)
+        self._check_goal(goal, skill, settings)
+        with self._core_lock, np.errstate(over='raise', invalid='raise', divide='raise'):
+            plan = plan_path(skill, start, goal, obstacles, settings.plan, settings.plane,
+                             goal_orientation=goal_orientation)
+            if settings.check_timing:
+                self._check_timing(plan, skill, settings)
+        return skill, plan
+
+    def _execute(self, settings, skill, plan, stamp, perceived_goal, header):
+        """Count a plan made, and publish it for the controller unless ``execute`` is false."""
+        with self._state_lock:
+            self._planned += 1
         if settings.execute:
-            self._start_following(skill, plan, settings, stamp,
-                                  perceived_goal=request.goal.header.frame_id == '')
+            self._start_following(skill, plan, settings, stamp, perceived_goal=perceived_goal)
             # The same Path as the response, its bytes written with numpy (0.1 ms, where rclpy
             # serializes the message in ~2).
             self._path_pub.publish(serialize_path(plan.positions, plan.t, stamp, 'base_link',
                                                   plan.orientation))
             if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
-                self._request_markers((settings, skill, plan, response.plan.header))
-        self.get_logger().debug(f'/generalize: {settings.skill} ({plan.method}), '
+                self._request_markers((settings, skill, plan, header))
+        self.get_logger().debug(f'planned {settings.skill} ({plan.method}), '
                                 f'{len(plan.t)} poses over {plan.t[-1]:.2f} s')
-        return response
 
     def _refuse_busy(self, request, response, waited):
         """Answer a request that waited too long with an empty plan; say so every few seconds."""

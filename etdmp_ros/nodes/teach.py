@@ -8,17 +8,17 @@ and its script are package files (``etdmp_ros/teach_page/``); what the node does
 is ROS-free (:mod:`etdmp_ros.skills.teaching`); the server is aiohttp in a thread of its own
 (:mod:`etdmp_ros.nodes._web`). docs/teach.md says what the page shows and sends.
 
-Interfaces, all of them the system's existing ones (nothing new in the other nodes):
+Interfaces (docs/teach.md, "How the page talks to dmp_server"): every request carries its own
+skill name and settings, so that the page and other clients of dmp_server cannot mix, and no
+parameter of dmp_server changes:
 
-- teaching: dmp_server's parameters ``teach_skill_name`` (set) and its task plane,
-  ``formulation`` and ``n_basis`` (read, so the drawing is checked and shown exactly as dmp_server
-  will learn it), then a ``nav_msgs/Path`` on ``/etdmp/demonstrations``; dmp_server's answer is
-  its own log line, read from ``/rosout`` (``rcl_interfaces/Log``, logger ``dmp_server``), the
-  line ``ros2 run`` prints: "learned skill 'Z' ..." or "taught demonstration for skill 'Z'
-  rejected: <reason>";
-- writing: dmp_server's ``skill``, ``duration`` and ``execute`` (set), then ``/generalize`` with
-  empty frame ids (from the pen to the perceived goal); a refusal's reason is dmp_server's ERROR
-  line on ``/rosout``;
+- teaching: dmp_server's task plane, ``formulation`` and ``n_basis`` (read, so the drawing is
+  checked and shown exactly as dmp_server will learn it), then dmp_server's ``~/teach`` service
+  with the name and the drawing's base_link samples; its answer says what it learned, or why
+  not;
+- writing: dmp_server's ``~/generalize_with`` service with the skill, the duration and
+  ``execute`` true, from the pen to the perceived goal; its answer says what it planned, or why
+  not;
 - the camera view: ``/camera/camera/color/image_raw`` (raw bytes, best effort: never able to
   hold the camera's publisher back) and its ``camera_info``, the plan on ``/etdmp/path``, the
   pen trace (``trace_source``), the controller's status. The image and the trace are subscribed
@@ -27,15 +27,13 @@ Interfaces, all of them the system's existing ones (nothing new in the other nod
 
 Threads: the executor (``_spin.run``) runs the subscriptions and a 2 Hz timer that subscribes
 and unsubscribes the camera view; the web server's loop thread and its workers serve the page
-and wait for dmp_server (one teaching or writing at a time).
+and wait for dmp_server's answers (one teaching or writing at a time from this page).
 """
 
 import asyncio
-from collections import deque
 import contextlib
 from dataclasses import dataclass
 import importlib.resources
-import json
 import struct
 import threading
 import time
@@ -46,23 +44,21 @@ from etdmp_ros import limits
 from etdmp_ros.dmp import builtin_demo, learn
 from etdmp_ros.geometry.camera import CameraPose
 from etdmp_ros.geometry.task_plane import TaskPlane
-from etdmp_ros.nodes._web import WebServer
+from etdmp_ros.nodes._web import one_line, WebServer
 from etdmp_ros.ros import system
-from etdmp_ros.ros.conversions import (image_from_cdr, intrinsics_from_camera_info, path_from_cdr,
-                                       path_from_numpy)
+from etdmp_ros.ros.conversions import image_from_cdr, intrinsics_from_camera_info, path_from_cdr
 from etdmp_ros.ros.conversions._cdr import CdrReader
 from etdmp_ros.ros.parameters import declared_settings, InvalidConfiguration
 from etdmp_ros.ros.spin import run
 from etdmp_ros.skills.library import check_skill_name
-from etdmp_ros.skills.teaching import (Canvas, generalizations, learn_drawing, parse_drawing,
-                                       project, taught_path, teaching_outcome, TeachInputError,
+from etdmp_ros.skills.teaching import (Canvas, decode_json, generalizations, is_local,
+                                       learn_drawing, LOCAL_NAMES, MalformedRequest,
+                                       parse_drawing, project, taught_path, TeachInputError,
                                        Trace)
 from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import Path
-from nav_msgs.srv import GetPlan
 import numpy as np
-from rcl_interfaces.msg import Log
-from rcl_interfaces.srv import GetParameters, SetParameters
+from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -80,10 +76,9 @@ TRACE_TOPICS = {'ground_truth': 'ur10_sim/ground_truth/tool_tip', 'tool_pose': '
 WATCH_PERIOD = 0.5
 #: Longest wait for a dmp_server service to be offered (s).
 SERVICE_WAIT = 2.0
-#: A parameter request without an answer after this long is sent again (s).
+#: A request that may be repeated (reading parameters, teaching) is sent again after this long
+#: without an answer (s).
 RETRY_PERIOD = 1.0
-#: Host names a page served on a loopback address may be asked for (else: DNS rebinding).
-LOCAL_NAMES = ('localhost', '127.0.0.1', '::1')
 #: Plan poses projected for the page at most.
 PLAN_POINTS = 600
 _LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -149,56 +144,6 @@ def point_from_cdr(data):
         raise ValueError('serialized message ends too early') from None
 
 
-class Reports:
-    """dmp_server's log lines as they arrive on /rosout, for the requests that wait for one."""
-
-    def __init__(self, size=200):
-        """Keep the last ``size`` lines."""
-        self._lines = deque(maxlen=size)
-        self._count = 0
-        self._closed = False
-        self._changed = threading.Condition()
-
-    def close(self):
-        """Make every wait return None at once (the node is stopping)."""
-        with self._changed:
-            self._closed = True
-            self._changed.notify_all()
-
-    def add(self, level, text):
-        """Add a line (level: rcl_interfaces/Log's, e.g. 40 = ERROR)."""
-        with self._changed:
-            self._lines.append((self._count, level, text))
-            self._count += 1
-            self._changed.notify_all()
-
-    def mark(self):
-        """Return the number of the next line (what :meth:`wait` looks at from)."""
-        with self._changed:
-            return self._count
-
-    def wait(self, since, match, timeout):
-        """
-        Return ``(result, text)`` of the first line from ``since`` on where ``match`` says so.
-
-        ``match(level, text)`` returns None for a line that is not the one waited for. Returns
-        None after ``timeout`` seconds without one.
-        """
-        deadline = time.monotonic() + timeout
-        with self._changed:
-            while True:
-                for number, level, text in self._lines:
-                    if number >= since:
-                        result = match(level, text)
-                        if result is not None:
-                            return result, text
-                since = self._count
-                remaining = deadline - time.monotonic()
-                if remaining <= 0.0 or self._closed:
-                    return None
-                self._changed.wait(remaining)
-
-
 def _message(err):
     text = str(err)
     return text if len(text) <= 2 * limits.MAX_REASON_CHARS else \
@@ -214,12 +159,8 @@ class TeachNode(Node):
         log = self.get_logger()
         self._settings = declared_settings(self, DESCRIPTION, Settings.from_values)
         settings = self._settings
-        namespace = self.get_namespace().strip('/').replace('/', '.')
-        server_logger = settings.dmp_server.replace('/', '.')
-        self._server_logger = f'{namespace}.{server_logger}' if namespace else server_logger
         self._busy = threading.Lock()
         self._stopping = threading.Event()
-        self._reports = Reports()
         self._frame = None            # the latest colour image: (CDR bytes, received)
         self._jpeg = (None, None, 0.0)   # (JPEG, the frame's received, encoded at)
         self._jpeg_lock = threading.Lock()
@@ -231,17 +172,16 @@ class TeachNode(Node):
         self._watched_until = 0.0
         self._view = []               # the subscriptions made while a page watches
         self.frames_received = 0
-        self.create_subscription(Log, '/rosout', self._on_log, QoSProfile(depth=100))
         self.create_subscription(Path, 'etdmp/path', self._on_path, _LATCHED, raw=True)
         self.create_subscription(String, 'etdmp/controller/status', self._on_status, _LATCHED)
-        self._demonstrations = self.create_publisher(Path, 'etdmp/demonstrations', 10)
         server = settings.dmp_server
-        self._set_client = self.create_client(SetParameters, f'{server}/set_parameters')
         self._get_client = self.create_client(GetParameters, f'{server}/get_parameters')
-        self._generalize = self.create_client(GetPlan, 'generalize')
+        self._teach_client = self.create_client(SetParametersAtomically, f'{server}/teach')
+        self._write_client = self.create_client(SetParametersAtomically,
+                                                f'{server}/generalize_with')
         self.create_timer(WATCH_PERIOD, self._update_view)
         threading.Thread(target=_warm_up, daemon=True, name='warm_up').start()
-        self._web = WebServer(make_app(self), settings.address, settings.port)
+        self._web = WebServer(make_app(self), settings.address, settings.port, self._web_log)
         try:
             self._web.start()
         except OSError as err:
@@ -260,17 +200,25 @@ class TeachNode(Node):
         """Return True if the page is served to this machine only."""
         return self._settings.address in LOCAL_NAMES
 
+    def said(self, request, status, text):
+        """Log the answer ``status`` (4xx: WARN, 5xx: ERROR) to ``request``, one line."""
+        self._web_log('warn' if status < 500 else 'error',
+                      f'{request.method} {request.path}: {status}: {text}')
+
+    def _web_log(self, level, text):
+        text = f'teaching page: {one_line(text, 2 * limits.MAX_REASON_CHARS)}'
+        # Two call sites: rclpy refuses a call site whose severity changes between calls.
+        if level == 'warn':
+            self.get_logger().warn(text)
+        else:
+            self.get_logger().error(text)
+
     def stop(self):
         """Stop the web server (called before the node is destroyed)."""
         self._stopping.set()
-        self._reports.close()
         self._web.stop()
 
     # -- subscriptions ----------------------------------------------------------------------
-
-    def _on_log(self, msg):
-        if msg.name == self._server_logger:
-            self._reports.add(int(msg.level), msg.msg)
 
     def _on_path(self, data):
         try:
@@ -353,15 +301,16 @@ class TeachNode(Node):
             time.sleep(0.005)
         return future.result()
 
-    def _set(self, values):
-        """Set dmp_server parameters; TeachInputError with its reason if it refuses one."""
-        request = SetParameters.Request(parameters=[
-            Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
-        results = self._call(self._set_client, request, 'setting parameters', retry=True).results
-        for name, result in zip(values, results):
-            if not result.successful:
-                raise TeachInputError(f'dmp_server refused {name} = {values[name]!r}: '
-                                      f'{result.reason}')
+    def _ask(self, client, what, retry, **arguments):
+        """
+        Call one of dmp_server's request services with ``arguments``; return its answer.
+
+        The answer is a SetParametersResult: ``successful`` and dmp_server's ``reason``.
+        """
+        request = SetParametersAtomically.Request(parameters=[
+            Parameter(name, value=value).to_parameter_msg()
+            for name, value in arguments.items()])
+        return self._call(client, request, what, retry=retry).result
 
     def _server_plane(self):
         """Return (TaskPlane with dmp_server's scale, formulation, n_basis) from dmp_server."""
@@ -414,27 +363,14 @@ class TeachNode(Node):
                 raise TeachInputError(f'not taught: {err} (checked here as dmp_server checks '
                                       'it; nothing was sent)') from None
             shown = generalizations(skill, canvas, plane)
-            self._set({'teach_skill_name': drawing.name})
-            deadline = time.monotonic() + SERVICE_WAIT
-            while self._demonstrations.get_subscription_count() == 0:
-                if time.monotonic() > deadline or self._stopping.is_set():
-                    raise Unavailable('nobody subscribes to /etdmp/demonstrations: is '
-                                      'dmp_server running?')
-                time.sleep(0.01)
             positions, t = taught_path(drawing, canvas, plane)
-            mark = self._reports.mark()
-            self._demonstrations.publish(path_from_numpy(
-                positions, t, self.get_clock().now().nanoseconds, 'base_link'))
-            report = self._reports.wait(
-                mark, lambda level, text: teaching_outcome(drawing.name, text),
-                self._settings.report_timeout)
-            if report is None:
-                raise Unavailable(f'dmp_server did not report on /rosout within '
-                                  f'{self._settings.report_timeout:g} s whether it learned '
-                                  f'{drawing.name!r} (are its /rosout logs disabled?)')
-            learned, text = report
-            if not learned:
-                raise TeachInputError(f'dmp_server: {text}')
+            # Repeated if unanswered: teaching the same again replaces it with the same.
+            answer = self._ask(self._teach_client, 'teaching', True, name=drawing.name,
+                               t=t.tolist(), positions=positions.ravel().tolist(),
+                               recorded_dim='2d')
+            if not answer.successful:
+                raise TeachInputError(f'dmp_server: {answer.reason}')
+            text = answer.reason
             elapsed = time.monotonic() - started
         self.get_logger().info(f'taught {drawing.name!r} ({demo.n_samples} samples, '
                                f'{demo.duration:.2f} s, {drawing.strokes} stroke(s)) in '
@@ -467,24 +403,17 @@ class TeachNode(Node):
                                   f'{duration!r}')
         with self._exclusive():
             started = time.monotonic()
-            self._set({'skill': name, 'duration': float(duration), 'execute': True})
             self._trace.clear()
             self._watch()
-            mark = self._reports.mark()
-            plan = self._call(self._generalize, GetPlan.Request(), '/generalize').plan
-            if not plan.poses:
-                report = self._reports.wait(
-                    mark, lambda level, text: True if level >= Log.ERROR and
-                    text.startswith('/generalize') else None, self._settings.report_timeout)
-                reason = report[1] if report else 'no reason on /rosout'
-                raise TeachInputError(f'dmp_server planned nothing: {reason}')
-            first, last = plan.poses[0].header.stamp, plan.poses[-1].header.stamp
-            seconds = (last.sec - first.sec) + (last.nanosec - first.nanosec) * 1e-9
+            # Never repeated: a second request would write it twice.
+            answer = self._ask(self._write_client, 'writing', False, skill=name,
+                               duration=float(duration), execute=True)
             elapsed = time.monotonic() - started
-        return {'ok': True, 'seconds': round(elapsed, 3), 'poses': len(plan.poses),
-                'duration': round(seconds, 3),
-                'message': f'writing {name!r}: {len(plan.poses)} poses over {seconds:.2f} s, '
-                           'from the pen to the goal marker'}
+        if not answer.successful:
+            raise TeachInputError(f'dmp_server planned nothing: {answer.reason}')
+        return {'ok': True, 'seconds': round(elapsed, 3),
+                'message': f'writing {name!r}: dmp_server {answer.reason}, from the pen to the '
+                           'goal marker'}
 
     def camera_jpeg(self):
         """
@@ -545,10 +474,6 @@ def _warm_up():
 
 # ------------------------------------------------------------------------------ the web side
 
-def _no_constant(name):
-    raise ValueError(f'{name} is not a number JSON allows')
-
-
 def _error(status, text):
     return web.json_response({'ok': False, 'error': text}, status=status)
 
@@ -559,13 +484,29 @@ def make_app(node):
     files = {route: ((page / name).read_bytes(), kind)
              for route, (name, kind) in PAGE_FILES.items()}
 
+    def refused(request, status, text):
+        node.said(request, status, text)
+        return _error(status, text)
+
     @web.middleware
-    async def local_only(request, handler):
+    async def guarded(request, handler):
         # A page served to this machine only answers to this machine's names: a web site that
-        # points its own name at 127.0.0.1 (DNS rebinding) gets nothing.
-        if node.loopback and (request.url.host or '').strip('[]') not in LOCAL_NAMES:
+        # points its own name at 127.0.0.1 (DNS rebinding) gets nothing. And whatever goes
+        # wrong in a handler is one line in the log and a JSON answer, never a traceback.
+        try:
+            local = is_local(request.headers.get('Host'))
+        except MalformedRequest as err:
+            return refused(request, 400, str(err))
+        if node.loopback and not local:
+            node.said(request, 403, 'Host is not this machine')
             return web.Response(status=403, text='this page answers on localhost only')
-        return await handler(request)
+        try:
+            return await handler(request)
+        except web.HTTPException:
+            raise   # aiohttp's own answers: 404, 405
+        except Exception as err:   # noqa: B902 - a bug must not be a traceback per request
+            return refused(request, 500, f'internal error: {type(err).__name__}: '
+                                         f'{_message(err)}')
 
     async def page_file(request):
         body, kind = files[request.path]
@@ -574,26 +515,29 @@ def make_app(node):
     def post(action):
         async def handler(request):
             if request.content_type != 'application/json':
-                return _error(415, 'send the request as application/json (as the page does)')
+                return refused(request, 415, 'send the request as application/json (as the '
+                                             'page does)')
             try:
                 body = await request.read()
             except web.HTTPRequestEntityTooLarge:
-                return _error(413, f'the request is larger than MAX_TEACH_REQUEST_BYTES = '
-                                   f'{limits.MAX_TEACH_REQUEST_BYTES} bytes (a drawing may have '
-                                   f'{limits.MAX_DRAWN_POINTS} points): nothing was taught')
+                return refused(request, 413, f'the request is larger than '
+                                             f'MAX_TEACH_REQUEST_BYTES = '
+                                             f'{limits.MAX_TEACH_REQUEST_BYTES} bytes (a drawing '
+                                             f'may have {limits.MAX_DRAWN_POINTS} points): '
+                                             'nothing was taught')
             try:
-                data = json.loads(body, parse_constant=_no_constant)
-            except ValueError as err:   # JSONDecodeError and UnicodeDecodeError are ValueErrors
-                return _error(400, f'the request is not valid JSON: {_message(err)}')
+                data = decode_json(body)
+            except MalformedRequest as err:
+                return refused(request, 400, _message(err))
             loop = asyncio.get_running_loop()
             try:
                 return web.json_response(await loop.run_in_executor(None, action, data))
             except TeachInputError as err:
-                return _error(422, _message(err))
+                return refused(request, 422, _message(err))
             except Busy as err:
-                return _error(409, str(err))
+                return refused(request, 409, str(err))
             except Unavailable as err:
-                return _error(503, str(err))
+                return refused(request, 503, str(err))
         return handler
 
     async def config(request):
@@ -611,7 +555,7 @@ def make_app(node):
         return web.json_response(node.overlay(), headers={'Cache-Control': 'no-store'})
 
     app = web.Application(client_max_size=limits.MAX_TEACH_REQUEST_BYTES,
-                          middlewares=[local_only])
+                          middlewares=[guarded])
     for route in files:
         app.router.add_get(route, page_file)
     app.router.add_get('/api/config', config)

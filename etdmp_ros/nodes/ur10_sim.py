@@ -183,12 +183,10 @@ class UR10SimNode(Node):
     def _validate_parameters(self, parameters):
         for parameter in parameters:
             try:
-                if parameter.name == 'goal_position':
-                    parse_goal_position(_number_list(parameter))
-                elif parameter.name == 'bottle.position':
-                    parse_bottle_position(_number_list(parameter))
+                if parameter.name in ('goal_position', 'bottle.position'):
+                    self.sim.scene.placed(parameter.name, _number_list(parameter))
                 elif parameter.name == 'obstacle_positions':
-                    points = parse_obstacle_positions(_number_list(parameter))
+                    points = self.sim.scene.placed(parameter.name, _number_list(parameter))
                     if len(points) > MAX_OBSTACLES:
                         raise ValueError(f'at most {MAX_OBSTACLES} obstacles, got {len(points)}')
                 elif parameter.name == 'teach_script' and parameter.value:

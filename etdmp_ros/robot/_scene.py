@@ -22,6 +22,7 @@ Objects and the point that stands for each (all in base_link, metres; table top 
 from dataclasses import dataclass
 import math
 
+from etdmp_ros import limits
 from etdmp_ros.geometry.camera import CameraPose
 import numpy as np
 
@@ -69,14 +70,23 @@ def _color(name, value):
     return np.append(rgb[:3], rgb[3] if rgb.size == 4 else 1.0)
 
 
+def _in_workcell(name, array):
+    big = np.flatnonzero(np.abs(array) > limits.MAX_REQUEST_COORDINATE)
+    if big.size:
+        raise ValueError(f'{name} has a coordinate of {array[big[0]]:.3g} m, beyond '
+                         f'{limits.MAX_REQUEST_COORDINATE:g} m (MAX_REQUEST_COORDINATE): no place '
+                         'of the workcell')
+    return array
+
+
 def parse_goal_position(value):
-    """Return ``goal_position`` as a float array (3,); ValueError if not 3 finite numbers."""
-    return _vector('goal_position', value, size=3)
+    """Return ``goal_position`` as a float array (3,); ValueError if not 3 bounded numbers."""
+    return _in_workcell('goal_position', _vector('goal_position', value, size=3))
 
 
 def parse_bottle_position(value):
-    """Return ``bottle.position`` as a float array (2,) [x, y]; ValueError if not 2 finite."""
-    return _vector('bottle.position', value, size=2)
+    """Return ``bottle.position`` as a float array (2,) [x, y]; ValueError if not 2 bounded."""
+    return _in_workcell('bottle.position', _vector('bottle.position', value, size=2))
 
 
 def parse_obstacle_positions(value):
@@ -84,9 +94,19 @@ def parse_obstacle_positions(value):
     Return ``obstacle_positions`` (flat [x1, y1, z1, x2, ...]) as an array (N, 3).
 
     An empty list means no obstacles. ValueError if the length is not a multiple of 3 or a value
-    is not finite.
+    is not finite or beyond MAX_REQUEST_COORDINATE.
     """
-    return _vector('obstacle_positions', value, multiple_of=3).reshape(-1, 3)
+    return _in_workcell('obstacle_positions',
+                        _vector('obstacle_positions', value, multiple_of=3)).reshape(-1, 3)
+
+
+#: The scene's objects that stand on the table and may be moved at runtime: their parameter,
+#: its parser, the SceneConfig field of their radius, and what they are called.
+MOVABLE = {
+    'goal_position': (parse_goal_position, 'goal_radius', 'the goal marker'),
+    'obstacle_positions': (parse_obstacle_positions, 'obstacle_radius', 'obstacle'),
+    'bottle.position': (parse_bottle_position, 'bottle_radius', 'the bottle'),
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,7 +160,7 @@ class SceneConfig:
         whiteboard = _vector('whiteboard.size', p['whiteboard.size'], 2)
         if np.any(whiteboard < 0):
             raise ValueError(f'whiteboard.size must be >= 0, got {whiteboard.tolist()}')
-        return cls(
+        scene = cls(
             tool_offset=_vector('tool_offset', p['tool_offset'], 3),
             initial_joint_positions=_vector('initial_joint_positions',
                                             p['initial_joint_positions'], 6),
@@ -165,3 +185,38 @@ class SceneConfig:
             obstacle_height=_positive('obstacle.height', p['obstacle.height']),
             obstacle_color=_color('obstacle.color', p['obstacle.color']),
         )
+        for name in MOVABLE:
+            scene.placed(name, p[name])
+        return scene
+
+    def placed(self, name, value):
+        """
+        Return the position of movable object ``name`` (a key of MOVABLE) parsed and checked.
+
+        Each object stands on the table: its footprint (a disc of its radius about the point's
+        x, y) lies on the table top, and clear of the robot's base (ROBOT_BASE_RADIUS about
+        base_link's z axis). Heights are free within MAX_REQUEST_COORDINATE (a goal marker below
+        the table top is hidden from the camera, as a test does). Raises ValueError saying
+        where the object would be and why not (before, 1e308 or a bottle inside the robot's
+        base were accepted).
+        """
+        parse, radius_field, what = MOVABLE[name]
+        points = np.atleast_2d(parse(value))
+        radius = getattr(self, radius_field)
+        low = self.table_center - self.table_size / 2.0 + radius
+        high = self.table_center + self.table_size / 2.0 - radius
+        for k, point in enumerate(points):
+            where = f'{what} {k + 1} ' if len(points) > 1 else f'{what} '
+            where += f'at ({", ".join(f"{c:.3f}" for c in point)})'
+            if np.any(point[:2] < low) or np.any(point[:2] > high):
+                raise ValueError(
+                    f'{name}: {where} is off the table: with its radius {radius:g} m it must '
+                    f'stand within x {low[0]:.3f} to {high[0]:.3f} m, y {low[1]:.3f} to '
+                    f'{high[1]:.3f} m (table.center, table.size)')
+            axis = float(np.hypot(point[0], point[1]))
+            if axis < limits.ROBOT_BASE_RADIUS + radius:
+                raise ValueError(
+                    f"{name}: {where} is inside the robot's base: {axis:.3f} m from its axis, "
+                    f'less than ROBOT_BASE_RADIUS {limits.ROBOT_BASE_RADIUS:g} m + its radius '
+                    f'{radius:g} m')
+        return parse(value)

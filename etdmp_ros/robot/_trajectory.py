@@ -9,6 +9,7 @@ nothing else: its feed-forward velocity is the secant of ``pose`` over one contr
 from bisect import bisect_right
 
 
+from etdmp_ros import limits
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.robot import _ik_fast
 
@@ -297,6 +298,13 @@ def trajectory_from_path(stamps_ns, positions, quaternions, tool_rotation, speed
         raise TrajectoryError('positions and orientations must match the stamps in number')
     if not np.all(np.isfinite(positions)) or not np.all(np.isfinite(quat)):
         raise TrajectoryError('the path contains NaN or inf')
+    far = float(np.abs(positions).max())
+    if far > limits.MAX_REQUEST_COORDINATE:
+        # A finite 1e308 overflowed: a timed path raised LinAlgError in the checking thread (a
+        # traceback, the path dropped unsaid); an untimed one passed the check with duration 0.
+        raise TrajectoryError(f'the path has a coordinate of {far:.3g} m, beyond '
+                              f'{limits.MAX_REQUEST_COORDINATE:g} m (MAX_REQUEST_COORDINATE): no '
+                              'place of the workcell')
     if not np.any(quat):
         rotations = np.repeat(np.asarray(tool_rotation, dtype=float)[None], n, axis=0)
     else:

@@ -28,6 +28,8 @@ TABLE_BEGIN = '<!-- parameters: written by `make config` from etdmp_ros/ros/syst
 TABLE_END = '<!-- end of parameters -->'
 LIMITS_BEGIN = '<!-- limits: written by `make config` from etdmp_ros/limits.py -->'
 LIMITS_END = '<!-- end of limits -->'
+SERVICES_BEGIN = '<!-- services: written by `make config` from etdmp_ros/ros/system.py -->'
+SERVICES_END = '<!-- end of services -->'
 
 
 def read_parameter_file(path, node_name=None):
@@ -176,10 +178,34 @@ def parameter_table(spec):
     return '\n'.join(rows)
 
 
+def services_text(spec):
+    """Return the markdown of node ``spec``'s request services and their arguments."""
+    parameters = {p.name for p in spec.all_parameters}
+    blocks = []
+    for service in spec.services:
+        rows = [f'`/{spec.name}/{service.name}` ({system.ARGUMENTS_SERVICE_TYPE}): '
+                f'{service.summary}', '',
+                '| argument | type | unit | range | required | meaning |',
+                '|---|---|---|---|---|---|']
+        for a in service.arguments:
+            meaning = a.description
+            if a.name in parameters:
+                meaning = f'The parameter {a.name} for this request only: {meaning}'
+            rows.append(f'| `{a.name}` | {a.type_name} | {_cell(a.unit)} | '
+                        f'{_cell(_range_cell(a))} | '
+                        f'{"yes" if a.name in service.required else ""} | {_cell(meaning)} |')
+        blocks.append('\n'.join(rows))
+    return '\n\n'.join(blocks)
+
+
 def docs_text(spec, current):
     """Return ``current`` (a docs page) with its parameter table replaced by the generated one."""
-    return replace_block(current, TABLE_BEGIN, TABLE_END, parameter_table(spec),
+    text = replace_block(current, TABLE_BEGIN, TABLE_END, parameter_table(spec),
                          f'docs/{spec.name}.md')
+    if spec.services:
+        text = replace_block(text, SERVICES_BEGIN, SERVICES_END, services_text(spec),
+                             f'docs/{spec.name}.md')
+    return text
 
 
 def _limit_value(value):

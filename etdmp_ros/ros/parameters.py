@@ -15,7 +15,8 @@ declared with before rclpy checks the type; any other type is refused by rclpy w
 import math
 
 from etdmp_ros.ros.system import DOUBLE_ARRAY, STRING_ARRAY
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
 from rclpy.parameter import Parameter
@@ -90,9 +91,10 @@ def declare(node, spec):
 
     Lists given as parameter overrides are converted as :func:`as_declared` does, which is
     registered as the node's pre-set callback (the only one: rclpy joins the lists that several
-    return). Raises rclpy's InvalidParameterValueException /
-    InvalidParameterTypeException when a value given in a parameter file is out of range or of
-    the wrong type.
+    return). Raises rclpy's InvalidParameterValueException / InvalidParameterTypeException when
+    a value given in a parameter file is out of range or of the wrong type, and ValueError when
+    a list's element is out of its range (:meth:`etdmp_ros.ros.system.Parameter.check`);
+    :func:`in_range` checks every later change the same way.
     """
     # Values given with --ros-args -p (typed by rcl as the command line is): the same
     # conversion. rclpy keeps them in this dict and offers no public way to change them.
@@ -104,7 +106,28 @@ def declare(node, spec):
         default = _ARRAY_TYPES[p.array_type] if p.array_type and not p.default else p.default
         node.declare_parameter(p.name, default, descriptor(p))
     node.add_pre_set_parameters_callback(lambda parameters: as_declared(spec, parameters))
-    return values(node, spec)
+    declared = values(node, spec)
+    for p in spec.all_parameters:
+        p.check(declared[p.name])   # ValueError: the node program's FATAL start-up error
+    node.add_on_set_parameters_callback(lambda parameters: in_range(spec, parameters))
+    return declared
+
+
+def in_range(spec, parameters):
+    """
+    Return the SetParametersResult of checking rclpy ``parameters`` against ``spec``'s ranges.
+
+    rclpy checks a scalar's range (its descriptor); a list's elements only this does
+    (:meth:`etdmp_ros.ros.system.Parameter.check`), e.g. static_obstacles [1e308, 0, 0].
+    """
+    described = {p.name: p for p in spec.all_parameters}
+    for parameter in parameters:
+        if parameter.name in described and parameter.type_ != Parameter.Type.NOT_SET:
+            try:
+                described[parameter.name].check(plain(parameter.value))
+            except ValueError as err:
+                return SetParametersResult(successful=False, reason=str(err))
+    return SetParametersResult(successful=True)
 
 
 def values(node, spec, changes=()):

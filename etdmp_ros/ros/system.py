@@ -20,8 +20,10 @@ the user's files. The module needs no ROS.
 """
 
 from dataclasses import dataclass, field, replace
+import math
 from pathlib import Path
 
+from etdmp_ros import limits
 from etdmp_ros.dmp import builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.robot import (ControllerConfig, DEFAULT_ACCELERATION_LIMITS, SCENE_PARAMETERS,
                              SceneConfig)
@@ -76,6 +78,30 @@ class Parameter:
         if isinstance(self.default, list) and not self.default and not self.array_type:
             raise ValueError(f'{self.name}: an empty default needs array_type')
 
+    def check(self, value):
+        """
+        Raise ValueError saying why ``value`` is no value of this parameter, by its description.
+
+        Checks ``choices`` and ``value_range`` (each element of a list, NaN included: a list
+        parameter's range is checked here, rclpy checks only a scalar's). A value of another
+        type (a string for a list with ``dynamic_typing``) is the node's to check.
+        """
+        if self.choices and isinstance(value, str) and value not in self.choices:
+            raise ValueError(f'{self.name} must be one of {", ".join(self.choices)}, got '
+                             f'{value!r}')
+        if self.value_range is None:
+            return
+        low, high = self.value_range
+        many = isinstance(value, (list, tuple))
+        for i, v in enumerate(value if many else [value]):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                continue
+            if not low <= v <= high:
+                where = f'{self.name}[{i}]' if many else self.name
+                unit = f' {self.unit}' if self.unit else ''
+                raise ValueError(f'{where} = {v:.6g}{unit} is outside its range {low:g} to '
+                                 f'{high:g}{unit}')
+
     @property
     def type_name(self):
         """Return the ROS type name (``double``, ``integer[]`` ...) of the parameter."""
@@ -104,6 +130,12 @@ def _parameter(name, default, description, **kwargs):
 
 P = _parameter
 _CONTROL = ControllerConfig()
+#: Range of a coordinate in base_link (m): limits.MAX_REQUEST_COORDINATE either way.
+_WORKCELL = (-limits.MAX_REQUEST_COORDINATE, limits.MAX_REQUEST_COORDINATE)
+#: Range of a joint position (rad): the UR10's joint limits, +-2 pi (its URDF).
+_JOINT_RANGE = (-2.0 * math.pi, 2.0 * math.pi)
+#: Range of a colour component (rgb in 0..1).
+_COLOUR = (0.0, 1.0)
 _PLAN = PlanSettings()
 _GAINS = ObstacleGains()
 _REACH = Workspace()
@@ -112,17 +144,19 @@ _REACH = Workspace()
 #: The workcell shared by every node (config/scene.yaml). Base frame: base_link of the UR10.
 SCENE = (
     P('tool_offset', [0.0, 0.0, 0.16], 'Tool tip (pen, stirrer) in the flange frame tool0, in '
-      'tool0 axes (along the flange axis).', unit='m'),
+      'tool0 axes (along the flange axis).', unit='m', value_range=(-1.0, 1.0)),
     P('initial_joint_positions', [0.0, -1.2, 1.9, -2.27, -1.57, 0.0],
       'Joint positions the simulation starts in (pen 8 cm above the table, pointing down); '
-      'the posture of posture_gain.', unit='rad'),
+      'the posture of posture_gain.', unit='rad', value_range=_JOINT_RANGE),
     P('task_plane.origin', [0.75, 0.15, 0.0], 'Origin of the plane in which 2D skills '
-      '(letters, wiping) are executed: the table top in front of the robot.', unit='m'),
+      '(letters, wiping) are executed: the table top in front of the robot.', unit='m',
+      value_range=_WORKCELL),
     P('task_plane.x_axis', [1.0, 0.0, 0.0], 'x axis of the task plane in base_link.'),
     P('task_plane.y_axis', [0.0, 1.0, 0.0], 'y axis of the task plane in base_link '
       '(orthogonal to x).'),
     P('camera.position', [1.55, 0.05, 0.85], 'Position of the colour optical frame of the '
       'RealSense D435 (z forward, x right, y down) in base_link.', unit='m',
+      value_range=_WORKCELL,
       section='Simulated workcell: ur10_sim builds it, perception reads camera and sizes',
       note='RealSense D435 colour optical frame (ROS: z forward, x right, y down) in '
       'base_link: position [x, y, z] and orientation quaternion [x, y, z, w]. The ONE copy of '
@@ -132,40 +166,50 @@ SCENE = (
     P('camera.orientation', [-0.654881, -0.654881, 0.266705, 0.266705],
       'Orientation quaternion [x, y, z, w] of the colour optical frame in base_link.'),
     P('table.center', [0.45, 0.0], 'Centre [x, y] of the table top (the plane z = 0).',
-      unit='m'),
-    P('table.size', [1.9, 1.5], 'Size [x, y] of the table top.', unit='m'),
-    P('table.height', 0.75, 'Height of the table legs.', unit='m'),
-    P('table.color', [0.62, 0.52, 0.40], 'Table colour, rgb in 0..1.'),
+      unit='m', value_range=_WORKCELL),
+    P('table.size', [1.9, 1.5], 'Size [x, y] of the table top.', unit='m',
+      value_range=(0.1, 10.0)),
+    P('table.height', 0.75, 'Height of the table legs.', unit='m', value_range=(0.1, 2.0)),
+    P('table.color', [0.62, 0.52, 0.40], 'Table colour, rgb in 0..1.', value_range=_COLOUR),
     P('whiteboard.size', [0.6, 0.6], 'Size of a thin (0.5 mm) white sheet lying on the table, '
-      'centred under task_plane.origin; [0, 0]: none.', unit='m'),
-    P('whiteboard.color', [0.95, 0.95, 0.95], 'Whiteboard colour, rgb in 0..1.'),
-    P('bottle.position', [0.70, -0.30], 'Where [x, y] the open bottle stands on the table; '
-      'ur10_sim moves it at runtime (ros2 param set /ur10_sim bottle.position "[0.7, -0.28]").',
-      unit='m'),
-    P('bottle.radius', 0.045, 'Bottle radius.', unit='m'),
-    P('bottle.height', 0.20, 'Bottle height; its mouth is at this z.', unit='m'),
-    P('bottle.color', [0.20, 0.35, 0.85], 'Bottle colour, rgb in 0..1.'),
+      'centred under task_plane.origin; [0, 0]: none.', unit='m', value_range=(0.0, 10.0)),
+    P('whiteboard.color', [0.95, 0.95, 0.95], 'Whiteboard colour, rgb in 0..1.',
+      value_range=_COLOUR),
+    P('bottle.position', [0.70, -0.30], 'Where [x, y] the open bottle stands on the table '
+      "(all of it, clear of the robot's base); ur10_sim moves it at runtime (ros2 param set "
+      '/ur10_sim bottle.position "[0.7, -0.28]").', unit='m', value_range=_WORKCELL),
+    P('bottle.radius', 0.045, 'Bottle radius.', unit='m', value_range=(0.005, 0.5)),
+    P('bottle.height', 0.20, 'Bottle height; its mouth is at this z.', unit='m',
+      value_range=(0.01, 1.0)),
+    P('bottle.color', [0.20, 0.35, 0.85], 'Bottle colour, rgb in 0..1.', value_range=_COLOUR),
     P('goal_position', [0.838, 0.1, 0.002], 'Centre of the top face of the goal marker (a '
-      'green disc lying on the table) in base_link.', unit='m',
+      "green disc lying on the table: all of it on the table top, clear of the robot's base) "
+      'in base_link.', unit='m', value_range=_WORKCELL,
       note='Goal marker: a green disc lying on the table; goal_position is the centre of its '
       'top face. ur10_sim moves it at runtime (ros2 param set /ur10_sim goal_position '
       '"[...]"). Default (make demo): 9 cm from where the pen starts, which lies towards -x, '
       "+y of it (quadrant II) while the letter G's demonstration starts towards +x, +y of its "
       'goal (quadrant I): ET-DMP turns the G by 90 degrees, upright as the camera sees it, and '
       'scales it to about 0.23 m tall, on the whiteboard.'),
-    P('goal_marker.radius', 0.03, 'Radius of the goal marker disc.', unit='m'),
-    P('goal_marker.color', [0.10, 0.75, 0.20], 'Goal marker colour, rgb in 0..1.'),
+    P('goal_marker.radius', 0.03, 'Radius of the goal marker disc.', unit='m',
+      value_range=(0.005, 0.5)),
+    P('goal_marker.color', [0.10, 0.75, 0.20], 'Goal marker colour, rgb in 0..1.',
+      value_range=_COLOUR),
     P('obstacle_positions', [0.757, 0.063, 0.08, 0.921, 0.045, 0.08], 'Centres of the top '
-      'faces of the obstacle cylinders, flat [x1, y1, z1, x2, ...] in base_link.', unit='m',
+      'faces of the obstacle cylinders, flat [x1, y1, z1, x2, ...] in base_link (each on the '
+      "table top, clear of the robot's base).", unit='m', value_range=_WORKCELL,
       note='Obstacles: red upright cylinders; each point [x, y, z] is the centre of a '
       "cylinder's top face (z = obstacle.height: it stands on the table). Flat list [x1, y1, "
       'z1, x2, ...]; ur10_sim moves them at runtime; [] for none (at most 8). Default (make '
       'demo): 20 mm beside the obstacle-free ET-DMP path of the G from the default start to '
       "goal_position (a quarter and half-way along it, inside the letter's bowl): that path "
       'would run through both cylinders (the pen tip needs 25 + 3 mm from an axis).'),
-    P('obstacle.radius', 0.025, 'Radius of the obstacle cylinders.', unit='m'),
-    P('obstacle.height', 0.08, 'Height of the obstacle cylinders.', unit='m'),
-    P('obstacle.color', [0.85, 0.10, 0.10], 'Obstacle colour, rgb in 0..1.'),
+    P('obstacle.radius', 0.025, 'Radius of the obstacle cylinders.', unit='m',
+      value_range=(0.005, 0.5)),
+    P('obstacle.height', 0.08, 'Height of the obstacle cylinders.', unit='m',
+      value_range=(0.01, 1.0)),
+    P('obstacle.color', [0.85, 0.10, 0.10], 'Obstacle colour, rgb in 0..1.',
+      value_range=_COLOUR),
 )
 _SCENE = {p.name: p for p in SCENE}
 
@@ -359,7 +403,8 @@ DMP_SERVER = (
     P('obstacle_max_age', 2.0, '/etdmp/obstacles older than this are ignored; 0 = no limit.',
       unit='s', value_range=_DAY, **_RUNTIME),
     P('static_obstacles', [], 'Obstacle points always used, flat [x1, y1, z1, x2, ...] in '
-      'base_link.', unit='m', array_type=DOUBLE_ARRAY, example=[0.8, 0.1, 0.0], **_RUNTIME),
+      'base_link.', unit='m', value_range=_WORKCELL, array_type=DOUBLE_ARRAY,
+      example=[0.8, 0.1, 0.0], **_RUNTIME),
     P('goal_clearance', _PLAN.goal_clearance, 'A request with an obstacle closer than this to '
       'the goal fails.', unit='m', value_range=(0.0, 1.0), **_RUNTIME),
     P('tool_position_source', 'joint_states', 'Tool position for an empty start frame: '
@@ -375,7 +420,7 @@ DMP_SERVER = (
       **_RUNTIME),
     P('goal_offset', [0.0, 0.0, 0.0], 'Added (base_link) to the perceived goal object for an '
       'empty goal frame id: e.g. the stirring goal near the bottom of the bottle, [0, 0, '
-      '-0.15] below its mouth.', unit='m', **_RUNTIME),
+      '-0.15] below its mouth.', unit='m', value_range=(-2.0, 2.0), **_RUNTIME),
     P('min_distance', _PLAN.min_distance, 'Start and goal closer than this fail the request '
       '(start equals goal).', unit='m', value_range=(0.0, 1.0), **_RUNTIME),
     P('reach_radius', _REACH.reach, 'UR10 reach about the shoulder (reach check: a simple '
@@ -408,6 +453,112 @@ DMP_SERVER = (
       'so that under overload every request is answered (docs/limits.md).', unit='s',
       value_range=(0.01, 60.0), **_RUNTIME),
 )
+
+# -------------------------------------------------------------------- dmp_server's services
+#: The type of dmp_server's services whose request carries what it needs, so that concurrent
+#: clients cannot mix (docs/dmp_server.md, "Requests that carry their settings"): named, typed
+#: arguments (rcl_interfaces/Parameter) answered with successful and a reason. Standard types
+#: only: the package builds no message package of its own.
+ARGUMENTS_SERVICE_TYPE = 'rcl_interfaces/srv/SetParametersAtomically'
+
+
+@dataclass(frozen=True)
+class ServiceSpec:
+    """
+    A service whose request is named, typed arguments (:data:`ARGUMENTS_SERVICE_TYPE`).
+
+    ``name`` is relative to the node (``~/<name>``). Each argument is a :class:`Parameter`: its
+    default gives its type (and is its value when not given, unless it is ``required``); an
+    argument named like one of the node's parameters is that parameter's value for this one
+    request, with its range and choices.
+    """
+
+    name: str
+    summary: str
+    arguments: tuple
+    required: tuple = ()
+
+    def argument(self, name):
+        """Return the argument :class:`Parameter` called ``name``; KeyError if none."""
+        for a in self.arguments:
+            if a.name == name:
+                return a
+        raise KeyError(f'~/{self.name} has no argument {name!r}')
+
+    def values(self, given):
+        """
+        Return ``{argument: value}`` of a request's ``given`` arguments ({name: plain value}).
+
+        Arguments not given are absent (the caller's defaults apply). Raises ValueError naming
+        an unknown argument, a missing required one, a value of the wrong type, or one outside
+        its range or choices (:meth:`Parameter.check`).
+        """
+        known = {a.name: a for a in self.arguments}
+        unknown = sorted(set(given) - set(known))
+        if unknown:
+            raise ValueError(f'~/{self.name} has no argument {unknown[0]!r}; its arguments are '
+                             f'{", ".join(known)}')
+        missing = [name for name in self.required if name not in given]
+        if missing:
+            raise ValueError(f'~/{self.name} needs the argument {missing[0]!r}')
+        values = {}
+        for name, value in given.items():
+            values[name] = _typed(known[name], value, self.name)
+            known[name].check(values[name])
+        return values
+
+
+def _typed(argument, value, service):
+    """Return ``value`` as the type of ``argument``'s default; ValueError if it is not one."""
+    default = [] if argument.array_type == DOUBLE_ARRAY else argument.default
+    number = (int, float)
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, number) and not isinstance(value, bool)
+        value = float(value) if ok else value
+    elif isinstance(default, str):
+        ok = isinstance(value, str)
+    else:   # a list of floats
+        ok = isinstance(value, (list, tuple)) and all(
+            isinstance(v, number) and not isinstance(v, bool) for v in value)
+        value = [float(v) for v in value] if ok else value
+    if not ok:
+        raise ValueError(f'~/{service} argument {argument.name!r} must be a {argument.type_name}, '
+                         f'got {type(value).__name__}')
+    return value
+
+
+_SERVER = {p.name: p for p in DMP_SERVER}
+DMP_SERVER_SERVICES = (
+    ServiceSpec('teach', 'Learn a demonstration as the skill it names, saved like every taught '
+                'one; the answer says what was learned, or why not.', (
+                    P('name', '', 'Name of the skill (1-64 letters, digits, _ or -); a taught '
+                      'skill of that name is replaced.'),
+                    P('t', [], 'Time of each sample (s), rising.', unit='s',
+                      array_type=DOUBLE_ARRAY),
+                    P('positions', [], 'Position of each sample in base_link, flat [x1, y1, '
+                      'z1, x2, ...].', unit='m', value_range=_WORKCELL,
+                      array_type=DOUBLE_ARRAY),
+                    P('orientations', [], 'Tool orientation of each sample in base_link, flat '
+                      '[x1, y1, z1, w1, ...]; none: position only.', array_type=DOUBLE_ARRAY),
+                    _SERVER['recorded_dim']),
+                required=('name', 't', 'positions')),
+    ServiceSpec('generalize_with', '/generalize with its skill and settings in the request: '
+                'the plan goes to /etdmp/path (unless execute is false); the answer says what '
+                'was planned, or why not. No parameter of the node changes.', (
+                    _SERVER['skill'], _SERVER['method'], _SERVER['duration'],
+                    _SERVER['execute'],
+                    P('start', [], "Start [x, y, z] in base_link; none: the tool's position "
+                      '(as an empty start frame id of /generalize).', unit='m',
+                      value_range=_WORKCELL, array_type=DOUBLE_ARRAY),
+                    P('goal', [], 'Goal [x, y, z] in base_link; none: the perceived goal object '
+                      'plus goal_offset (as an empty goal frame id).', unit='m',
+                      value_range=_WORKCELL, array_type=DOUBLE_ARRAY),
+                    P('goal_orientation', [], 'Goal orientation [x, y, z, w] in base_link; none '
+                      'or all zeros: none.', array_type=DOUBLE_ARRAY))),
+)
+
 
 # ------------------------------------------------------------------------------- controller
 CONTROLLER_SCENE = _scene('tool_offset', 'initial_joint_positions')
@@ -465,7 +616,7 @@ CONTROLLER = (
     P('joint_acceleration_limits', list(DEFAULT_ACCELERATION_LIMITS), 'Per joint, UR order '
       '(shoulder pan ... wrist 3). UR publishes none (only torques: 330, 330, 150, 56, 56, 56 '
       'N m); letter G 0.2 m tall in its nominal 2 s needs up to 20 at the elbow.',
-      unit='rad/s^2'),
+      unit='rad/s^2', value_range=(0.1, 1000.0)),
     P('joint_limit_margin', _CONTROL.joint_limit_margin, 'Kept from each joint position '
       'limit; a joint that could not stop before it halts the arm.', unit='rad',
       value_range=(0.0, 0.5)),
@@ -510,11 +661,10 @@ TEACH = (
       'task_plane.origin, robot base at the top as the camera sees it).', unit='m',
       value_range=(0.01, 10.0), section='Teaching'),
     P('dmp_server', 'dmp_server', "The DMP server node (relative to this node's namespace) whose "
-      'parameters the page reads (task plane, formulation, n_basis) and sets (teach_skill_name, '
-      'skill, duration, execute).'),
-    P('report_timeout', 10.0, "Longest wait for dmp_server's answer: a service call, or its "
-      'report on /rosout of a taught demonstration or a refused plan.', unit='s',
-      value_range=(0.1, 120.0)),
+      'parameters the page reads (task plane, formulation, n_basis) and whose ~/teach and '
+      '~/generalize_with services it calls (the page changes none of its parameters).'),
+    P('report_timeout', 10.0, "Longest wait for dmp_server's answer to a service call (reading "
+      'its parameters, teaching, writing).', unit='s', value_range=(0.1, 120.0)),
     P('camera_rate', 5.0, 'Camera images per second a page gets at most (JPEG).', unit='Hz',
       value_range=(0.1, 30.0), section='Camera view'),
     P('jpeg_quality', 80, 'JPEG quality of the camera images sent to the page.',
@@ -548,6 +698,7 @@ class NodeSpec:
     node_class: str
     sim_time: bool = False
     config_header: str = field(default='', repr=False)
+    services: tuple = ()
 
     @property
     def executable(self):
@@ -575,6 +726,13 @@ class NodeSpec:
         """Return ``{name: default}`` of every parameter the node declares."""
         return {p.name: p.default for p in self.all_parameters}
 
+    def service(self, name):
+        """Return the :class:`ServiceSpec` called ``name``; KeyError if the node has none."""
+        for spec in self.services:
+            if spec.name == name:
+                return spec
+        raise KeyError(f'{self.name} has no service {name!r}')
+
 
 #: The nodes in start order (the simulation first: the others wait for its topics).
 NODES = (
@@ -588,7 +746,7 @@ NODES = (
              '(ros2 param set /perception <name> <value>).'),
     NodeSpec('dmp_server', 'learns skills from demonstrations and serves /generalize',
              DMP_SERVER_SCENE, DMP_SERVER, 'etdmp_ros.nodes.dmp_server:DmpServer',
-             sim_time=True),
+             sim_time=True, services=DMP_SERVER_SERVICES),
     NodeSpec('controller', 'follows /etdmp/path with the UR10 tool tip (closed-loop IK)',
              CONTROLLER_SCENE, CONTROLLER, 'etdmp_ros.nodes.controller:ControllerNode',
              sim_time=True),
@@ -633,6 +791,8 @@ def scene_config(overrides=None):
     """
     values = scene_defaults()
     values.update(overrides or {})
+    for p in SCENE:
+        p.check(values[p.name])
     return SceneConfig.from_parameters(values)
 
 

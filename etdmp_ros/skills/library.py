@@ -76,6 +76,10 @@ class SkillExistsError(ValueError):
     """A skill would replace one that must not be replaced (e.g. a built-in one)."""
 
 
+class SkillNameClashError(ValueError):
+    """A new skill's name equals a known skill's but for case (``g`` beside ``G``)."""
+
+
 class UnknownSkillError(ValueError):
     """A skill name that the library does not know (the message lists the known ones)."""
 
@@ -469,14 +473,14 @@ class SkillLibrary:
         Learn ``demo`` (a Demonstration) as skill ``name`` and return its SkillEntry.
 
         Replaces a skill of the same name only if learning succeeds and the existing skill's
-        source is not in ``protected`` (then SkillExistsError). Raises DemonstrationError (or
-        ValueError for a bad name) and leaves the library unchanged on failure.
+        source is not in ``protected`` (then SkillExistsError). A name that equals another
+        skill's but for case (``g`` beside ``G``) is refused (SkillNameClashError): names are
+        case-sensitive, and the two would be one file in a skills folder on a case-insensitive
+        file system. Raises DemonstrationError (or ValueError for a bad name) and leaves the
+        library unchanged on failure.
         """
         check_skill_name(name)
-        existing = self.source(name)
-        if existing is not None and existing in protected:
-            raise SkillExistsError(f'skill {name!r} exists already ({existing}) and is not '
-                                   'replaced')
+        self._check_new(name, protected)
         if not isinstance(demo, Demonstration):
             raise TypeError(f'expected a Demonstration, got {type(demo).__name__}')
         if demo.dim not in (2, 3):
@@ -489,15 +493,39 @@ class SkillLibrary:
         key = (self.formulation, self.n_basis)
         entry._learned[key] = learn(demo, n_basis=self.n_basis, formulation=self.formulation)
         with self._lock:
+            self._check_new(name, protected)   # again: another thread may have added one
             self._entries[name] = entry
         return entry
+
+    def _check_new(self, name, protected):
+        """Raise if skill ``name`` may not be added (a protected one, or a case clash)."""
+        with self._lock:
+            existing = self._entries.get(name)
+            if existing is not None and existing.source in protected:
+                raise SkillExistsError(f'skill {name!r} exists already ({existing.source}) and '
+                                       'is not replaced')
+            other = self._case_twin(name)
+            if other is not None:
+                raise SkillNameClashError(
+                    f'skill name {name!r} differs from the known skill {other.name!r} '
+                    f'({other.source}) only in case: choose another name, or {other.name!r} '
+                    'itself to replace that one (names are case-sensitive, and the two would '
+                    'be one file on a case-insensitive file system)')
+
+    def _case_twin(self, name):
+        """Return the entry whose name equals ``name`` but for case (not ``name`` itself)."""
+        folded = name.casefold()
+        return next((e for n, e in self._entries.items()
+                     if n != name and n.casefold() == folded), None)
 
     def get(self, name):
         """Return the SkillEntry of ``name`` or raise UnknownSkillError listing the known ones."""
         with self._lock:
             entry = self._entries.get(name)
             if entry is None:
-                raise UnknownSkillError(f'unknown skill {name!r}; known skills: '
+                twin = self._case_twin(name) if isinstance(name, str) else None
+                hint = f' (did you mean {twin.name!r}? names are case-sensitive)' if twin else ''
+                raise UnknownSkillError(f'unknown skill {name!r}{hint}; known skills: '
                                         f'{", ".join(sorted(self._entries)) or "none"}')
             return entry
 

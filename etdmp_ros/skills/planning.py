@@ -12,10 +12,10 @@ ET-DMP core and map the result back.
   2D skills. With radii the core's detour avoids them (the ``avoidance`` setting, empty: the
   detour with radii, the paper's point obstacles without; docs/design.md#obstacles-with-a-size).
 - Checks, each a :class:`PlanningError` whose message is the reason given to the user: NaN or inf,
-  start = goal (closer than ``min_distance``), an obstacle on the goal (closer than
-  ``goal_clearance``), a goal or a path point outside the :class:`Workspace`, and whatever the
-  core refuses (``GeneralizationError``: for the detour, also a start or goal inside an obstacle
-  and a clearance it cannot keep).
+  a coordinate beyond ``MAX_REQUEST_COORDINATE`` (:func:`bounded`), start = goal (closer than
+  ``min_distance``), an obstacle on the goal (closer than ``goal_clearance``), a goal or a path
+  point outside the :class:`Workspace`, and whatever the core refuses (``GeneralizationError``:
+  for the detour, also a start or goal inside an obstacle and a clearance it cannot keep).
 - Timing: samples every ``output_period`` seconds from 0 to ``tau (1 + margin)``, with ``tau`` the
   ``duration`` setting (0: the demonstration's own duration) and ``margin`` the
   ``obstacle_margin`` when the paper's coupling avoids obstacles (its detour arrives later), else
@@ -32,8 +32,10 @@ ET-DMP core and map the result back.
 from dataclasses import dataclass, field, replace
 import math
 
+from etdmp_ros import limits
 from etdmp_ros.dmp import (AVOIDANCES, euclidean_transform, GeneralizationError, METHODS,
                            ObstacleGains)
+from etdmp_ros.geometry.quaternion import unit_and_norm
 import numpy as np
 
 #: Tool orientation (x, y, z, w) in base_link that points the tool's z axis down (-z of
@@ -117,10 +119,10 @@ def _quaternion(value):
     q = np.asarray(value, dtype=float)
     if q.shape != (4,) or not np.all(np.isfinite(q)):
         raise ValueError(f'tool_orientation must be 4 finite numbers (x, y, z, w), got {value!r}')
-    norm = np.linalg.norm(q)
+    unit, norm = unit_and_norm(q)
     if not norm > 1e-6:
         raise ValueError('tool_orientation must be a non-zero quaternion (x, y, z, w)')
-    return tuple(float(c) for c in q / norm)
+    return tuple(float(c) for c in unit)
 
 
 @dataclass(frozen=True)
@@ -223,9 +225,27 @@ def _points(value, what, shape):
         raise PlanningError(f'{what} must be a point (x, y, z), got shape {array.shape}')
     if shape != (3,):
         array = array.reshape(-1, 3) if array.size else np.zeros((0, 3))
-    if not np.all(np.isfinite(array)):
+    return bounded(array, what)
+
+
+def bounded(points, what):
+    """
+    Return ``points`` (any shape, base_link metres) as a float array, checked as a request's.
+
+    Raises PlanningError for NaN or inf, and for a coordinate beyond MAX_REQUEST_COORDINATE (a
+    finite 1e308 overflowed in every plan it reached: as an obstacle, "overflow encountered
+    in divide").
+    """
+    points = np.asarray(points, dtype=float)
+    if not np.all(np.isfinite(points)):
         raise PlanningError(f'{what} contains NaN or inf')
-    return array
+    big = np.abs(points) > limits.MAX_REQUEST_COORDINATE
+    if np.any(big):
+        value = points[np.unravel_index(np.flatnonzero(big)[0], points.shape)]
+        raise PlanningError(f'{what} has a coordinate of {value:.3g} m, beyond '
+                            f'{limits.MAX_REQUEST_COORDINATE:g} m (MAX_REQUEST_COORDINATE): no '
+                            'place of the workcell')
+    return points
 
 
 def _radii(value, count):
@@ -302,8 +322,9 @@ def goal_orientation_of(skill, value, settings):
         raise PlanningError(f'goal orientation {q.tolist()} contains NaN or inf')
     if not np.any(q) or np.array_equal(q, (0.0, 0.0, 0.0, 1.0)):
         return None
-    norm = float(np.linalg.norm(q))
+    unit, norm = unit_and_norm(q)
     if abs(norm - 1.0) > GOAL_ORIENTATION_NORM_TOLERANCE:
+        # (1e308, 1e308, 0, 1) was refused as "overflow encountered in dot" before.
         raise PlanningError(f'goal orientation {_fmt(q)} is not a unit quaternion (norm '
                             f'{norm:.4g}); send a unit one, or all zeros for no goal '
                             'orientation')
@@ -313,7 +334,7 @@ def goal_orientation_of(skill, value, settings):
     if settings.orientation_mode == 'tool':
         raise PlanningError("a goal orientation was given, but orientation_mode is 'tool' (the "
                             'tool keeps tool_orientation); send all zeros for none')
-    return q / norm
+    return unit
 
 
 #: Largest deviation from 1 of the norm of a requested goal orientation.
@@ -321,7 +342,7 @@ GOAL_ORIENTATION_NORM_TOLERANCE = 1e-3
 
 
 def _fmt(point):
-    return '(' + ', '.join(f'{c:.3f}' for c in point) + ')'
+    return '(' + ', '.join(f'{c:.3f}' if abs(c) < 1e6 else f'{c:.3g}' for c in point) + ')'
 
 
 def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,

@@ -38,7 +38,9 @@ demonstration's start direction turned by 0, 90, 180 and 270 degrees), in canvas
 """
 
 from dataclasses import dataclass
+import json
 import math
+import re
 import threading
 
 from etdmp_ros import limits
@@ -65,6 +67,70 @@ SAMPLE_PERIOD = 0.01
 
 class TeachInputError(ValueError):
     """What the page sent cannot be taught; the message says why (shown on the page)."""
+
+
+class MalformedRequest(TeachInputError):
+    """The request itself is malformed (HTTP 400): not JSON, nested too deep, a bad Host."""
+
+
+#: Host names a page served on a loopback address may be asked for (else: DNS rebinding).
+LOCAL_NAMES = ('localhost', '127.0.0.1', '::1')
+# Host header: an IPv6 literal in brackets or a name / IPv4 address, then an optional port.
+_HOST = re.compile(r'(?:\[(?P<ip6>[0-9A-Fa-f:.]+)\]|(?P<name>[A-Za-z0-9._~%!$&\'()*+,;=-]+))'
+                   r'(?::(?P<port>[0-9]{0,5}))?')
+
+
+def request_host(header):
+    """
+    Return the host name of an HTTP ``Host`` header, lower case (an IPv6 address unbracketed).
+
+    RFC 9110 / 3986: ``host[:port]``, an IPv6 address in brackets (``[::1]:8080``). Raises
+    :class:`MalformedRequest` for anything else: ``::1`` without brackets, ``localhost:8080:x``,
+    a port that is not a number up to 65535, an unclosed bracket.
+    """
+    match = _HOST.fullmatch(header)
+    port = match and match['port']
+    if match is None or (port and int(port) > 65535):
+        raise MalformedRequest(f'the Host header {_shown(header)} is not host[:port] (an IPv6 '
+                               'address is written in brackets: [::1]:8080)')
+    return (match['ip6'] or match['name']).lower()
+
+
+def is_local(header):
+    """
+    Return whether a request's ``Host`` header (None: none sent) names this machine.
+
+    A browser always sends the name it asked for, so a web site that points its own name at
+    127.0.0.1 (DNS rebinding) is refused; a client without a Host header (HTTP/1.0) can only
+    be a program on this machine. Raises :class:`MalformedRequest` for a malformed header.
+    """
+    return header is None or request_host(header) in LOCAL_NAMES
+
+
+def _no_constant(name):
+    raise ValueError(f'{name} is not a number JSON allows')
+
+
+def decode_json(body):
+    """
+    Return the JSON value of a request body (bytes); :class:`MalformedRequest` saying why not.
+
+    NaN and Infinity are no JSON and are refused. Nesting deeper than Python's JSON reader goes
+    (its recursion limit, about 1000; a drawing nests 4 deep) is refused too: the reader raises
+    RecursionError, which is no ValueError.
+    """
+    try:
+        return json.loads(body, parse_constant=_no_constant)
+    except RecursionError:
+        raise MalformedRequest('the request nests lists or objects deeper than a JSON reader '
+                               'allows (a drawing nests 4 deep): nothing was done') from None
+    except ValueError as err:   # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise MalformedRequest(f'the request is not valid JSON: {_cut(err)}') from None
+
+
+def _cut(err, limit=2 * limits.MAX_REASON_CHARS):
+    text = str(err)
+    return text if len(text) <= limit else text[:limit - 3] + '...'
 
 
 @dataclass(frozen=True)
@@ -350,9 +416,12 @@ def project(points, intrinsics, camera):
     Return the pixels (m, 2) of base_link ``points`` (n, 3) in the camera image, as a list.
 
     ``camera``: the optical frame's :class:`etdmp_ros.robot.CameraPose`; points behind the camera
-    (or within 1 cm of its plane) are left out.
+    (or within 1 cm of its plane) are left out, and so are points that are no place of the
+    workcell (NaN, inf or beyond MAX_REQUEST_COORDINATE: a received plan at 1e308 m overflowed
+    into infinite pixels, which JSON cannot carry to the page).
     """
     points = np.asarray(points, dtype=float).reshape(-1, 3)
+    points = points[np.all(np.abs(points) <= limits.MAX_REQUEST_COORDINATE, axis=1)]
     optical = (points - np.asarray(camera.position)) @ camera.rotation
     optical = optical[optical[:, 2] > 0.01]
     if not len(optical):
@@ -392,23 +461,3 @@ class Trace:
         """Return the points kept, (n, 3)."""
         with self._lock:
             return np.array(self._points, dtype=float).reshape(-1, 3)
-
-
-#: What dmp_server logs (its /rosout) when it has learned a taught demonstration, and when it
-#: has refused one (etdmp_ros/nodes/dmp_server.py, _on_demonstration).
-LEARNED = 'learned skill {name!r} ('
-REJECTED = 'taught demonstration for skill {name!r} rejected: '
-
-
-def teaching_outcome(name, message):
-    """
-    Return True (learned), False (refused) or None (another line) for a dmp_server log line.
-
-    ``message``: the text of one of dmp_server's log lines after a demonstration was taught as
-    skill ``name``.
-    """
-    if message.startswith(LEARNED.format(name=name)) and '/etdmp/demonstrations' in message:
-        return True
-    if message.startswith(REJECTED.format(name=name)):
-        return False
-    return None

@@ -26,7 +26,8 @@ import pytest
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Header
 from support.bad_files import big_csv, forged_npy, npz_bomb
-from test_dmp_server_node import Client, GOAL, request, START, TIMEOUT, wait_for_log
+from test_dmp_server_node import (Client, GOAL, obstacles_msg, request, START, TIMEOUT,
+                                  wait_for_log)
 
 #: The node's resident memory must stay below this (MB) through every attack. Measured here:
 #: about 230-260 MB after start-up; the .npz attack alone took 11.8 GB before the limits.
@@ -124,6 +125,17 @@ def _request(start, goal, **params):
     return attack
 
 
+def _goal_orientation(q):
+    """Request a plan to GOAL with goal orientation ``q`` (x, y, z, w)."""
+    def attack(env):
+        msg = request(START, GOAL)
+        o = msg.goal.pose.orientation
+        o.x, o.y, o.z, o.w = (float(c) for c in q)
+        future = env['client'].generalize.call_async(msg)
+        return path_to_numpy(env['client']._result(future).plan)[1]
+    return attack
+
+
 def _perceived_goal(goal):
     """Publish ``goal`` on /etdmp/goal, then request a plan to the perceived goal."""
     def attack(env):
@@ -196,6 +208,9 @@ ATTACKS = [
     ('start of 1e200', _request([1e200, 0.2, 0.0], GOAL), ('start', 'MAX_REQUEST_COORDINATE')),
     ('finite start of 1e308', _request([1e308, 0.2, 0.0], GOAL),
      ('1e+308 m', 'MAX_REQUEST_COORDINATE')),
+    # Refused before as "overflow encountered in dot".
+    ('goal orientation (1e308, 1e308, 0, 1)', _goal_orientation((1e308, 1e308, 0.0, 1.0)),
+     ('goal orientation (1e+308, 1e+308, 0.000, 1.000) is not a unit quaternion',)),
 ]
 
 
@@ -216,6 +231,34 @@ def test_attack_is_refused_and_the_node_keeps_serving(attacked, what, attack, fr
     assert len(client.call(START, GOAL)[1]) == 201      # the next good request succeeds
     _nothing_lost(attacked)
     assert rss_mb(node.pid) < RSS_BOUND_MB, rss_mb(node.pid)
+
+
+@pytest.mark.parametrize('name, value, reason', [
+    ('static_obstacles', [1e308, 0.0, 0.0], 'static_obstacles has a coordinate of 1e+308 m'),
+    ('task_plane.origin', [1e308, 0.0, 0.0], 'task_plane.origin has a coordinate of 1e+308 m'),
+    ('tool_orientation', [0.0, 0.0, 0.0, 0.0], 'non-zero quaternion'),
+])
+def test_parameters_beyond_the_workcell_are_refused(attacked, name, value, reason):
+    # Before: accepted, and then every /generalize was refused with "overflow encountered in
+    # divide" until someone set them back.
+    client = attacked['client']
+    [result] = client.set_parameters(**{name: value})
+    assert not result.successful and reason in result.reason, result.reason
+    np.testing.assert_allclose(client.call(START, GOAL)[1], attacked['baseline'], atol=1e-12)
+
+
+def test_a_perceived_obstacle_beyond_the_workcell_is_ignored(attacked):
+    # Before: kept, and every /generalize failed ("overflow encountered in divide") until the
+    # obstacle was older than obstacle_max_age.
+    client, node = attacked['client'], attacked['node']
+    client.publish('obstacles', obstacles_msg([1e308, 0.0, 0.0]))
+    deadline = time.monotonic() + TIMEOUT
+    while '/etdmp/obstacles has a coordinate of 1e+308 m' not in node.log():
+        assert time.monotonic() < deadline, node.log()
+        client.spin_for(0.1)
+    assert '[WARN]' in next(line for line in node.log().splitlines()
+                            if '/etdmp/obstacles has a coordinate' in line)
+    np.testing.assert_allclose(client.call(START, GOAL)[1], attacked['baseline'], atol=1e-12)
 
 
 def test_startup_with_every_bad_file_is_fast_and_bounded(attacked):
@@ -332,3 +375,116 @@ def test_teaching_a_builtin_name_needs_teach_overwrite(attacked):
     assert len(taught) > 0 and np.all(np.isfinite(taught))
     assert len(taught) != len(attacked['baseline']) or \
         np.abs(taught - attacked['baseline']).max() > 0.01
+
+
+# -- the teaching page beside another client of dmp_server ---------------------------------------
+
+@pytest.fixture(scope='module')
+def page(attacked, colcon_install, module_ros_env, tmp_path_factory):
+    """Return the page of the installed teach node beside the module's dmp_server."""
+    from support.drawings import request
+    from etdmp_ros.demo.teach_session import READY
+    tmp = tmp_path_factory.mktemp('page')
+    node = NodeProcess(colcon_install, module_ros_env, tmp, 'teach', {'port': 0})
+    deadline = time.monotonic() + 60.0
+    while not READY.search(node.log()):
+        assert node.process.poll() is None and time.monotonic() < deadline, node.log()
+        time.sleep(0.1)
+    url = READY.search(node.log()).group(1)
+    # Once it has found dmp_server (DDS discovery: seconds on a loaded machine), as a page
+    # opened beside a running system (make teach waits for every node likewise).
+    while _post(url + 'api/teach', request('warm_up'))[0] == 503:
+        assert time.monotonic() < deadline, node.log()
+    yield url
+    assert node.stop() == 0, node.log()
+    assert 'Traceback' not in node.log(), node.log()
+
+
+def _post(url, body):
+    import json
+    import urllib.error
+    import urllib.request
+    request = urllib.request.Request(url, json.dumps(body).encode(),
+                                     {'Content-Type': 'application/json'})
+    try:
+        with urllib.request.urlopen(request, timeout=60) as answer:
+            return answer.status, json.loads(answer.read())
+    except urllib.error.HTTPError as err:
+        return err.code, json.loads(err.read())
+
+
+class Meddler:
+    """Another client setting dmp_server's parameters as fast as it is answered, in a thread."""
+
+    def __init__(self, **values):
+        import itertools
+        import threading
+        self.client, self.sets = Client('another_client'), 0
+        self._values = itertools.cycle([dict(zip(values, v)) for v in zip(*values.values())])
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        """Set the values in turn until stopped."""
+        while not self._stop.is_set():
+            assert all(r.successful for r in self.client.set_parameters(**next(self._values)))
+            self.sets += 1
+            time.sleep(0.01)
+
+    def __enter__(self):
+        assert self.client.parameters.wait_for_service(timeout_sec=TIMEOUT)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join(timeout=TIMEOUT)
+        self.client.close()
+
+
+def test_a_teaching_from_the_page_cannot_be_saved_under_another_client_s_name(attacked, page):
+    # Before: the page set teach_skill_name and then published the drawing; with another client
+    # setting it to its own name meanwhile, 2 of 10 drawings were saved under that name
+    # (silently replacing that skill), and the page answered 503 after 10 s. Now the name comes
+    # in the request (~/teach).
+    from support.drawings import request
+    skills = attacked['skills']
+    with Meddler(teach_skill_name=['other', 'taught']) as meddler:
+        answers = [_post(page + 'api/teach', request(f'page{k}')) for k in range(10)]
+    assert meddler.sets > 10, meddler.sets   # it really set the parameter meanwhile
+    for k, (status, answer) in enumerate(answers):
+        assert status == 200 and answer['message'].startswith(
+            f"dmp_server learned skill 'page{k}' (2D, "), answer
+        assert answer['seconds'] < 5.0, answer['seconds']
+        assert (skills / f'page{k}.csv').is_file()
+    assert not (skills / 'other.csv').exists() and not (skills / 'taught.csv').exists()
+    assert attacked['client'].get_parameters('teach_skill_name')['teach_skill_name'] in (
+        'other', 'taught')     # what the other client set, nothing of the page's
+    print(f'\nten teachings beside {meddler.sets} parameter sets: '
+          f'{sorted(a["seconds"] for _, a in answers)} s')
+
+
+def test_a_writing_from_the_page_uses_its_skill_and_leaves_the_parameters_alone(attacked, page):
+    # Before: the page set skill and duration, then called /generalize: another client's skill
+    # could be written, and a refused plan left both changed for everyone.
+    from etdmp_ros.ros.conversions import joint_state_msg
+    from test_dmp_server_node import point_msg, Q_INIT, SCENE
+    client = attacked['client']
+    client.publish('joint_states', joint_state_msg(Q_INIT))
+    client.publish('goal', PointStamped(header=BASE, point=point_msg(SCENE['goal_position'])))
+    assert (attacked['skills'] / 'page0.csv').is_file()   # taught by the test above
+    with Meddler(skill=['W', 'P'], duration=[0.0, 5.0]):
+        written = [_post(page + 'api/write', {'name': 'page0', 'duration': 3.0})
+                   for _ in range(5)]
+        refused = _post(page + 'api/write', {'name': 'page0', 'duration': 0.3})
+        unknown = _post(page + 'api/write', {'name': 'nothing', 'duration': None})
+    for status, answer in written:
+        assert status == 200 and answer['message'].startswith(
+            "writing 'page0': dmp_server planned skill 'page0' (etdmp): 301 poses over 3.00 s"), \
+            answer
+    assert refused[0] == 422 and 'shortest feasible duration' in refused[1]['error'], refused
+    assert unknown[0] == 422 and "unknown skill 'nothing'" in unknown[1]['error'], unknown
+    values = client.get_parameters('skill', 'duration')
+    assert (values['skill'], values['duration']) in (('W', 0.0), ('P', 5.0)), values
+    assert client.set_parameters(skill='G', duration=0.0)[0].successful
+    assert len(client.call(START, GOAL)[1]) == 201

@@ -555,8 +555,11 @@ def test_unreachable_and_malformed_paths_are_refused(rig):
     bad = Path()
     bad.header.frame_id = 'map'
     bad.poses = [PoseStamped()]
+    huge = path.positions[:3].copy()
+    huge[1, 0] = 1e308   # a traceback in the checking thread before, the path dropped unsaid
     for message in (bad, serialize_path(np.full((3, 3), np.nan), [0.0, 0.1, 0.2]),
-                    serialize_path(path.positions[:3], [0.0, 0.2, 0.1])):
+                    serialize_path(path.positions[:3], [0.0, 0.2, 0.1]),
+                    serialize_path(huge, [0.0, 0.1, 0.2])):
         c.path_pub.publish(message)
         time.sleep(0.3)     # the path topic keeps only the latest message: one at a time
     _, _, commands, status = rig.records(since)
@@ -564,6 +567,7 @@ def test_unreachable_and_malformed_paths_are_refused(rig):
     assert commands and not any(np.any(v) for _, v in commands)      # the arm never moved
     log = rig.controller.log()
     assert "frame 'map' is not base_link" in log and 'NaN' in log and 'increase' in log
+    assert 'coordinate of 1e+308 m, beyond 100 m' in log and 'Traceback' not in log
     assert rig.controller.process.poll() is None
 
 

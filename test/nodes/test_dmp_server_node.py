@@ -36,12 +36,12 @@ from nav_msgs.srv import GetPlan
 
 import numpy as np
 import pytest
-from rcl_interfaces.srv import SetParameters
+from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
-from rclpy.parameter import Parameter
+from rclpy.parameter import Parameter, parameter_value_to_python
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -75,14 +75,19 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 class Client:
     """rclpy in this process, in its own context: service calls, publishers, parameters."""
 
-    def __init__(self):
+    def __init__(self, name='dmp_server_test_client'):
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node('dmp_server_test_client', context=self.context)
+        self.node = rclpy.create_node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.generalize = self.node.create_client(GetPlan, '/generalize')
         self.parameters = self.node.create_client(SetParameters, '/dmp_server/set_parameters')
+        self.get_client = self.node.create_client(GetParameters, '/dmp_server/get_parameters')
+        # dmp_server's services whose requests carry their skill and settings.
+        self.services = {name: self.node.create_client(SetParametersAtomically,
+                                                       f'/dmp_server/{name}')
+                         for name in ('teach', 'generalize_with')}
         self.pub = {
             'joint_states': self.node.create_publisher(JointState, '/joint_states', 10),
             'goal': self.node.create_publisher(PointStamped, '/etdmp/goal', 10),
@@ -135,6 +140,21 @@ class Client:
             (Parameter(name, Parameter.Type.DOUBLE_ARRAY, []) if value == [] else
              Parameter(name, value=value)).to_parameter_msg() for name, value in values.items()])
         return self._result(self.parameters.call_async(req)).results
+
+    def get_parameters(self, *names):
+        """Return dmp_server's parameters ``names`` as {name: value}."""
+        response = self._result(self.get_client.call_async(GetParameters.Request(
+            names=list(names))))
+        return {name: parameter_value_to_python(v) for name, v in zip(names, response.values)}
+
+    def ask(self, service, **arguments):
+        """Call dmp_server's ``service`` (teach, generalize_with); return (successful, reason)."""
+        client = self.services[service]
+        assert client.wait_for_service(timeout_sec=TIMEOUT)
+        result = self._result(client.call_async(SetParametersAtomically.Request(parameters=[
+            Parameter(name, value=value).to_parameter_msg()
+            for name, value in arguments.items()]))).result
+        return result.successful, result.reason
 
     def publish(self, topic, msg, times=3):
         """Publish a few times (the node's subscription may still be matching) and spin."""
@@ -772,3 +792,86 @@ def test_unusable_configuration_stops_the_node_with_the_reason(
     log = node.log()
     assert '[FATAL]' in log and 'invalid parameter' in log and reason in log, log
     assert 'Traceback' not in log, log
+
+
+def test_generalize_with_carries_its_skill_and_settings_in_the_request(client):
+    # /generalize takes its skill and duration from parameters that every client shares; these
+    # come in the request, and no parameter changes, planned or refused.
+    client.publish('obstacles', obstacles_msg(np.zeros((0, 3))))
+    before = client.get_parameters('skill', 'duration', 'execute', 'method')
+    count = len(client.paths)
+    ok, reason = client.ask('generalize_with', skill='W', duration=3.0, start=START.tolist(),
+                            goal=GOAL.tolist())
+    assert ok, reason
+    assert reason == "planned skill 'W' (etdmp): 301 poses over 3.00 s, published on /etdmp/path"
+    deadline = time.monotonic() + TIMEOUT
+    while len(client.paths) == count:
+        assert time.monotonic() < deadline, 'no /etdmp/path'
+        client.spin_for(0.05)
+    t, x, _ = path_to_numpy(client.paths[-1])
+    t_core, x_core = core_plan('W', START, GOAL, tau=3.0)
+    np.testing.assert_allclose(x, x_core, atol=1e-9)       # the W, not the parameter's G
+    np.testing.assert_allclose(t, t_core, atol=1e-9)
+    ok, reason = client.ask('generalize_with', method='dmp', execute=False,
+                            start=[0.66, 0.10, 0.0], goal=GOAL.tolist())
+    assert ok and reason.endswith('(execute false: not published)'), reason
+    for arguments, fragment in (
+            ({'skill': 'nope', 'start': START.tolist(), 'goal': GOAL.tolist()},
+             "unknown skill 'nope'"),
+            ({'skill': 'g', 'start': START.tolist(), 'goal': GOAL.tolist()},
+             "unknown skill 'g' (did you mean 'G'?"),
+            ({'duration': 0.5, 'start': START.tolist(), 'goal': GOAL.tolist()},
+             'shortest feasible duration'),
+            ({'duration': 700.0}, 'duration = 700 s is outside its range 0 to 600 s'),
+            ({'method': 'spline'}, 'method must be one of etdmp, dmp'),
+            ({'skil': 'W'}, "no argument 'skil'"),
+            ({'execute': 1}, "argument 'execute' must be a bool"),
+            ({'start': [0.8, 0.2], 'goal': GOAL.tolist()}, 'must be 3 numbers'),
+            ({'start': [1e308, 0.0, 0.0]}, 'start[0] = 1e+308 m is outside its range')):
+        ok, reason = client.ask('generalize_with', **arguments)
+        assert not ok and fragment in reason, (arguments, reason)
+    assert client.get_parameters('skill', 'duration', 'execute', 'method') == before
+
+
+def test_teach_learns_the_skill_named_in_the_request(server, client):
+    skills = FsPath(client.get_parameters('skills_dir')['skills_dir'])
+    before = client.get_parameters('teach_skill_name', 'recorded_dim')
+    n = 80
+    s = np.linspace(0.0, 1.0, n)
+    wave = np.column_stack([0.72 + 0.1 * s, 0.12 + 0.04 * np.sin(6.0 * s), np.zeros(n)])
+    t = np.linspace(5.0, 6.6, n)    # any origin: times from the first sample
+    ok, reason = client.ask('teach', name='svc_wave', t=t.tolist(),
+                            positions=wave.ravel().tolist(), recorded_dim='2d')
+    assert ok, reason
+    assert reason.startswith("learned skill 'svc_wave' (2D, 80 samples) from /dmp_server/teach, "
+                             f'saved to {skills / "svc_wave.csv"}'), reason
+    saved = np.loadtxt(skills / 'svc_wave.csv', delimiter=',', skiprows=1)
+    np.testing.assert_allclose(saved[:, 0], t - t[0], atol=1e-9)
+    np.testing.assert_allclose(saved[:, 1:] * PLANE.scale, PLANE.to_plane(wave) * PLANE.scale,
+                               atol=1e-9)
+    ok, reason = client.ask('generalize_with', skill='svc_wave', execute=False,
+                            start=START.tolist(), goal=GOAL.tolist())
+    assert ok and "planned skill 'svc_wave'" in reason, reason
+    # Refused with the reason; nothing saved, nothing replaced.
+    for arguments, fragment in (
+            ({'name': 'G'}, "skill 'G' exists already (built-in)"),
+            ({'name': 'g'}, "'g' differs from the known skill 'G' (built-in) only in case"),
+            ({'name': 'Svc_Wave'}, "differs from the known skill 'svc_wave'"),
+            ({'name': '../x'}, "skill name '../x' is not valid"),
+            ({'name': 'short', 't': t[:5].tolist(), 'positions': wave[:5].ravel().tolist()},
+             'at least 10'),
+            ({'name': 'odd', 'positions': wave.ravel()[:-1].tolist()},
+             '80 times need 240 position values'),
+            ({'name': 'far', 'positions': (wave * 1e308).ravel().tolist()},
+             'is outside its range -100 to 100 m'),
+            ({'name': 'many', 't': np.arange(20_001.0).tolist(),
+              'positions': np.zeros(60_003).tolist()}, 'more than MAX_DEMO_SAMPLES = 20000'),
+            ({'nme': 'typo'}, "no argument 'nme'")):
+        given = {'t': t.tolist(), 'positions': wave.ravel().tolist(), **arguments}
+        ok, reason = client.ask('teach', **given)
+        assert not ok and fragment in reason, (arguments.get('name'), reason)
+    saved = {p.stem for p in skills.iterdir()}
+    assert 'svc_wave' in saved and not saved & {'G', 'g', 'Svc_Wave', 'short', 'odd', 'far',
+                                                'many', 'typo'}, saved
+    assert client.get_parameters('teach_skill_name', 'recorded_dim') == before
+    wait_for_log(server, "taught demonstration for skill 'g' rejected")

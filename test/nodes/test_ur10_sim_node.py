@@ -302,6 +302,18 @@ def test_commands_watchdog_and_runtime_parameters(launch):
                       ('goal_position', [0.6, float('nan'), 0.0])):
         result = client.set_parameter(name, bad)
         assert not result.successful and result.reason
+    # Accepted before: a goal at 1e308 m, objects off the table or inside the robot's base.
+    for name, bad, reason in (
+            ('goal_position', [1e308, 0.0, 0.0], 'coordinate of 1e+308 m, beyond 100 m'),
+            ('goal_position', '[2.0, 0.1, 0.002]', 'is off the table'),
+            ('obstacle_positions', [0.8, 0.1, 0.08, 0.05, 0.0, 0.08],
+             "obstacle 2 at (0.050, 0.000, 0.080) is inside the robot's base"),
+            ('bottle.position', [0.7, 0.9], 'the bottle at (0.700, 0.900) is off the table'),
+            ('bottle.position', '[0.0, 0.0]', "is inside the robot's base")):
+        result = client.set_parameter(name, bad)
+        assert not result.successful and reason in result.reason, (name, result.reason)
+    truth = client.received('/ur10_sim/ground_truth/goal')[-1].point
+    assert np.allclose([truth.x, truth.y, truth.z], [0.6, -0.1, 0.002])   # not moved
     for name, bad in (('goal_position', '[0.6, 0.1]'), ('goal_position', 'home')):
         result = client.set_parameter(name, bad)
         assert not result.successful and result.reason

@@ -9,7 +9,8 @@ from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.robot import _ik_fast
 from etdmp_ros.robot import (ControllerConfig, DelayEstimator, DifferentialIK, JOINT_NAMES,
                              MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
-                             TrajectoryController, TrajectoryError, UR10Model)
+                             trajectory_from_path, TrajectoryController, TrajectoryError,
+                             UR10Model)
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -86,6 +87,16 @@ def test_pose_trajectory_rejects_bad_poses():
         PoseTrajectory([0, 1], np.zeros((2, 3)), [np.eye(3), 2 * np.eye(3)])
     with pytest.raises(TrajectoryError, match='not a rotation quaternion'):
         PoseTrajectory.from_quaternions([0, 1], np.zeros((2, 3)), [[0, 0, 0, 1], [0, 0, 0, 0]])
+
+
+@pytest.mark.parametrize('stamps', [[0, 10**7, 2 * 10**7], [0, 0, 0]], ids=['timed', 'untimed'])
+def test_a_received_path_beyond_the_workcell_is_refused(stamps):
+    # A pose at 1e308 m: timed, the spline raised LinAlgError (in the controller's checking
+    # thread: a traceback, the path dropped unsaid); untimed, it passed with duration 0.
+    positions = [[0.8, 0.1, 0.05], [1e308, 0.1, 0.05], [0.8, 0.2, 0.05]]
+    with np.errstate(over='raise', invalid='raise'):
+        with pytest.raises(TrajectoryError, match=r'coordinate of 1e\+308 m, beyond 100 m'):
+            trajectory_from_path(stamps, positions, np.zeros((3, 4)), np.eye(3))
 
 
 def test_quaternions_match_the_geometry_module():

@@ -2,7 +2,8 @@
 
 import math
 
-from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains
+from etdmp_ros.dmp import (builtin_demo, Demonstration, learn, nrmse, ObstacleGains,
+                           unit_quaternions)
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.robot import UR10Model
@@ -41,10 +42,21 @@ def test_task_plane_maps_to_demo_units_and_back():
     (([0, 0, 0], [0, 0, 0], [0, 1, 0], 0.02), 'x_axis must not be zero'),
     (([0, 0, math.nan], [1, 0, 0], [0, 1, 0], 0.02), 'finite'),
     (([0, 0, 0], [1, 0, 0], [0, 1, 0], 0.0), 'scale'),
+    # Accepted before, then every plan failed with "overflow encountered in divide".
+    (([1e308, 0, 0], [1, 0, 0], [0, 1, 0], 0.02),
+     r'origin has a coordinate of 1e\+308 m, beyond 100 m \(MAX_REQUEST_COORDINATE\)'),
+    (([0, 100.5, 0], [1, 0, 0], [0, 1, 0], 0.02), 'beyond 100 m'),
 ])
 def test_task_plane_refuses_bad_parameters(args, message):
     with pytest.raises(ValueError, match=message):
         TaskPlane.create(*args)
+
+
+def test_task_plane_axes_of_any_finite_length_are_normalised():
+    # [1e308, 1e308, 0] squared overflowed: its norm was inf, the axis the zero vector.
+    plane = TaskPlane.create([0.5, 0.0, 0.0], [1e308, 1e308, 0.0], [0.0, 0.0, 1e-6], 0.02)
+    np.testing.assert_allclose(plane.x_axis, [math.sqrt(0.5), math.sqrt(0.5), 0.0])
+    np.testing.assert_allclose(plane.y_axis, [0.0, 0.0, 1.0])
 
 
 def test_2d_plan_is_the_core_plan_in_the_task_plane(g_skill):
@@ -165,6 +177,10 @@ def test_obstacle_radii_are_metres_kept_clear_and_followed(g_skill):
                                  r'1.5\d\d m from the shoulder'),
     (START, [0.1, 0.05, 0.0], (), 'from the base axis, closer than 0.2 m'),
     (START, GOAL, [GOAL + [0.01, 0.0, 0.08]], r'lies on the goal: 10.0 mm from it'),
+    # A static obstacle of 1e308 refused every request with "overflow encountered in divide".
+    (START, GOAL, [[1e308, 0.0, 0.0]],
+     r'obstacles has a coordinate of 1e\+308 m, beyond 100 m \(MAX_REQUEST_COORDINATE\)'),
+    ([0.8, -150.0, 0.0], GOAL, (), 'start has a coordinate of -150 m'),
     ([1.05, -0.3, 0.0], [1.05, -0.15, 0.0], (),
      r"the plan leaves the UR10's reach at t = 0.27 s, \(1.107, -0.303, 0.000\): 1.155 m"),
 ])
@@ -338,11 +354,31 @@ def test_a_goal_orientation_is_reached_and_none_is_all_zeros(stir_skill, wipe_sk
     ((0.0, 0.0, 0.0, np.inf), 'NaN or inf'),
     ((0.0, 0.0, 0.5, 0.5), 'not a unit quaternion'),
     ((0.0, 0.0, 1.0), '4 numbers'),
+    # Refused as "overflow encountered in dot" before.
+    ((1e308, 1e308, 0.0, 1.0),
+     r'goal orientation \(1e\+308, 1e\+308, 0.000, 1.000\) is not a unit quaternion \(norm '
+     r'1.414e\+308\)'),
+    ((1.7e308, 1.7e308, 0.0, 1.0), r'is not a unit quaternion \(norm inf\)'),
 ])
 def test_bad_goal_orientations_are_refused_with_the_reason(stir_skill, value, message):
     mouth = np.array([0.70, -0.30, 0.20])
     with pytest.raises(PlanningError, match=message):
         plan_path(stir_skill, mouth + [-0.06, 0.04, 0.14], mouth, goal_orientation=value)
+
+
+def test_huge_quaternions_are_normalised_without_overflow(stir_skill):
+    # tool_orientation (1e308, 1e308, 0, 1): its norm overflowed to inf, and the "normalised"
+    # orientation was (0, 0, 0, 0). Demonstrated orientations alike (they are normalised).
+    with np.errstate(over='raise', invalid='raise', divide='raise'):
+        settings = PlanSettings(orientation=(1e308, 1e308, 0.0, 1.0))
+        np.testing.assert_allclose(settings.orientation, [math.sqrt(0.5), math.sqrt(0.5), 0, 0],
+                                   atol=1e-15)
+        q = unit_quaternions([[1e308, 0.0, 0.0, 1e308], [0.0, 0.0, 0.0, 2.0]], 2, 'x', str)
+        camera = quat.normalized([1e308, 1e308, 0.0, 1.0])   # was refused: its norm was inf
+    np.testing.assert_allclose(q, [[math.sqrt(0.5), 0, 0, math.sqrt(0.5)], [0, 0, 0, 1.0]])
+    np.testing.assert_allclose(camera, [math.sqrt(0.5), math.sqrt(0.5), 0, 0], atol=1e-15)
+    with pytest.raises(ValueError, match='non-zero'):
+        PlanSettings(orientation=(0.0, 0.0, 1e-300, 0.0))
 
 
 def test_a_goal_orientation_needs_a_skill_with_orientations(g_skill, stir_skill):

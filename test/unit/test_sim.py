@@ -389,5 +389,42 @@ def test_scene_parameters_are_validated():
         SceneConfig.from_parameters(missing)
 
 
+#: Where the objects may not be put (ur10_sim accepted all of them before).
+MISPLACED = [
+    ('goal_position', [1e308, 0.0, 0.0],
+     r'goal_position has a coordinate of 1e\+308 m, beyond 100 m'),
+    ('goal_position', [1.39, 0.1, 0.002], r'the goal marker at \(1.390, 0.100, 0.002\) is off the '
+                                          r'table: .* x -0.470 to 1.370 m'),
+    ('goal_position', [0.05, 0.05, 0.002], "the goal marker .* is inside the robot's base"),
+    ('bottle.position', [0.7, -0.74], r'the bottle at \(0.700, -0.740\) is off the table'),
+    ('bottle.position', [2.0, 0.0], 'is off the table'),
+    ('bottle.position', [0.0, 0.0], r"inside the robot's base: 0.000 m from its axis, less than "
+                                    r'ROBOT_BASE_RADIUS 0.115 m \+ its radius 0.045 m'),
+    ('obstacle_positions', [0.8, 0.1, 0.08, 0.1, -0.05, 0.08], "obstacle 2 .* inside the robot's"),
+    ('obstacle_positions', [0.8, 0.1, 0.08, 0.8, 0.9, 0.08], 'obstacle 2 .* off the table'),
+]
+
+
+@pytest.mark.parametrize('name, value, reason', MISPLACED,
+                         ids=[f'{row[0]} {row[1]}' for row in MISPLACED])
+def test_objects_stand_on_the_table_and_clear_of_the_robot(name, value, reason):
+    scene = system.scene_config()
+    with pytest.raises(ValueError, match=reason):
+        scene.placed(name, value)
+    params = read_parameter_file(_scene_path())
+    with pytest.raises(ValueError, match=reason):
+        SceneConfig.from_parameters({**params, name: value})
+
+
+def test_objects_anywhere_on_the_table_are_taken():
+    scene = system.scene_config()
+    np.testing.assert_allclose(scene.placed('goal_position', [1.36, -0.71, 0.002]),
+                               [1.36, -0.71, 0.002])
+    # Below the table top (hidden from the camera, as test_perception_node.py does): taken.
+    np.testing.assert_allclose(scene.placed('goal_position', [0.7, 0.2, -0.3]), [0.7, 0.2, -0.3])
+    assert scene.placed('obstacle_positions', []).shape == (0, 3)
+    np.testing.assert_allclose(scene.placed('bottle.position', [0.0, 0.161]), [0.0, 0.161])
+
+
 def _scene_path():
     return config_path('scene.yaml')

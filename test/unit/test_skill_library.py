@@ -11,7 +11,8 @@ from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.skills import library as skill_library
 from etdmp_ros.skills.library import (default_skills_dir, demonstration_files, load_demonstration,
                                       read_mcap_path, recorded_path_demo, save_skill_demo,
-                                      SkillExistsError, SkillLibrary, UnknownSkillError)
+                                      SkillExistsError, SkillLibrary, SkillNameClashError,
+                                      UnknownSkillError)
 from mcap_ros2.writer import Writer
 import numpy as np
 import pytest
@@ -300,6 +301,30 @@ def test_a_protected_skill_is_not_replaced():
     assert library.get('G') is builtin and library.source('G') == 'built-in'
     library.add('G', builtin_demo('P'), 'taught')          # not protected: replaced
     assert library.source('G') == 'taught' and library.source('nothing') is None
+
+
+def test_a_name_that_differs_from_a_known_one_only_in_case_is_refused(tmp_path):
+    # Before: 'g' beside 'G' and 'Stir' beside 'stir' were two skills, and in a skills folder
+    # on a case-insensitive file system one file. Lookups stay case-sensitive.
+    library = SkillLibrary()
+    for name in ('G', 'stir'):
+        library.add(name, builtin_demo(name), 'built-in')
+    for name, twin in (('g', 'G'), ('Stir', 'stir'), ('STIR', 'stir')):
+        with pytest.raises(SkillNameClashError, match=f'{name!r} differs from the known skill '
+                           f'{twin!r} \\(built-in\\) only in case'):
+            library.add(name, builtin_demo('P'), 'taught')
+    assert library.names() == ['G', 'stir'] and library.source('G') == 'built-in'
+    with pytest.raises(UnknownSkillError, match="unknown skill 'g' \\(did you mean 'G'\\?"):
+        library.get('g')
+    library.add('G', builtin_demo('P'), 'taught')          # the exact name replaces it
+    assert library.source('G') == 'taught'
+    # Files too: the second of two names that differ only in case is reported, not learned.
+    for stem in ('wave', 'Wave'):
+        save_demo(tmp_path / f'{stem}.csv', Demonstration(stem, np.column_stack(
+            [np.linspace(0, 5, 50), np.sin(np.linspace(0, 5, 50))]), np.linspace(0, 1, 50)))
+    added, errors = library.add_files([tmp_path], PLANE)
+    assert [e.name for e in added] == ['Wave'] and len(errors) == 1
+    assert 'wave.csv' in errors[0] and 'only in case' in errors[0]
 
 
 # -- kinesthetic teaching: a rosbag2 recording of /joint_states

@@ -218,6 +218,11 @@ def test_points_project_into_the_camera_image_or_are_left_out_behind_it():
     assert len(pixels) == 2
     assert np.allclose(pixels[0], [319.5, 239.5])
     assert teaching.project(np.zeros((0, 3)), intrinsics, camera) == []
+    # A plan or trace point at 1e308 m (or NaN) is no pixel (it was inf: no JSON for the page).
+    with np.errstate(over='raise', invalid='raise'):
+        pixels = teaching.project([[0.0, 0.0, 0.0], [1e308, 0.0, 0.0], [np.nan, 0.0, 0.0]],
+                                  intrinsics, camera)
+    assert np.allclose(pixels, [[319.5, 239.5]])
 
 
 def test_the_trace_keeps_points_a_spacing_apart_and_at_most_its_size():
@@ -229,19 +234,6 @@ def test_the_trace_keeps_points_a_spacing_apart_and_at_most_its_size():
     assert math.isclose(points[-1, 0], 0.02)
     trace.clear()
     assert trace.points().shape == (0, 3)
-
-
-def test_dmp_server_s_teaching_reports_are_recognised():
-    learned = ("learned skill 'Z' (2D, 77 samples) from /etdmp/demonstrations, saved to "
-               '/tmp/skills/Z.csv')
-    refused = ("taught demonstration for skill 'Z' rejected: skill 'Z' exists already "
-               '(built-in) and is not replaced; the skills already learned are kept')
-    assert teaching.teaching_outcome('Z', learned) is True
-    assert teaching.teaching_outcome('Z', refused) is False
-    assert teaching.teaching_outcome('Zed', learned) is None
-    assert teaching.teaching_outcome('Z', "learned skill 'Z' (2D, 7 samples) from x.csv") \
-        is None
-    assert teaching.teaching_outcome('Z', '/generalize with skill ...') is None
 
 
 # --------------------------------------------------------------------------------- the node
@@ -258,24 +250,6 @@ def test_the_trace_reader_reads_a_point_at_every_frame_id_length(kind):
         assert point_from_cdr(serialize_message(msg)) == (0.1, -0.2, 0.3), frame
     with pytest.raises(ValueError):
         point_from_cdr(serialize_message(kind())[:20])
-
-
-def test_reports_wait_for_the_line_asked_for():
-    from etdmp_ros.nodes.teach import Reports
-    reports = Reports()
-    reports.add(20, 'old line')
-    mark = reports.mark()
-    reports.add(20, 'something else')
-    reports.add(40, 'the one')
-    found = reports.wait(mark, lambda level, text: level if text == 'the one' else None, 1.0)
-    assert found == (40, 'the one')
-    started = time.monotonic()
-    assert reports.wait(mark, lambda level, text: None, 0.2) is None
-    assert 0.15 < time.monotonic() - started < 1.0
-    reports.close()
-    started = time.monotonic()
-    assert reports.wait(mark, lambda level, text: None, 10.0) is None
-    assert time.monotonic() - started < 0.5
 
 
 def test_the_parameter_file_gives_back_every_default():
@@ -366,6 +340,82 @@ def test_the_teach_node_answers_bad_requests_with_the_reason(teach_node):
     # A page served to this machine only answers to this machine's names (DNS rebinding).
     status, body = _http(url, host='attacker.example')
     assert status == 403 and b'localhost only' in body
+
+
+def _raw(url, data):
+    """Send raw bytes to the node's port; return the answer's status and body."""
+    port = int(url.rsplit(':', 1)[1].strip('/'))
+    with socket.create_connection(('127.0.0.1', port), timeout=10) as connection:
+        connection.sendall(data)
+        answer = b''
+        while chunk := connection.recv(65536):
+            answer += chunk
+    head, _, body = answer.partition(b'\r\n\r\n')
+    return int(head.split()[1]), body
+
+
+def _post(path, body, host='localhost'):
+    return (f'POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\n'
+            f'Content-Length: {len(body)}\r\nConnection: close\r\n\r\n').encode() + body
+
+
+def _get(path, *headers):
+    lines = ''.join(f'{h}\r\n' for h in headers)
+    return f'GET {path} HTTP/1.1\r\n{lines}Connection: close\r\n\r\n'.encode()
+
+
+#: Requests that broke the page's server (HTTP 500 and a traceback of 10-27 lines each), or
+#: were let through: (what, raw request, status, fragment of the answer).
+HTTP_ATTACKS = [
+    ('[ x 100000 to /api/teach', _post('/api/teach', b'[' * 100_000), 400,
+     'nests lists or objects deeper'),
+    ('{"a": x 50000 to /api/write', _post('/api/write', b'{"a": ' * 50_000), 400,
+     'nests lists or objects deeper'),
+    ('Host ::1 without brackets', _get('/api/config', 'Host: ::1'), 400,
+     "the Host header '::1' is not host[:port]"),
+    ('Host localhost:8080:evil', _get('/api/config', 'Host: localhost:8080:evil'), 400,
+     'is not host[:port]'),
+    ('Host with port 99999', _get('/api/config', 'Host: 127.0.0.1:99999'), 400,
+     'is not host[:port]'),
+    ('Host [::1 unclosed (was let through)', _get('/api/config', 'Host: [::1'), 400,
+     'is not host[:port]'),
+    ('Host attacker.example', _get('/api/config', 'Host: attacker.example'), 403,
+     'localhost only'),
+    ('two Host headers', _get('/api/config', 'Host: localhost', 'Host: evil.example'), 400,
+     "Duplicate 'Host'"),
+    ('a header of 100 kB', _get('/', 'Host: localhost', 'X: ' + 'a' * 100_000), 400,
+     'Got more than'),
+]
+
+
+@pytest.mark.parametrize('what, data, status, fragment', HTTP_ATTACKS,
+                         ids=[row[0] for row in HTTP_ATTACKS])
+def test_malformed_requests_get_a_4xx_and_one_log_line(teach_node, capfd, what, data, status,
+                                                       fragment):
+    capfd.readouterr()
+    got, body = _raw(teach_node.url, data)
+    assert (got, fragment in body.decode()) == (status, True), body[:300]
+    time.sleep(0.1)
+    log = capfd.readouterr().err
+    assert 'Traceback' not in log, log
+    lines = [line for line in log.splitlines() if 'teaching page' in line]
+    assert len(lines) == 1 and '[WARN]' in lines[0], log
+    for good in ('Host: localhost:8080', 'Host: [::1]:8080', 'Host: LOCALHOST', 'Host: 127.0.0.1'):
+        assert _raw(teach_node.url, _get('/api/config', good))[0] == 200, good
+
+
+def test_a_failing_handler_is_one_error_line_and_a_json_answer(teach_node, capfd, monkeypatch):
+    def broken():
+        raise KeyError('a bug')
+    monkeypatch.setattr(teach_node, 'config', broken)
+    capfd.readouterr()
+    status, body = _http(teach_node.url + 'api/config')
+    assert status == 500
+    assert json.loads(body) == {'ok': False, 'error': "internal error: KeyError: 'a bug'"}
+    time.sleep(0.1)
+    log = capfd.readouterr().err
+    lines = [line for line in log.splitlines() if 'teaching page' in line]
+    assert 'Traceback' not in log and len(lines) == 1 and '[ERROR]' in lines[0], log
 
 
 def test_a_port_in_use_is_a_clear_start_up_error(teach_node, monkeypatch):
