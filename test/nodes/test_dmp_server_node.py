@@ -584,7 +584,7 @@ def letter_z(n=120):
 def write_mcap(path, positions, t):
     """Record positions as geometry_msgs/PoseStamped on /tool_pose in a rosbag2 .mcap."""
     from mcap_ros2.writer import Writer
-    from test_skill_library import POSE_STAMPED_MSGDEF
+    from support.bags import POSE_STAMPED_MSGDEF
     with open(path, 'wb') as stream:
         writer = Writer(stream)
         schema = writer.register_msgdef('geometry_msgs/msg/PoseStamped', POSE_STAMPED_MSGDEF)

@@ -13,48 +13,14 @@ from etdmp_ros.skills.library import (default_skills_dir, demonstration_files, l
                                       read_mcap_path, recorded_path_demo, save_skill_demo,
                                       SkillExistsError, SkillLibrary, SkillNameClashError,
                                       UnknownSkillError)
-from mcap_ros2.writer import Writer
 import numpy as np
 import pytest
 from support.bad_files import forged_npy, npz_bomb
-
-# Message definitions as rosbag2 stores them in .mcap schemas (ros2msg, dependencies appended).
-_SEP = '=' * 80 + '\n'
-_HEADER_DEPS = (_SEP + 'MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n' +
-                _SEP + 'MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n')
-_POSE_DEPS = (_SEP + 'MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n' +
-              _SEP + 'MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n' +
-              _SEP + 'MSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\n'
-              'float64 w 1\n')
-POSE_STAMPED_MSGDEF = 'std_msgs/Header header\ngeometry_msgs/Pose pose\n' + _HEADER_DEPS + \
-    _POSE_DEPS
-PATH_MSGDEF = ('std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n' + _HEADER_DEPS +
-               _SEP + 'MSG: geometry_msgs/PoseStamped\nstd_msgs/Header header\n'
-               'geometry_msgs/Pose pose\n' + _POSE_DEPS)
+from support.bags import pose_message, write_mcap
 
 PLANE = TaskPlane.create([0.75, 0.15, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.02)
 TILTED = TaskPlane.create([0.5, 0.0, 0.3], [0.0, 1.0, 0.0], [-np.sqrt(0.5), 0.0, np.sqrt(0.5)],
                           0.01)
-
-
-def _pose(p, stamp_ns, frame='base_link'):
-    return {'header': {'stamp': {'sec': stamp_ns // 10**9, 'nanosec': stamp_ns % 10**9},
-                       'frame_id': frame},
-            'pose': {'position': dict(zip('xyz', (float(c) for c in p))),
-                     'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}}}
-
-
-def write_mcap(path, topics):
-    """Write {topic: (kind, [(log_time_ns, message dict), ...])} as a rosbag2 .mcap."""
-    with open(path, 'wb') as stream:
-        writer = Writer(stream)
-        schemas = {'pose': writer.register_msgdef('geometry_msgs/msg/PoseStamped',
-                                                  POSE_STAMPED_MSGDEF),
-                   'path': writer.register_msgdef('nav_msgs/msg/Path', PATH_MSGDEF)}
-        for topic, (kind, messages) in topics.items():
-            for k, (log_time, msg) in enumerate(messages):
-                writer.write_message(topic, schemas[kind], msg, log_time=log_time, sequence=k)
-        writer.finish()
 
 
 def letter_path(n=80, height=0.05):
@@ -153,9 +119,9 @@ def test_mcap_pose_stamped_topic_is_read_with_header_stamps(tmp_path):
     path = letter_path(40)
     stamps = (10**9 * np.linspace(100.0, 101.95, 40)).astype(np.int64)
     log_times = stamps + 5_000_000          # recorded a little later than stamped
-    other = [(int(t), _pose([0, 0, 0], int(t), 'odom')) for t in log_times[:3]]
+    other = [(int(t), pose_message([0, 0, 0], int(t), 'odom')) for t in log_times[:3]]
     write_mcap(tmp_path / 'rec.mcap', {
-        '/tool_pose': ('pose', [(int(lt), _pose(p, int(st))) for p, st, lt in
+        '/tool_pose': ('pose', [(int(lt), pose_message(p, int(st))) for p, st, lt in
                                 zip(path, stamps, log_times)]),
         '/other': ('pose', other)})
     recorded = read_mcap_path(tmp_path / 'rec.mcap', '/tool_pose')
@@ -175,7 +141,7 @@ def test_mcap_pose_stamped_topic_is_read_with_header_stamps(tmp_path):
 def test_mcap_unset_stamps_use_the_recording_times(tmp_path):
     path = letter_path(30) + np.column_stack([np.zeros((30, 2)), np.linspace(0, 0.2, 30)])
     log_times = (10**9 * np.linspace(3.0, 4.5, 30)).astype(np.int64)
-    write_mcap(tmp_path / 'up.mcap', {'/pen': ('pose', [(int(lt), _pose(p, 0)) for p, lt in
+    write_mcap(tmp_path / 'up.mcap', {'/pen': ('pose', [(int(lt), pose_message(p, 0)) for p, lt in
                                                         zip(path, log_times)])})
     demo = load_demonstration(tmp_path / 'up.mcap', PLANE)     # the only topic
     assert demo.dim == 3 and demo.duration == pytest.approx(1.5)
@@ -187,7 +153,8 @@ def test_mcap_path_topic_uses_the_last_path(tmp_path):
 
     def path_msg(points, t0):
         return {'header': {'stamp': {'sec': t0, 'nanosec': 0}, 'frame_id': 'base_link'},
-                'poses': [_pose(p, t0 * 10**9 + k * 50_000_000) for k, p in enumerate(points)]}
+                'poses': [pose_message(p, t0 * 10**9 + k * 50_000_000)
+                          for k, p in enumerate(points)]}
     write_mcap(tmp_path / 'plans.mcap', {'/plan': ('path', [(1, path_msg(first, 1)),
                                                             (2, path_msg(last, 2))])})
     library = SkillLibrary()
@@ -382,7 +349,7 @@ def test_joint_state_recording_becomes_the_tool_path_by_forward_kinematics(tmp_p
     np.testing.assert_allclose(recorded.positions, tip[first:last + 1], atol=1e-12)
     np.testing.assert_allclose(recorded.t, stamps[first:last + 1] * 1e-9)
     assert 39 <= first < 70 and len(joints) - 70 < last <= len(joints) - 40   # rest trimmed
-    rotation = ur10.frame_pose(joints[first + 100])[1]
+    rotation = ur10.framepose_message(joints[first + 100])[1]
     np.testing.assert_allclose(quat.to_matrix(quat.normalized(recorded.orientations[100])),
                                rotation, atol=1e-9)
     demo = load_demonstration(tmp_path / 'taught.mcap', PLANE, kinematics=ur10)
