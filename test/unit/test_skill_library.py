@@ -349,7 +349,7 @@ def test_joint_state_recording_becomes_the_tool_path_by_forward_kinematics(tmp_p
     np.testing.assert_allclose(recorded.positions, tip[first:last + 1], atol=1e-12)
     np.testing.assert_allclose(recorded.t, stamps[first:last + 1] * 1e-9)
     assert 39 <= first < 70 and len(joints) - 70 < last <= len(joints) - 40   # rest trimmed
-    rotation = ur10.framepose_message(joints[first + 100])[1]
+    rotation = ur10.frame_pose(joints[first + 100])[1]
     np.testing.assert_allclose(quat.to_matrix(quat.normalized(recorded.orientations[100])),
                                rotation, atol=1e-9)
     demo = load_demonstration(tmp_path / 'taught.mcap', PLANE, kinematics=ur10)
