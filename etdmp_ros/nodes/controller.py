@@ -358,7 +358,15 @@ class ControllerNode(Node):
             self._stale = False
             self.get_logger().info('joint states are back')
         self._last_step = t
+        resyncs = self.controller.resyncs
         command = self.controller.step(q, t)
+        if self.controller.resyncs != resyncs:
+            at, gap, before, after = self.controller.last_gap
+            self.get_logger().warning(
+                f'no control step for {gap * 1e3:.0f} ms (joint states late: this process was '
+                f'not scheduled?); the arm went on with its last command meanwhile: the path '
+                f'goes on from path time {after:.3f} s, nearest to the tool, instead of '
+                f'{before:.3f} s')
         self._summarize(command, t)
         self._rotation = command.tool_rotation
         self._publish_command(command.qd)
