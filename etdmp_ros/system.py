@@ -163,7 +163,11 @@ SCENE = (
       'demo): 20 mm beside the obstacle-free ET-DMP path of the G from the default start to '
       "goal_position (a quarter and half-way along it, inside the letter's bowl): that path "
       'would run through both cylinders (the pen tip needs 25 + 3 mm from an axis).'),
-    P('obstacle.radius', 0.025, 'Radius of the obstacle cylinders.', unit='m'),
+    P('obstacle_radii', [], 'Radius of each obstacle cylinder, in the order of '
+      'obstacle_positions; obstacles beyond this list (all, when it is empty) have '
+      'obstacle.radius.', unit='m', array_type=DOUBLE_ARRAY, example=[0.025, 0.04]),
+    P('obstacle.radius', 0.025, 'Radius of the obstacle cylinders that obstacle_radii does not '
+      'size; perception starts its measurement of a radius from it.', unit='m'),
     P('obstacle.height', 0.08, 'Height of the obstacle cylinders.', unit='m'),
     P('obstacle.color', [0.85, 0.10, 0.10], 'Obstacle colour, rgb in 0..1.'),
 )
@@ -181,7 +185,8 @@ _SIM_DYNAMIC = {'dynamic': True, 'dynamic_typing': True}
 #: What the simulation builds from: the parameters of SceneConfig.
 _SIM_RUNTIME_SCENE = ('goal_position', 'obstacle_positions', 'bottle.position')
 UR10_SIM_SCENE = tuple(
-    _scene(name, **(_SIM_DYNAMIC if name in _SIM_RUNTIME_SCENE else {}))[0]
+    _scene(name, **(_SIM_DYNAMIC if name in _SIM_RUNTIME_SCENE else
+                    {'dynamic': True} if name == 'obstacle_radii' else {}))[0]
     for name in SCENE_PARAMETERS)
 UR10_SIM = (
     P('control_rate', 125.0, 'Rate of /joint_states, /clock and the ground truth; velocity '
@@ -258,9 +263,13 @@ PERCEPTION = (
       "than this is an occlusion edge (the arm in front), not the object's rim.", unit='m',
       value_range=(1e-3, 1.0), **_DETECTION),
     P('min_rim_points', 8, 'Fewer usable rim pixels than this: the centroid of the top face '
-      'instead of the radius-constrained circle fit.', value_range=(3, 100_000), **_DETECTION),
+      'instead of the circle fit.', value_range=(3, 100_000), **_DETECTION),
     P('max_rim_rms', 0.004, 'A worse rim fit (RMS) flags the blob as two objects overlapping '
       'in the image.', unit='m', value_range=(1e-4, 0.1), **_DETECTION),
+    P('obstacle_radius_range', [0.005, 0.1], 'Radii [low, high] an obstacle may have: each '
+      "obstacle's radius is measured from its rim (when the rim seen spans half the circle or "
+      'more; else obstacle.radius is reported), and one measured outside this range is not '
+      'reported.', unit='m', value_range=(1e-4, 1.0), dynamic=True, dynamic_typing=True),
     P('height_tolerance', 0.02, 'A goal or obstacle whose top face is seen higher than this '
       'above its height (goal marker 2 mm, obstacle.height) or lower below the table top is '
       'refused, as is one off the table (table.center, table.size).', unit='m',

@@ -15,7 +15,8 @@ from ._description import (camera_transforms, chain_pose, FrameTree, robot_descr
                            Transform)
 from ._guide import GuidedMotion, GuideError
 from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, IKResult
-from ._scene import (parse_bottle_position, parse_goal_position, parse_obstacle_positions,
+from ._scene import (obstacle_radii_for, parse_bottle_position, parse_goal_position,
+                     parse_obstacle_positions, parse_obstacle_radii, PEN_RADIUS, PEN_TIP_LENGTH,
                      PEN_TIP_RADIUS, SCENE_PARAMETERS, SceneConfig)
 from ._trajectory import (MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
                           trajectory_from_path, TrajectoryError)
@@ -23,7 +24,7 @@ from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_
                     UR10Model)
 
 _LAZY = {
-    '_sim': ('CameraState', 'MAX_OBSTACLES', 'UR10Sim'),
+    '_sim': ('CameraState', 'Contact', 'MAX_OBSTACLES', 'UR10Sim'),
     '_vision': ('check_frame', 'Detection', 'Detections', 'Detector', 'detector_from_parameters',
                 'DETECTOR_PARAMETERS', 'DetectorSettings', 'FrameSynchronizer', 'HsvRange',
                 'ObjectModel', 'Rejection'),
@@ -45,11 +46,13 @@ __all__ = [
     'CameraIntrinsics', 'CameraPose', 'Command', 'ControllerConfig',
     'DEFAULT_ACCELERATION_LIMITS', 'DelayEstimator', 'DifferentialIK', 'FrameTree',
     'GuidedMotion', 'GuideError', 'IKResult',
-    'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_TIP_RADIUS',
+    'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_RADIUS',
+    'PEN_TIP_LENGTH', 'PEN_TIP_RADIUS',
     'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES', 'SceneConfig', 'TrajectoryController',
     'Transform', 'TrajectoryError', 'UR10Model', 'camera_transforms', 'chain_pose',
-    'matrix_to_quaternion', 'parse_bottle_position', 'parse_goal_position',
-    'parse_obstacle_positions', 'quaternion_to_matrix', 'quaternions_to_rotations',
+    'matrix_to_quaternion', 'obstacle_radii_for', 'parse_bottle_position',
+    'parse_goal_position', 'parse_obstacle_positions', 'parse_obstacle_radii',
+    'quaternion_to_matrix', 'quaternions_to_rotations',
     'robot_data_dir', 'robot_description', 'trajectory_from_path', 'ur10_urdf_path',
     *_LAZY_NAMES,
 ]
