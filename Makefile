@@ -28,7 +28,7 @@ help:
 	@echo "make docs       regenerate the README pictures in docs/img/"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
+	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic|bench-obstacles"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
 	@echo "make browser    headless Chromium + chromedriver for the teaching page's test (apt, as root; make test does it)"

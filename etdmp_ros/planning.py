@@ -11,6 +11,10 @@ ET-DMP core and map the result back.
   start = goal (closer than ``min_distance``), an obstacle on the goal (closer than
   ``goal_clearance``), a goal or a path point outside the :class:`Workspace`, and whatever the
   core refuses (``GeneralizationError``).
+- Obstacle sizes: each obstacle's radius (m, as perceived; 0 for a point) plus the
+  ``tool_radius`` and ``obstacle_clearance`` settings is the clearance the plan must keep from
+  its centre (:attr:`Plan.obstacle_radii`, in metres; divided by the task plane's scale in a
+  2D skill's units).
 - Timing: samples every ``output_period`` seconds from 0 to ``tau (1 + margin)``, with ``tau`` the
   ``duration`` setting (0: the demonstration's own duration) and ``margin`` the
   ``obstacle_margin`` when there are obstacles (a detour arrives later), else 0.
@@ -27,6 +31,7 @@ from dataclasses import dataclass, field, replace
 import math
 
 from etdmp_ros.dmp import euclidean_transform, GeneralizationError, METHODS, ObstacleGains
+from etdmp_ros.robot._scene import PEN_RADIUS
 import numpy as np
 
 #: Tool orientation (x, y, z, w) in base_link that points the tool's z axis down (-z of
@@ -123,7 +128,8 @@ class PlanSettings:
 
     ``obstacle_k`` is in 1/m; 0 keeps the core's default, ``k = gains.k_relative / |x0 - g|``.
     ``orientation`` is normalised; ``orientation_mode`` one of PLAN_ORIENTATION_MODES.
-    Construction raises ValueError for bad values.
+    ``tool_radius`` and ``obstacle_clearance`` (m) add to each obstacle's radius: the clearance
+    the plan keeps from its centre. Construction raises ValueError for bad values.
     """
 
     method: str = 'etdmp'
@@ -139,6 +145,8 @@ class PlanSettings:
     orientation: tuple = TOOL_DOWN
     orientation_mode: str = 'demo'
     workspace: Workspace = field(default_factory=Workspace)
+    tool_radius: float = PEN_RADIUS
+    obstacle_clearance: float = 0.008
 
     def __post_init__(self):
         """Validate and normalise."""
@@ -153,7 +161,7 @@ class PlanSettings:
             raise ValueError(f'independent_axis must be 0, 1 or 2, got {self.independent_axis!r}')
         positive = ('output_period',)
         non_negative = ('duration', 'obstacle_k', 'obstacle_margin', 'goal_clearance',
-                        'min_distance')
+                        'min_distance', 'tool_radius', 'obstacle_clearance')
         for name in positive + non_negative:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0.0 or (name in positive and value == 0.0):
@@ -173,6 +181,9 @@ class Plan:
     quaternion per pose (a skill with orientations), base_link; :attr:`orientations` is (n, 4)
     either way. ``start``, ``goal`` and ``obstacles`` (m, 3) as used (projected onto the task
     plane for 2D skills); ``trajectory``: the core's result in the skill's space.
+    ``obstacle_radii`` (m,): the clearance (m) the plan keeps from each obstacle's centre (its
+    radius + the tool's + ``obstacle_clearance``), None when the obstacles were given without
+    radii.
     """
 
     t: np.ndarray
@@ -184,6 +195,7 @@ class Plan:
     obstacles: np.ndarray
     method: str
     trajectory: object
+    obstacle_radii: np.ndarray = None
 
     @property
     def orientations(self):
@@ -288,22 +300,45 @@ def _fmt(point):
     return '(' + ', '.join(f'{c:.3f}' for c in point) + ')'
 
 
+def obstacle_clearances(radii, settings, count):
+    """
+    Return the clearance (count,) a plan keeps from each obstacle's centre (m), or None.
+
+    ``radii``: each obstacle's radius (m; 0 for a point), None when not known; the tool's radius
+    and the safety margin (``settings``) are added. Raises PlanningError for radii that do not
+    match the obstacles or are not finite and >= 0.
+    """
+    if radii is None:
+        return None
+    try:
+        radii = np.asarray(radii, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise PlanningError(f'obstacle radii must be numbers, got {radii!r}') from None
+    if len(radii) != count:
+        raise PlanningError(f'{count} obstacles but {len(radii)} obstacle radii')
+    if not np.all(np.isfinite(radii)) or np.any(radii < 0.0):
+        raise PlanningError(f'obstacle radii must be finite and >= 0 (m), got {radii.tolist()}')
+    return radii + settings.tool_radius + settings.obstacle_clearance
+
+
 def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
-              goal_orientation=None):
+              goal_orientation=None, obstacle_radii=None):
     """
     Plan ``skill`` (an ``etdmp_ros.dmp.Skill``) from ``start`` to ``goal`` around ``obstacles``.
 
     ``start``, ``goal``: base_link points (3,); ``obstacles``: (m, 3) base_link points;
     ``settings``: PlanSettings; ``plane``: the TaskPlane (needed for 2D skills);
     ``goal_orientation``: None or (x, y, z, w) in base_link (see :func:`goal_orientation_of`:
-    all zeros for none). Returns a Plan; raises PlanningError with the reason when the request
-    cannot be served.
+    all zeros for none); ``obstacle_radii``: (m,) each obstacle's radius in metres (0: a point),
+    None for obstacles of unknown size. Returns a Plan; raises PlanningError with the reason
+    when the request cannot be served.
     """
     settings = PlanSettings() if settings is None else settings
     goal_q = goal_orientation_of(skill, goal_orientation, settings)
     start = _points(start, 'start', (3,))
     goal = _points(goal, 'goal', (3,))
     obstacles = _points(obstacles, 'obstacles', None)
+    clearances = obstacle_clearances(obstacle_radii, settings, len(obstacles))
     space = _Space(skill, plane)
     start_s, goal_s, obstacles_s = (space.inward(p) for p in (start, goal, obstacles))
     start_b, goal_b, obstacles_b = (space.outward(p) for p in (start_s, goal_s, obstacles_s))
@@ -329,6 +364,9 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
     gains = settings.gains
     if settings.obstacle_k > 0.0:   # 1/m → 1/skill unit: exp(-k d) with d = d_units * scale
         gains = replace(gains, k=settings.obstacle_k * space.scale)
+    # In the skill's units, the clearance each obstacle needs (issue 25: the core takes it as
+    # ``obstacle_radii`` once it avoids obstacles with a size; the paper's terms take points).
+    clearances_s = None if clearances is None else clearances / space.scale  # noqa: F841
     try:
         traj = skill.generalize(
             start_s, goal_s, obstacles_s, method=settings.method, mode=settings.mode,
@@ -350,7 +388,7 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
         raise PlanningError(f"the plan leaves the UR10's reach at t = {traj.t[i]:.2f} s, "
                             f'{_fmt(positions[i])}: {reason}')
     return Plan(traj.t, positions, space.outward_vectors(traj.v), orientation,
-                start_b, goal_b, obstacles_b, settings.method, traj)
+                start_b, goal_b, obstacles_b, settings.method, traj, clearances)
 
 
 def place_demo(skill, start, goal, plane=None, mode=1, independent_axis=2):

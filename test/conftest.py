@@ -31,7 +31,8 @@ _DOMAIN_IDS = itertools.count(1 + os.getpid() % 50)
 #: ``unit`` runs in this process without ROS processes (about 30 s in all, linters included),
 #: ``nodes`` starts installed executables, ``system`` runs the whole closed loop.
 SUITES = {
-    'unit': ('test_bag', 'test_cli', 'test_controller_sim', 'test_demos', 'test_dmp_core',
+    'unit': ('test_arm_check', 'test_bag', 'test_cli', 'test_controller_sim', 'test_demos',
+             'test_dmp_core',
              'test_dmp_obstacles', 'test_dmp_online', 'test_dmp_orientation',
              'test_dmp_similarity', 'test_dmp_skill', 'test_flake8', 'test_guide',
              'test_ik', 'test_metrics', 'test_package_xml', 'test_paper_reproduction',

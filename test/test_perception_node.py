@@ -6,8 +6,8 @@ simulation's ground truth of the same stamp within 5 mm, the obstacles' measured
 /etdmp/obstacle_volumes, beside /etdmp/obstacles with the same stamp) the radii the simulation
 was given (``ros2 param set /ur10_sim obstacle_radii``) within 1 mm, follow the goal when it is
 moved with ``ros2 param set /ur10_sim goal_position``, and stop (goal) or empty (obstacles)
-when the objects leave the view. Alone, fed by this test: frames with wrong encodings or sizes are skipped with a
-warning and the node keeps working.
+when the objects leave the view. Alone, fed by this test: frames with wrong encodings or sizes
+are skipped with a warning and the node keeps working.
 """
 
 import time

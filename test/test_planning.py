@@ -6,7 +6,7 @@ from etdmp_ros.dmp import _quaternion as quat
 from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains
 from etdmp_ros.planning import (FollowedPlan, place_demo, plan_path, PlanningError,
                                 PlanSettings, TOOL_DOWN, Workspace)
-from etdmp_ros.robot import UR10Model
+from etdmp_ros.robot import PEN_RADIUS, UR10Model
 from etdmp_ros.task_plane import TaskPlane
 import numpy as np
 import pytest
@@ -110,6 +110,25 @@ def test_obstacles_are_projected_avoided_and_k_is_in_metres(g_skill):
     np.testing.assert_allclose(weaker.positions[:201], free.positions, atol=1e-9)
 
 
+def test_obstacle_radii_become_the_clearance_the_plan_keeps(g_skill):
+    # Issue 25: each obstacle's radius (as perceived) + the tool's + the safety margin, in
+    # metres, on the plan (what the core is given, in the skill's units).
+    obstacles = np.array([[0.78, 0.16, 0.08], [0.76, 0.2, 0.08]])
+    plain = plan_path(g_skill, START, GOAL, obstacles, plane=PLANE)
+    assert plain.obstacle_radii is None
+    settings = PlanSettings(tool_radius=0.01, obstacle_clearance=0.004)
+    sized = plan_path(g_skill, START, GOAL, obstacles, settings, PLANE,
+                      obstacle_radii=[0.025, 0.0])
+    np.testing.assert_allclose(sized.obstacle_radii, [0.039, 0.014])
+    assert PlanSettings().tool_radius == PEN_RADIUS    # the simulation's pen, by default
+    for radii, message in (([0.025], '2 obstacles but 1 obstacle radii'),
+                           ([0.025, -0.01], 'finite and >= 0'),
+                           ([0.025, math.nan], 'finite and >= 0'),
+                           ('big', 'must be numbers')):
+        with pytest.raises(PlanningError, match=message):
+            plan_path(g_skill, START, GOAL, obstacles, plane=PLANE, obstacle_radii=radii)
+
+
 @pytest.mark.parametrize('start, goal, obstacles, message', [
     ([math.nan, 0.2, 0.0], GOAL, (), 'start contains NaN or inf'),
     (START, [0.7, -math.inf, 0.0], (), 'goal contains NaN or inf'),
@@ -170,6 +189,8 @@ def test_workspace_criterion_matches_the_ur10_model():
     ({'orientation': (0, 0, 0, 0)}, 'non-zero quaternion'),
     ({'orientation': (0, 0, 1)}, '4 finite numbers'),
     ({'gains': ObstacleGains(gamma=-1.0)}, 'gamma must be finite and >= 0'),
+    ({'tool_radius': -0.001}, 'tool_radius must be >= 0'),
+    ({'obstacle_clearance': math.inf}, 'obstacle_clearance must be >= 0'),
 ])
 def test_settings_refuse_bad_values(kwargs, message):
     with pytest.raises(ValueError, match=message):

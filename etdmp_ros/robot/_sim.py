@@ -548,18 +548,20 @@ class UR10Sim:
             m.opt.disableflags = flags
         if d.ncon == 0:
             return ()
+        n, contact = d.ncon, d.contact
+        geoms, depths = contact.geom[:n], np.maximum(0.0, -contact.dist[:n])
+        positions = contact.pos[:n].copy()
+        d.ncon = 0              # the dynamics have none (the next step would clear them too)
         names, found = self._contact_names, {}
-        for c in d.contact[:d.ncon]:
-            robot, other = (c.geom1, c.geom2) if m.geom_contype[c.geom1] else (c.geom2, c.geom1)
-            depth = max(0.0, -float(c.dist))
+        for (a, b), depth, position in zip(geoms, depths, positions):
+            robot, other = (a, b) if m.geom_contype[a] else (b, a)
             if robot == self._tip_geom and other == self._table_geom and \
                     depth <= WRITING_DEPTH:
                 continue        # the pen writing on the table, not pressed through it
-            # One per pair of part and object (MuJoCo gives up to 4 points a pair): the deepest.
+            # One per pair of part and item (MuJoCo gives up to 4 points a pair): the deepest.
             pair = (names[robot], names[other])
             if pair not in found or depth > found[pair].depth:
-                found[pair] = Contact(*pair, c.pos.copy(), depth)
-        d.ncon = 0              # the dynamics have none (the next step would clear them too)
+                found[pair] = Contact(*pair, position, float(depth))
         return tuple(found.values())
 
     def advance(self, duration):
