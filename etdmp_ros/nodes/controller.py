@@ -166,12 +166,17 @@ class InputWatch:
 
         Its stamp must have advanced from the last accepted one's as the robot's time did, to
         within ``timeout``: a stamp far in the future would end the path at once (the
-        controller's time is the stamps'), one far in the past would read as a restart.
+        controller's time is the stamps'), one far in the past would read as a restart. One
+        that advanced, but less than the clock, is late, not false: this process was not
+        scheduled while the robot's clock went on (its /clock messages taken first), or the
+        transport held it back; the controller goes on from it (its missed steps re-synchronise
+        the path: etdmp_ros.robot._controller). Refusing it stopped the arm as stale-input
+        ("its stamp is -0.104 s off the robot clock ...") on a machine loaded 9 times over.
         """
         if self._stamp is None or simulated != self._simulated:
             return ''
         skew = ((stamp_ns - self._stamp) - (robot_ns - self._robot)) * 1e-9
-        if abs(skew) <= self.timeout:
+        if abs(skew) <= self.timeout or (skew < 0.0 and stamp_ns > self._stamp):
             return ''
         return (f'its stamp is {skew:+.3f} s off the robot clock (advanced '
                 f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '
