@@ -129,7 +129,7 @@ LETTERS = [('P', None), ('R', None), ('W', 2.0)]
 
 @pytest.fixture(scope='module', params=LETTERS, ids=[f'{s}-{d or "demo"}s' for s, d in LETTERS])
 def letter(request, colcon_install, module_ros_env, tmp_path_factory):
-    """Run the demo for a letter (idle), in the given duration; return (metrics, folder)."""
+    """Run the demo for one of LETTERS, idle, in its duration; return its metrics, folder."""
     skill, duration = request.param
     return _run((skill, f'{duration}s' if duration else 'idle', False), colcon_install,
                 module_ros_env, tmp_path_factory, duration)
