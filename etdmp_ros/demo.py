@@ -22,7 +22,10 @@ simulation's time; the others stamp with their inputs' stamps). Then it
    (:mod:`etdmp_ros.metrics`, which defines the numbers; the controller's own tracking error
    comes from the summary it logs) and writes ``plot.png``, ``camera_start.png``,
    ``camera_middle.png``, ``camera_end.png``, ``animation.gif`` (:mod:`etdmp_ros.pictures`),
-   ``metrics.json`` and ``recording.npz`` to the output folder, node logs to ``<out>/logs/``.
+   ``metrics.json`` and ``recording.npz`` to the output folder, node logs to ``<out>/logs/``;
+5. fails (exit code 1, after writing all of it) when the simulation saw the arm or the tool
+   touch an obstacle, the bottle or the table (``metrics.json``'s ``contacts``, the
+   simulation's ground truth), as it does when the controller stopped the motion.
 
 With ``--move-goal`` (``make demo MOVE_GOAL=1``) the demo moves the goal marker
 (:data:`etdmp_ros.scenario.MOVE_GOAL_BY`, 4 cm) at :data:`~etdmp_ros.scenario.MOVE_GOAL_AT` of
@@ -415,8 +418,6 @@ def _run_demo(options, env):
                 out / 'metadata.yaml']
     if live.failure:
         raise DemoError(f'the controller stopped: {live.failure} (files written to {out})')
-    if metrics['contacts'] != 0:
-        raise DemoError(_contact_failure(metrics) + f' (files written to {out})')
     return metrics, written
 
 
@@ -567,6 +568,9 @@ def main(argv=None):
         print('interrupted', file=sys.stderr)
         return 130
     print(summary(metrics, written), flush=True)
+    if metrics['contacts'] != 0:        # measured and written, but the run failed
+        print(f'demo failed: {_contact_failure(metrics)}', file=sys.stderr)
+        return 1
     return 0
 
 

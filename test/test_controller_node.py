@@ -368,6 +368,13 @@ def test_a_joint_state_stamp_must_advance_with_the_robots_clock():
     assert watch.implausible(5008 * ms, 5112 * ms, True) == ''
     # But one that did not advance while the clock went on is no news from the robot.
     assert '-0.112 s off' in watch.implausible(5000 * ms, 5112 * ms, True)
+    # Ahead of this process's view of the clock (its /clock messages still queued), but not
+    # ahead of the wall clock since the last one: the clock lags, the stamp is the robot's.
+    assert '+0.104 s off' in watch.implausible(5176 * ms, 5072 * ms, True)
+    assert watch.implausible(5176 * ms, 5072 * ms, True, wall_ns=180 * ms) == ''
+    assert '+0.104 s off' in watch.implausible(5176 * ms, 5072 * ms, True, wall_ns=50 * ms)
+    assert '+100.000 s off' in watch.implausible(105_008 * ms, 5008 * ms, True,
+                                                 wall_ns=1000 * ms)
     # A restarted simulation: its clock went back with its stamps, which is plausible (the
     # controller then drops the path: its time went back).
     assert watch.implausible(8 * ms, 8 * ms, True) == ''
