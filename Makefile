@@ -14,7 +14,7 @@ LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 ROS_TOOLS   ?= ../shared/ros
 ROS_STAMP   := $(VENV)/.ros-tools
 
-.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs config bench clean distclean help
+.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs docs-site config bench clean distclean help
 .DEFAULT_GOAL := help
 
 help:
@@ -26,7 +26,8 @@ help:
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
 	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
 	@echo "make docs       regenerate the README pictures in docs/img/"
-	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/system.py"
+	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
+	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
 	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic|bench-obstacles"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
@@ -72,9 +73,9 @@ browser:
 test: $(STAMP) ros-tools browser
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
 
-# The suites are markers (test/conftest.py SUITES): unit, nodes, system.
+# The suites are folders: test/unit, test/nodes, test/system (test/conftest.py marks them).
 test-fast: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -m unit test
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q test/unit
 
 # The closed loop: camera -> perception -> /generalize -> controller -> MuJoCo UR10 (out/demo/).
 # MOVE_GOAL=1: the goal marker moves by 4 cm while the pen writes (online ET-DMP, --move-goal);
@@ -91,16 +92,16 @@ demo: $(STAMP)
 # Kinesthetic teaching, simulated: ur10_sim's teaching mode leads the arm through a stir as a
 # hand in freedrive would, /joint_states recorded to out/kinesthetic/stir_by_hand.mcap.
 kinesthetic: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.kinesthetic --out out/kinesthetic
+	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo.kinesthetic --out out/kinesthetic
 
-# The four nodes and the teaching page (etdmp_ros/teach_session.py); Ctrl-C stops them.
+# The four nodes and the teaching page (etdmp_ros/demo/teach_session.py); Ctrl-C stops them.
 TEACH_PORT ?= 8080
 teach: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.teach_session --port $(TEACH_PORT)
+	MUJOCO_GL=egl $(VENV_PY) -m etdmp_ros.demo.teach_session --port $(TEACH_PORT)
 
 # config/*.yaml and the parameter tables of docs/<node>.md are written from the system description.
 config: $(STAMP)
-	$(VENV_PY) -m etdmp_ros.config_files
+	$(VENV_PY) -m etdmp_ros.ros.config_files
 
 # The paper's letter experiments, offline (Figs. 5, 7-8, 13 and metrics.json in out/reproduce/).
 reproduce: $(STAMP)
@@ -116,6 +117,13 @@ docs: reproduce
 	$(VENV)/bin/etdmp generalize --skill G --start -6 4 --goal 0 0 --obstacle -7.6 -4.4 \
 	  --plot docs/img/generalize_G.png
 	MUJOCO_GL=egl $(VENV_PY) tools/render_scene.py
+	$(VENV_PY) tools/draw_layers.py
+
+# The documentation site: docs/*.md (MyST) and the API reference from the docstrings (docs/conf.py;
+# rosdoc2.yaml points docs.ros.org's builder at the same files). Warnings are errors, as in the test.
+docs-site: $(STAMP)
+	$(VENV_PY) -m sphinx -W --keep-going -q -b html docs build/docs/html
+	@echo "open build/docs/html/index.html"
 
 # The benchmark's own environment: the project's pins plus the peer libraries it compares
 # against (movement-primitives, pydmps), which never enter .venv/.

@@ -38,7 +38,7 @@ setup(
     entry_points={
         'console_scripts': [
             # Offline command line (no ROS needed): generalize, reproduce the paper, plot.
-            'etdmp = etdmp_ros.cli:main',
+            'etdmp = etdmp_ros.apps.cli:main',
             # ROS 2 nodes: `ros2 run etdmp_ros <node>` (setup.cfg puts scripts in lib/etdmp_ros).
             'ur10_sim = etdmp_ros.nodes.ur10_sim:main',
             'dmp_server = etdmp_ros.nodes.dmp_server:main',

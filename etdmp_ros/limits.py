@@ -2,7 +2,7 @@
 Limits that bound what the nodes accept from outside, named in one place (no ROS needed).
 
 Each limit says its unit and what it protects. A limit a user may want to tune is a node
-parameter instead (etdmp_ros/system.py). Sections are per node or subsystem; keep each one's
+parameter instead (etdmp_ros/ros/system.py). Sections are per node or subsystem; keep each one's
 constants together under its heading.
 """
 

@@ -1,7 +1,7 @@
 """
 Start the whole system as four processes: ur10_sim, perception, dmp_server, controller.
 
-The nodes and their parameter files come from the system description (etdmp_ros.system): each
+The nodes and their parameter files come from the system description (etdmp_ros.ros.system): each
 node gets the shared workcell file config/scene.yaml, then its own config/<node>.yaml, then the
 system's overrides (use_sim_time for the nodes that follow /clock), exactly as
 `ros2 run etdmp_ros bringup` does in one process (for installs without ros2launch).
@@ -24,7 +24,7 @@ stays ``/clock``).
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from etdmp_ros import config_files, system
+from etdmp_ros.ros import config_files, system
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.conditions import IfCondition

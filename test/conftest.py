@@ -13,8 +13,8 @@ from pathlib import Path
 import subprocess
 import sys
 
-from etdmp_ros import processes, system
-from etdmp_ros.processes import installed_argv, isolated_environment, sourced  # noqa: F401
+from etdmp_ros.ros import processes, system
+from etdmp_ros.ros.processes import installed_argv, isolated_environment, sourced  # noqa: F401
 import pytest
 import yaml
 
@@ -27,51 +27,28 @@ SOURCE_LITTER = ('build', 'install', 'log', '*.egg-info')
 _DOMAIN_IDS = itertools.count(1 + os.getpid() % 50)
 
 
-#: Every test module in one suite, marked so (``pytest -m unit``; ``make test-fast``):
-#: ``unit`` runs in this process without ROS processes (about 30 s in all, linters included),
-#: ``nodes`` starts installed executables, ``system`` runs the whole closed loop.
-SUITES = {
-    'unit': ('test_arm_check', 'test_bag', 'test_cli', 'test_controller_sim', 'test_demos',
-             'test_dmp_core',
-             'test_dmp_obstacles', 'test_dmp_online', 'test_dmp_orientation',
-             'test_dmp_similarity', 'test_dmp_skill', 'test_flake8', 'test_guide',
-             'test_ik', 'test_metrics', 'test_package_xml', 'test_paper_reproduction',
-             'test_pep257', 'test_planning',
-             'test_readme', 'test_robot_model', 'test_ros_conversions_geometry',
-             'test_ros_conversions_image', 'test_ros_conversions_sim',
-             'test_ros_conversions_tf', 'test_sim',
-             'test_skill_library', 'test_system', 'test_teaching', 'test_vision'),
-    'nodes': ('test_adversarial_controller', 'test_adversarial_dmp_server',
-              'test_adversarial_perception',
-              'test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
-              'test_install_layout', 'test_namespaces', 'test_perception_node',
-              'test_ros2_cli', 'test_ur10_sim_node', 'test_ur10_sim_tf'),
-    'system': ('test_end_to_end', 'test_kinesthetic', 'test_teach_page'),
-}
-_SUITE_OF = {module: suite for suite, modules in SUITES.items() for module in modules}
+#: The suites, one folder each (``pytest -m unit`` or ``pytest test/unit``; ``make test-fast``):
+#: ``unit`` runs in this process without ROS processes (linters included), ``nodes`` starts
+#: installed executables, ``system`` runs the whole closed loop. Helpers for the tests live in
+#: ``support/`` (no tests), the benchmarks in ``benchmarks/`` (not collected).
+SUITES = ('unit', 'nodes', 'system')
+TEST_DIR = Path(__file__).resolve().parent
 
 
 def pytest_configure(config):
-    """Register the suite markers; every test module of this folder must be in exactly one."""
-    present = {path.stem for path in Path(__file__).parent.glob('test_*.py')}
-    listed = [module for modules in SUITES.values() for module in modules]
-    if sorted(listed) != sorted(present):
-        raise pytest.UsageError(
-            f'test/conftest.py SUITES disagrees with the test modules: unlisted '
-            f'{sorted(present - set(listed))}, missing {sorted(set(listed) - present)}, '
-            f'listed twice {sorted({m for m in listed if listed.count(m) > 1})}')
+    """Register the suite markers; every test module must sit in a suite's folder."""
+    stray = sorted(str(path.relative_to(TEST_DIR)) for path in TEST_DIR.rglob('test_*.py')
+                   if path.parent.name not in SUITES or path.parent.parent != TEST_DIR)
+    if stray:
+        raise pytest.UsageError(f"test modules outside the suites' folders {SUITES}: {stray}")
     for suite in SUITES:
-        config.addinivalue_line('markers', f'{suite}: a test of the {suite} suite (conftest)')
+        config.addinivalue_line('markers', f'{suite}: a test of the {suite} suite (test/{suite}/)')
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark every test with its module's suite; a module in no suite is an error."""
+    """Mark every test with its folder's suite."""
     for item in items:
-        module = item.path.stem
-        if module not in _SUITE_OF:
-            raise pytest.UsageError(f'{module} is in no suite: add it to SUITES in '
-                                    'test/conftest.py')
-        item.add_marker(getattr(pytest.mark, _SUITE_OF[module]))
+        item.add_marker(getattr(pytest.mark, item.path.parent.name))
 
 
 def _litter():
@@ -128,7 +105,7 @@ def ros2(request):
     Skips the module when the CLI is not installed; stops the ``ros2 daemon`` of every domain it
     gave out (``ros2.fresh()`` makes another runner on a new domain) after the module.
     """
-    import ros2_cli
+    from support import ros2_cli
     if ros2_cli.missing():
         pytest.skip(ros2_cli.missing())
     install = request.getfixturevalue('colcon_install')
@@ -156,10 +133,11 @@ class NodeProcess(processes.NodeProcess):
     """
     An installed node started as `ros2 run etdmp_ros <node>` would be, its output in a file.
 
-    Parameters: the system's files (:func:`etdmp_ros.system.parameter_files`: config/scene.yaml,
-    then config/<node>.yaml) from the install's share folder, then ``overrides`` written as the
-    node's own section in a third file (a `-p name:=value` would lose against the node's section
-    of its YAML), then ``extra_args`` verbatim. Stopping: :meth:`stop` (SIGINT, then kill).
+    Parameters: the system's files (:func:`etdmp_ros.ros.system.parameter_files`:
+    config/scene.yaml, then config/<node>.yaml) from the install's share folder, then ``overrides``
+    written as the node's own section in a third file (a `-p name:=value` would lose against the
+    node's section of its YAML), then ``extra_args`` verbatim. Stopping: :meth:`stop` (SIGINT, then
+    kill).
     """
 
     def __init__(self, install, env, tmp, node, overrides=None, name=None, extra_args=''):

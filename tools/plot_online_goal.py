@@ -14,9 +14,9 @@ the acceleration the samples imply, |v_(k+1) - v_k| / dt. Usage::
 import argparse
 from pathlib import Path
 
+from etdmp_ros.apps.plotting import _equal_2d, _equal_3d, _figure, _save, _start_goal, DEMO_STYLE
 from etdmp_ros.dmp import builtin_demo, learn
 from etdmp_ros.dmp._online import compare_goal_jump, goal_jump_case, GOAL_JUMP_WAYS
-from etdmp_ros.plotting import _equal_2d, _equal_3d, _figure, _save, _start_goal, DEMO_STYLE
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]

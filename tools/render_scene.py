@@ -19,8 +19,9 @@ import os
 from pathlib import Path
 
 import cv2
-from etdmp_ros import system
-from etdmp_ros.robot import CameraPose, UR10Sim
+from etdmp_ros.geometry.camera import CameraPose
+from etdmp_ros.ros import system
+from etdmp_ros.sim import UR10Sim
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]

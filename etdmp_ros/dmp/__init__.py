@@ -29,7 +29,8 @@ Typical use::
     print(nrmse(traj.x, skill.demo))
 """
 
-from ._demos import builtin_demo, builtin_demo_names, Demonstration, load_demo, save_demo
+from ._demos import (builtin_demo, builtin_demo_names, check_file_size, Demonstration, load_demo,
+                     save_demo, unit_quaternions)
 from ._errors import DemonstrationError, GeneralizationError
 from ._obstacles import obstacle_coupling, ObstacleGains
 from ._online import OnlineGains, OnlineRun
@@ -43,6 +44,7 @@ __all__ = [
     'Demonstration', 'DemonstrationError', 'EuclideanTransform', 'FORMULATIONS',
     'GeneralizationError', 'METHOD_LABELS', 'METHODS', 'OBSTACLE_MARGIN', 'ORIENTATION_MODES',
     'ObstacleGains', 'OnlineGains', 'OnlineRun', 'Similarity', 'Skill', 'Trajectory',
-    'builtin_demo', 'builtin_demo_names', 'clearance', 'euclidean_transform', 'learn',
-    'load_demo', 'nrmse', 'obstacle_coupling', 'save_demo', 'similarity',
+    'builtin_demo', 'builtin_demo_names', 'check_file_size', 'clearance', 'euclidean_transform',
+    'learn', 'load_demo', 'nrmse', 'obstacle_coupling', 'save_demo', 'similarity',
+    'unit_quaternions',
 ]

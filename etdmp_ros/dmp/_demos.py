@@ -47,11 +47,11 @@ import itertools
 from pathlib import Path
 import zipfile
 
+from etdmp_ros import limits
+from etdmp_ros.geometry.quaternion import MIN_NORM
 import numpy as np
 
 from ._errors import DemonstrationError
-from ._quaternion import unit_quaternions
-from .. import limits
 
 # Forcing-term fitting and finite-difference accelerations need a few samples per basis width;
 # fewer than this is almost certainly a truncated or mis-parsed file.
@@ -573,3 +573,38 @@ def _check_limits(positions, t, where, locate):
         raise DemonstrationError(f'{where}: {locate(row, col)} is {positions[row, col]:.3g}, '
                                  f'beyond the limit MAX_DEMO_COORDINATE = '
                                  f'{limits.MAX_DEMO_COORDINATE:g} in absolute value')
+
+
+def unit_quaternions(values, n, where, locate):
+    """
+    Check and normalise demonstrated orientations: ``values`` (n, 4), ROS order (x, y, z, w).
+
+    ``locate(row)`` names a sample in messages (``orientations[3]``, ``line 5``). Raises
+    DemonstrationError for a wrong shape or dtype, a non-finite or a zero quaternion.
+    """
+    try:
+        q = np.asarray(values)
+    except (TypeError, ValueError) as err:
+        raise DemonstrationError(f'{where}: orientations are not an array ({err})') from None
+    if q.dtype.kind not in 'iuf':
+        raise DemonstrationError(f'{where}: orientations must be real numbers, got dtype '
+                                 f'{q.dtype} (shape {q.shape})')
+    q = q.astype(np.float64)
+    if q.shape != (n, 4):
+        raise DemonstrationError(f'{where}: orientations must have shape ({n}, 4): one '
+                                 f'quaternion (x, y, z, w) per sample, got {q.shape}')
+    bad = np.flatnonzero(~np.all(np.isfinite(q), axis=1))
+    if bad.size:
+        raise DemonstrationError(f'{where}: the orientation at {locate(bad[0])} is '
+                                 f'{q[bad[0]].tolist()}; quaternions must be finite '
+                                 f'({bad.size} bad sample(s))')
+    norm = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(norm < MIN_NORM)
+    if bad.size:
+        raise DemonstrationError(f'{where}: the orientation at {locate(bad[0])} is the zero '
+                                 f'quaternion {q[bad[0]].tolist()}, which is no rotation '
+                                 f'({bad.size} such sample(s)); give unit quaternions '
+                                 '(x, y, z, w)')
+    # Quaternions already unit to round-off are kept as they are, so that normalising is
+    # idempotent (a file written and read back keeps every bit).
+    return np.where(np.abs(norm - 1.0)[:, None] <= 4e-16, q, q / norm[:, None])

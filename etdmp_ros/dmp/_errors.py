@@ -1,4 +1,6 @@
-"""Errors raised by the DMP core: both are ValueErrors with a message meant for users."""
+"""Errors of the DMP core (ValueErrors with a message for users), and the check behind most."""
+
+import numpy as np
 
 
 class DemonstrationError(ValueError):
@@ -7,3 +9,14 @@ class DemonstrationError(ValueError):
 
 class GeneralizationError(ValueError):
     """A generalization request cannot be served (bad start, goal, obstacles; degeneracy)."""
+
+
+def finite_array(value, name):
+    """Convert a request argument to a finite float array or raise GeneralizationError."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise GeneralizationError(f'{name} must be numeric: {exc}') from None
+    if not np.all(np.isfinite(arr)):
+        raise GeneralizationError(f'{name} contains NaN or inf')
+    return arr

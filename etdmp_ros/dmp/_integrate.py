@@ -22,6 +22,9 @@ import numpy as np
 
 from ._obstacles import steering_axis
 
+#: Longest sub-step of the integrator, as a fraction of tau.
+MAX_SUBSTEP = 1e-3
+
 try:  # The fast path is optional: without numba the reference path serves.
     import numba
 except ImportError:  # pragma: no cover - numba is pinned in requirements

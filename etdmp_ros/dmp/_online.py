@@ -28,10 +28,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._errors import GeneralizationError
-from ._integrate import chain, discretize, numba, rollout
+from ._errors import finite_array, GeneralizationError
+from ._integrate import chain, discretize, MAX_SUBSTEP, numba, rollout
 from ._similarity import nrmse
-from ._skill import _finite_array, MAX_SUBSTEP
 from ._transform import EPS
 
 
@@ -129,7 +128,7 @@ class OnlineRun:
             raise GeneralizationError(str(exc)) from None
         d = skill.dim
         for name, value in (('start', start), ('goal', goal)):
-            if _finite_array(value, name).shape != (d,):
+            if finite_array(value, name).shape != (d,):
                 raise GeneralizationError(f'an online run is one movement: {name} must have '
                                           f'shape ({d},), got {np.shape(value)}')
         r = skill._check_request(start, goal, obstacles, method, dt, tau, 0.0, gains)
@@ -455,7 +454,7 @@ class OnlineRun:
     def _point(self, value, name):
         """Check one point (d,) given to :meth:`step`."""
         d = self._skill.dim
-        arr = _finite_array(value, name)
+        arr = finite_array(value, name)
         if arr.shape != (d,):
             raise GeneralizationError(f'{name} must have shape ({d},), got {arr.shape}')
         return arr.copy()
@@ -463,7 +462,7 @@ class OnlineRun:
     def _obstacle_set(self, value):
         """Check an obstacle set (n, d) given to :meth:`step`; return it as (n, d)."""
         d = self._skill.dim
-        obs = _finite_array(value, 'obstacles')
+        obs = finite_array(value, 'obstacles')
         if obs.size == 0:
             return np.zeros((0, d))
         if obs.ndim > 2 or obs.shape[-1] != d:

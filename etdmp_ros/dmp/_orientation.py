@@ -17,9 +17,9 @@ demonstration's frame is kept, and its output is turned back by the rotation par
 
 from collections import OrderedDict
 
+from etdmp_ros.geometry import quaternion as quat
 import numpy as np
 
-from . import _quaternion as quat
 from ._errors import GeneralizationError
 from ._forcing_term import ForcingTerm, phase
 from ._integrate import rollout

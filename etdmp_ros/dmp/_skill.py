@@ -3,16 +3,17 @@
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from etdmp_ros import limits
 import numpy as np
 
 from ._demos import Demonstration
-from ._errors import DemonstrationError, GeneralizationError
+from ._errors import DemonstrationError, finite_array, GeneralizationError
 from ._forcing_term import ForcingTerm, phase
-from ._integrate import rollout
+from ._integrate import MAX_SUBSTEP, rollout
 from ._obstacles import ObstacleGains
+from ._online import OnlineRun
 from ._orientation import check_goal_orientation, OrientationDMP, turn_quaternions
 from ._transform import EPS, EuclideanTransform, transforms
-from .. import limits
 
 FORMULATIONS = ('ijspeert', 'hoffmann')
 METHODS = ('etdmp', 'dmp')
@@ -21,8 +22,6 @@ METHOD_LABELS = {'etdmp': 'ET-DMP', 'dmp': 'DMP'}
 #: Below this fraction of the demonstration's size, ``(g_D - x0_D)_i`` counts as zero for the
 #: plain Ijspeert DMP, whose per-dimension scaling would divide by it.
 PLAIN_DMP_MIN_OFFSET = 1e-3
-#: Longest sub-step of the integrator, as a fraction of tau.
-MAX_SUBSTEP = 1e-3
 #: Default extra time, as a fraction of tau, given to a movement that avoids obstacles.
 OBSTACLE_MARGIN = 0.5
 #: Most output samples one rollout may produce (guards against absurd dt).
@@ -66,17 +65,6 @@ class _Request(NamedTuple):
     tau: float
     dt: float
     n_out: int
-
-
-def _finite_array(value, name):
-    """Convert a request argument to a finite float array or raise GeneralizationError."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise GeneralizationError(f'{name} must be numeric: {exc}') from None
-    if not np.all(np.isfinite(arr)):
-        raise GeneralizationError(f'{name} contains NaN or inf')
-    return arr
 
 
 def learn(positions, orientations=None, dt=None, t=None, n_basis=100, K=156.25, D=25.0,
@@ -228,7 +216,6 @@ class Skill:
         of :meth:`generalize`. The method: docs/design.md#online-goal. Raises
         GeneralizationError on bad or degenerate input.
         """
-        from ._online import OnlineRun   # _online builds on this module
         return OnlineRun(self, start, goal, obstacles, method, mode, independent_axis, dt, tau,
                          gains, online, fast)
 
@@ -268,8 +255,8 @@ class Skill:
         GeneralizationError for the first problem found.
         """
         d = self.dim
-        start = _finite_array(start, 'start')
-        goal = _finite_array(goal, 'goal')
+        start = finite_array(start, 'start')
+        goal = finite_array(goal, 'goal')
         single = start.ndim <= 1
         starts = start.reshape(1, -1) if single else start
         if starts.ndim != 2 or starts.shape[1] != d or len(starts) == 0:
@@ -282,7 +269,7 @@ class Skill:
         else:
             raise GeneralizationError(f'goal must have shape ({d},) or ({len(starts)}, {d}), '
                                       f'got {goal.shape}')
-        obs = _finite_array(obstacles, 'obstacles')
+        obs = finite_array(obstacles, 'obstacles')
         if obs.size == 0:
             obs = np.zeros((0, d))
         elif obs.ndim > 2 or obs.shape[-1] != d:

@@ -47,7 +47,7 @@ def encode(state, stamp_ns):
 
 def decode(data, nq, nmocap, nobstacles):
     """Return ``(CameraState, stamp ns)`` from :func:`encode`'s bytes; ValueError if malformed."""
-    from etdmp_ros.robot import CameraState
+    from etdmp_ros.sim import CameraState
     values = np.frombuffer(data, dtype='<f8', offset=_HEADER.size)
     if len(data) < _HEADER.size or values.size != nq + 7 * nmocap + nobstacles:
         raise ValueError(f'camera snapshot of {len(data)} bytes does not fit the model')
@@ -68,8 +68,8 @@ class CameraPublishers:
 
     def __init__(self, node, topics, intrinsics):
         """Create the four publishers on ``node``; ``topics`` maps color, depth, *_info."""
-        from etdmp_ros.nodes.ur10_sim import OPTICAL_FRAME
-        from etdmp_ros.ros_conversions import camera_info_msg
+        from etdmp_ros.robot import CAMERA_OPTICAL_FRAME as OPTICAL_FRAME
+        from etdmp_ros.ros.conversions import camera_info_msg
         from rclpy.qos import QoSProfile
         from sensor_msgs.msg import CameraInfo, Image
         images = QoSProfile(depth=2)   # frames are big: never queue more than one behind
@@ -87,7 +87,7 @@ class CameraPublishers:
         ``times``, if given, gets the CPU seconds of rendering and of publishing the images
         added to its ``render`` and ``publish_images``.
         """
-        from etdmp_ros.ros_conversions import image_msg
+        from etdmp_ros.ros.conversions import image_msg
         if self.color.get_subscription_count() or self.depth.get_subscription_count():
             c0 = time.process_time()
             rgb, depth_mm = sim.render_rgb_depth(state)
@@ -119,10 +119,9 @@ def main(argv=None):
     args, ros_args = parser.parse_known_args(argv)
     link = socket.socket(fileno=args.fd)
 
-    from etdmp_ros.nodes._spin import init
-    from etdmp_ros.nodes.ur10_sim import build_sim
-    from etdmp_ros.robot import MAX_OBSTACLES
-    from etdmp_ros.ros_conversions import ns_to_stamp
+    from etdmp_ros.ros.spin import init
+    from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
+    from etdmp_ros.ros.conversions import ns_to_stamp
     import rclpy
     from rclpy.node import Node
 
@@ -131,7 +130,7 @@ def main(argv=None):
     log = node.get_logger()
     published = skipped = early = 0       # early: snapshots sent while this process started
     try:
-        sim = build_sim(json.loads(args.parameters))
+        sim = UR10Sim.from_parameters(json.loads(args.parameters))
         camera = CameraPublishers(node, json.loads(args.topics), sim.intrinsics)
         nq, nmocap = sim.model.nq, sim.model.nmocap
         while rclpy.ok():

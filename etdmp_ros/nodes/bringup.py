@@ -3,7 +3,7 @@ bringup: ur10_sim, perception, dmp_server and controller in ONE process (no ros2
 
 ``ros2 run etdmp_ros bringup`` runs the same node classes with the same parameter files as
 ``ros2 launch etdmp_ros etdmp.launch.py`` runs in four processes, as the system description
-(:mod:`etdmp_ros.system`) says: config/scene.yaml, then each node's config/<node>.yaml (every
+(:mod:`etdmp_ros.ros.system`) says: config/scene.yaml, then each node's config/<node>.yaml (every
 file is keyed by node name, so all of them can be given to the one process), then the system's
 overrides (``use_sim_time`` for dmp_server and the controller, which follow /clock), then the
 arguments given here (e.g. ``--ros-args --params-file my.yaml``). One executor spins them
@@ -15,7 +15,7 @@ import importlib
 import sys
 import tempfile
 
-from etdmp_ros import system
+from etdmp_ros.ros import system
 import yaml
 
 
@@ -59,7 +59,7 @@ def ros_arguments(user_args, directory):
 
 def main(args=None):
     """Run the four nodes in one process until Ctrl-C (or SIGTERM)."""
-    from etdmp_ros.nodes._spin import run
+    from etdmp_ros.ros.spin import run
     from etdmp_ros.nodes.dmp_server import InvalidConfiguration
 
     def make(nodes):

@@ -29,7 +29,7 @@ at the current path time, continues it (dmp_server's re-plan of a remainder when
 moves): it is taken over at once at that path time, without an approach, and checked while it
 is followed (a failed check stops it, as any path); any other path is checked first. Frames:
 ``base_link`` or empty only. Paths arrive as raw bytes and are parsed with numpy, so a long path
-never stalls the control loop (see :mod:`etdmp_ros.ros_conversions._path_cdr`).
+never stalls the control loop (see :mod:`etdmp_ros.ros.conversions._path_cdr`).
 """
 
 from dataclasses import fields, replace
@@ -38,13 +38,15 @@ import sys
 import threading
 import time
 
-from etdmp_ros import limits, system
-from etdmp_ros.nodes._parameters import declare
-from etdmp_ros.nodes._spin import normal_scheduling, rate_qos, run, set_realtime_priority
-from etdmp_ros.robot import (ControllerConfig, matrix_to_quaternion, trajectory_from_path,
-                             TrajectoryController, TrajectoryError, UR10Model)
-from etdmp_ros.ros_conversions import (joint_state_from_cdr, ns_to_stamp, path_from_cdr,
+from etdmp_ros import limits
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.robot import (ControllerConfig, trajectory_from_path, TrajectoryController,
+                             TrajectoryError, UR10Model)
+from etdmp_ros.ros import system
+from etdmp_ros.ros.conversions import (joint_state_from_cdr, ns_to_stamp, path_from_cdr,
                                        velocity_command_msg)
+from etdmp_ros.ros.parameters import declare
+from etdmp_ros.ros.spin import normal_scheduling, rate_qos, run, set_realtime_priority
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
@@ -57,6 +59,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool
+
 
 NODE_NAME = 'controller'
 JOINT_STATES_TOPIC = 'joint_states'
@@ -590,7 +593,7 @@ def _pose_msg(position, rotation, stamp):
     p = pose.pose.position
     p.x, p.y, p.z = (float(v) for v in position)
     o = pose.pose.orientation
-    o.x, o.y, o.z, o.w = (float(v) for v in matrix_to_quaternion(rotation))
+    o.x, o.y, o.z, o.w = (float(v) for v in quat.from_matrix(rotation))
     return pose
 
 

@@ -5,9 +5,9 @@ Its place in the system: docs/design.md#nodes-and-interfaces; what it does with 
 docs/design.md#bad-input-policy.
 
 ``ros2 run etdmp_ros dmp_server --ros-args --params-file config/scene.yaml --params-file
-config/dmp_server.yaml``. The logic lives in ROS-free modules: :mod:`etdmp_ros.skill_library`
-(demonstrations → skills, persistence), :mod:`etdmp_ros.task_plane` and
-:mod:`etdmp_ros.planning` (request → timed base_link path). This node converts messages and
+config/dmp_server.yaml``. The logic lives in ROS-free modules: :mod:`etdmp_ros.skills.library`
+(demonstrations → skills, persistence), :mod:`etdmp_ros.geometry.task_plane` and
+:mod:`etdmp_ros.skills.planning` (request → timed base_link path). This node converts messages and
 parameters and keeps the latest inputs.
 
 Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward kinematics) or
@@ -18,7 +18,7 @@ serves ``/generalize`` (nav_msgs/srv/GetPlan); publishes ``/etdmp/path`` (transi
 
 Threads: the executor (``_spin.make_executor``) runs the input callbacks and parameters;
 /generalize is served by a thread of its own, first come first served, one call at a time
-(:mod:`etdmp_ros.nodes._queued_service`: a request that waited longer than
+(:mod:`etdmp_ros.ros.queued_service`: a request that waited longer than
 ``max_request_wait`` is refused as busy at once, so none is lost unanswered under overload; a
 call takes about a millisecond of this node's own work, the round trip is dominated by rclpy's
 message conversion and DDS); markers are built and published by a worker thread after the
@@ -34,25 +34,26 @@ import pathlib
 import threading
 import time
 
-from etdmp_ros import limits, system
+from etdmp_ros import limits
 from etdmp_ros.dmp import builtin_demo, FORMULATIONS, METHODS, ObstacleGains
-from etdmp_ros.nodes._parameters import (declared_settings, InvalidConfiguration,
-                                         values as parameter_values)
-from etdmp_ros.nodes._queued_service import QueuedService
-from etdmp_ros.nodes._spin import run
-from etdmp_ros.planning import (FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo, Plan,
-                                PLAN_ORIENTATION_MODES, plan_path, PlanSettings, Workspace)
-from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.task_plane import TaskPlane
+from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, UR10Model
 from etdmp_ros.robot._arm_check import arm_obstacle_violation, ArmGeometry
 from etdmp_ros.robot._timing import joint_timing_violation, plan_joints
-from etdmp_ros.ros_conversions import (cylinders_from_markers, joint_state_arrays, ns_to_stamp,
+from etdmp_ros.ros import system
+from etdmp_ros.ros.conversions import (cylinders_from_markers, joint_state_arrays, ns_to_stamp,
                                        path_from_cdr, path_from_numpy, point_to_numpy,
                                        points_from_numpy, pose_array_to_numpy, serialize_path)
-from etdmp_ros.skill_library import (BASE_FRAMES, check_skill_name, default_skills_dir,
-                                     RECORDED_DIMS, recorded_orientations,
-                                     recorded_path_demo, save_skill_demo,
-                                     SkillLibrary)
-from etdmp_ros.task_plane import TaskPlane
+from etdmp_ros.ros.parameters import (declared_settings, InvalidConfiguration,
+                                      values as parameter_values)
+from etdmp_ros.ros.queued_service import QueuedService
+from etdmp_ros.ros.spin import run
+from etdmp_ros.skills.library import (BASE_FRAMES, check_skill_name, default_skills_dir,
+                                      RECORDED_DIMS, recorded_orientations, recorded_path_demo,
+                                      save_skill_demo, SkillLibrary)
+from etdmp_ros.skills.planning import (FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo, Plan,
+                                       PLAN_ORIENTATION_MODES, plan_path, PlanSettings, Workspace)
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
@@ -64,6 +65,7 @@ from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, Rel
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
+
 
 NODE_NAME = 'dmp_server'
 DESCRIPTION = system.node(NODE_NAME)
@@ -624,7 +626,7 @@ class DmpServer(Node):
         with self._state_lock:
             q = self._joint_state.fresh(settings.tool_state_max_age)
         q = settings.initial_joints if q is None else q
-        rotations = quaternion_to_matrix(plan.orientation)
+        rotations = quat.to_matrix(quat.normalized(plan.orientation))
         idx, joints, violation = plan_joints(self._timing_model, plan.positions, rotations,
                                              plan.t, q, limits.TIMING_CHECK_SAMPLES)
         if settings.check_timing:
@@ -1009,7 +1011,7 @@ def _axes_marker(header, ns, positions, orientations):
     if len(positions) == 0:
         return _marker(header, ns, Marker.LINE_LIST, None, None, 0.0)
     idx = np.unique(np.linspace(0, len(positions) - 1, MARKER_AXES).round().astype(int))
-    axes = quaternion_to_matrix(orientations[idx])               # (k, 3, 3): columns x, y, z
+    axes = quat.to_matrix(quat.normalized(orientations[idx]))      # (k, 3, 3): columns x, y, z
     tips = positions[idx, None, :] + MARKER_AXIS_LENGTH * np.swapaxes(axes, 1, 2)
     points = np.stack([np.repeat(positions[idx, None, :], 3, axis=1), tips], axis=2)
     marker = _marker(header, ns, Marker.LINE_LIST, points.reshape(-1, 3), (1, 1, 1, 1),

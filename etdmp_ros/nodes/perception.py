@@ -17,7 +17,7 @@ newest complete frame. Publishes, stamped with the image's stamp, in base_link:
 - ``/etdmp/obstacle_volumes`` (visualization_msgs/MarkerArray): the same obstacles as upright
   cylinders with their measured radii (a CYLINDER marker each, in the PoseArray's order and
   with its stamp: diameter ``scale.x = scale.y``, height ``scale.z`` from the table to the top
-  face; :mod:`etdmp_ros.ros_conversions._markers`), every processed frame: what dmp_server
+  face; :mod:`etdmp_ros.ros.conversions._markers`), every processed frame: what dmp_server
   plans around and what RViz or Foxglove show;
 - ``/etdmp/bottle`` (geometry_msgs/PointStamped): centre of the open bottle's mouth (while
   ``detect_bottle``); nothing when it is not seen. dmp_server takes it as the goal object of a
@@ -40,14 +40,13 @@ from dataclasses import dataclass
 import time
 
 import cv2
-
-from etdmp_ros import system
-from etdmp_ros.nodes._parameters import declare, plain, values as parameter_values
-from etdmp_ros.nodes._spin import run
-from etdmp_ros.robot import detector_from_parameters, FrameSynchronizer
-from etdmp_ros.ros_conversions import (camera_image_from_msg, cylinder_markers, image_msg,
+from etdmp_ros.perception import detector_from_parameters, FrameSynchronizer
+from etdmp_ros.ros import system
+from etdmp_ros.ros.conversions import (camera_image_from_msg, cylinder_markers, image_msg,
                                        intrinsics_from_camera_info, pose_array_from_numpy,
                                        stamp_to_ns)
+from etdmp_ros.ros.parameters import declare, plain, values as parameter_values
+from etdmp_ros.ros.spin import run
 from geometry_msgs.msg import PointStamped, PoseArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node

@@ -5,7 +5,7 @@ teach: the teaching page. Draw a movement in a browser, teach it, watch the UR10
 this machine only by default); ``make teach`` runs it beside the whole simulated system, and
 ``ros2 launch etdmp_ros etdmp.launch.py teach:=true`` starts it with the launch file. The page
 and its script are package files (``etdmp_ros/teach_page/``); what the node does with a drawing
-is ROS-free (:mod:`etdmp_ros.teaching`); the server is aiohttp in a thread of its own
+is ROS-free (:mod:`etdmp_ros.skills.teaching`); the server is aiohttp in a thread of its own
 (:mod:`etdmp_ros.nodes._web`). docs/teach.md says what the page shows and sends.
 
 Interfaces, all of them the system's existing ones (nothing new in the other nodes):
@@ -42,19 +42,21 @@ import time
 
 from aiohttp import web
 import cv2
-from etdmp_ros import limits, system
+from etdmp_ros import limits
 from etdmp_ros.dmp import builtin_demo, learn
-from etdmp_ros.nodes._parameters import declared_settings, InvalidConfiguration
-from etdmp_ros.nodes._spin import run
+from etdmp_ros.geometry.camera import CameraPose
+from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.nodes._web import WebServer
-from etdmp_ros.robot import CameraPose
-from etdmp_ros.ros_conversions import (image_from_cdr, intrinsics_from_camera_info,
-                                       path_from_cdr, path_from_numpy)
-from etdmp_ros.ros_conversions._cdr import CdrReader
-from etdmp_ros.skill_library import check_skill_name
-from etdmp_ros.task_plane import TaskPlane
-from etdmp_ros.teaching import (Canvas, generalizations, learn_drawing, parse_drawing, project,
-                                taught_path, teaching_outcome, TeachInputError, Trace)
+from etdmp_ros.ros import system
+from etdmp_ros.ros.conversions import (image_from_cdr, intrinsics_from_camera_info, path_from_cdr,
+                                       path_from_numpy)
+from etdmp_ros.ros.conversions._cdr import CdrReader
+from etdmp_ros.ros.parameters import declared_settings, InvalidConfiguration
+from etdmp_ros.ros.spin import run
+from etdmp_ros.skills.library import check_skill_name
+from etdmp_ros.skills.teaching import (Canvas, generalizations, learn_drawing, parse_drawing,
+                                       project, taught_path, teaching_outcome, TeachInputError,
+                                       Trace)
 from geometry_msgs.msg import PointStamped, PoseStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan

@@ -14,7 +14,7 @@ velocities in rad/s, UR order). Publishes, stamped with the simulated time:
 - ``/ur10_sim/ground_truth/contacts`` (visualization_msgs/MarkerArray, transient local): the
   robot's contacts with the obstacles, the bottle, the table and the floor
   (:attr:`etdmp_ros.robot.UR10Sim.contacts`; a SPHERE per contact, its text ``<part> <item>
-  <depth mm>``, see :mod:`etdmp_ros.ros_conversions._markers`), at every tick while there are
+  <depth mm>``, see :mod:`etdmp_ros.ros.conversions._markers`), at every tick while there are
   any, once empty when they end (and at start);
 - as a UR driver, robot_state_publisher and realsense-ros would: ``/robot_description``
   (std_msgs/String, transient local: the UR10 URDF the simulation is built from, with the tool
@@ -31,7 +31,7 @@ latest command (and scene changes), step the physics, publish the state, then sl
 and publishes the images: the physics and the joint states never wait for rendering or image
 transport, nor share an interpreter lock with them. The executor thread only receives commands
 and parameter changes, validates them and hands them over. Parameters: config/scene.yaml and
-config/ur10_sim.yaml (their values are also the built-in defaults: etdmp_ros.system);
+config/ur10_sim.yaml (their values are also the built-in defaults: etdmp_ros.ros.system);
 ``goal_position``, ``obstacle_positions``, ``obstacle_radii``, ``bottle.position``,
 ``real_time_factor``, ``watchdog_timeout`` and ``teach_script`` can be changed at runtime.
 
@@ -39,7 +39,7 @@ Teaching mode (kinesthetic teaching, simulated): with ``teach_script`` set, a sc
 tool as a hand in freedrive would (:class:`etdmp_ros.robot.GuidedMotion`) while velocity commands
 are ignored; ``~/teaching`` (std_msgs/String, transient local) says ``playing <file>``, then
 ``done <file>`` (or ``idle``). Record ``/joint_states`` meanwhile and learn from the recording
-(dmp_server ``demo_files``; ``python -m etdmp_ros.kinesthetic`` does both steps' first half).
+(dmp_server ``demo_files``; ``python -m etdmp_ros.demo.kinesthetic`` does both steps' first half).
 """
 
 import socket
@@ -47,19 +47,19 @@ import subprocess
 import threading
 import time
 
-from etdmp_ros import system
 from etdmp_ros.dmp import DemonstrationError, load_demo
-from etdmp_ros.nodes._parameters import declare
 from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_command,
                                          encode as camera_snapshot)
-from etdmp_ros.nodes._spin import rate_qos, run
-from etdmp_ros.robot import (camera_transforms, FrameTree, GuidedMotion, GuideError,
-                             MAX_OBSTACLES, parse_bottle_position, parse_goal_position,
-                             parse_obstacle_positions, parse_obstacle_radii, robot_description,
-                             SceneConfig, UR10Sim)
-from etdmp_ros.ros_conversions import (contact_markers, joint_state_msg, MovingTransforms,
+from etdmp_ros.robot import (CAMERA_OPTICAL_FRAME, camera_transforms, FrameTree, GuidedMotion,
+                             GuideError, parse_bottle_position, parse_goal_position,
+                             parse_obstacle_positions, parse_obstacle_radii, robot_description)
+from etdmp_ros.ros import system
+from etdmp_ros.ros.conversions import (contact_markers, joint_state_msg, MovingTransforms,
                                        ns_to_stamp, pose_array_from_numpy, tf_available,
                                        tf_message, velocity_command_array)
+from etdmp_ros.ros.parameters import declare
+from etdmp_ros.ros.spin import rate_qos, run
+from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -73,7 +73,7 @@ from visualization_msgs.msg import MarkerArray
 import yaml
 
 NODE_NAME = 'ur10_sim'
-OPTICAL_FRAME = 'camera_color_optical_frame'
+OPTICAL_FRAME = CAMERA_OPTICAL_FRAME
 COMMAND_TOPIC = 'forward_velocity_controller/commands'
 COLOR_TOPIC = 'camera/camera/color/image_raw'
 COLOR_INFO_TOPIC = 'camera/camera/color/camera_info'
@@ -107,18 +107,6 @@ ANSWERED_TICKS = 10
 GROUND_TRUTH_RATE = 10.0
 
 
-def build_sim(p):
-    """Return the :class:`UR10Sim` of ur10_sim's parameter values ``p`` (name -> value)."""
-    if p['depth_min'] >= p['depth_max']:
-        raise ValueError(f'depth_min ({p["depth_min"]}) must be below depth_max '
-                         f'({p["depth_max"]})')
-    return UR10Sim(SceneConfig.from_parameters(p), timestep=p['physics_timestep'],
-                   watchdog_timeout=p['watchdog_timeout'],
-                   image_size=(p['image_width'], p['image_height']),
-                   fovy_deg=p['fovy_deg'], depth_range=(p['depth_min'], p['depth_max']),
-                   depth_noise=p['depth_noise'], multisamples=p['multisamples'])
-
-
 class UR10SimNode(Node):
     """The simulation node: a thin shell translating topics and parameters to :class:`UR10Sim`."""
 
@@ -134,7 +122,7 @@ class UR10SimNode(Node):
             if p[name] is None:
                 p[name] = []
         self._parameter_values = p   # (not _parameters: rclpy Node uses that name)
-        self.sim = build_sim(p)
+        self.sim = UR10Sim.from_parameters(p)
         self.steps_per_tick = max(1, round(1.0 / (p['control_rate'] * self.sim.timestep)))
         self.tick_period = self.steps_per_tick * self.sim.timestep
         if abs(self.tick_period * p['control_rate'] - 1.0) > 1e-6:

@@ -46,13 +46,12 @@ after a gap says so in its reason.
 from dataclasses import dataclass, fields
 import math
 
+from etdmp_ros.robot import _ik_fast
+from etdmp_ros.robot._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, HALT_SINGULARITY
+from etdmp_ros.robot._trajectory import MinimumJerkMove
+from etdmp_ros.robot._ur10 import JOINT_NAMES, UR10Model
 import numpy as np
 import pinocchio as pin
-
-from . import _ik_fast
-from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, HALT_SINGULARITY
-from ._trajectory import MinimumJerkMove
-from ._ur10 import JOINT_NAMES, UR10Model
 
 IDLE = 'idle'
 APPROACHING = 'approaching'

@@ -14,13 +14,15 @@ Quaternions are ``[x, y, z, w]`` (ROS order).
 """
 
 from dataclasses import dataclass
-import math
+
 from xml.etree import ElementTree
 
-import numpy as np
 
-from ._camera import matrix_to_quaternion, quaternion_to_matrix
-from ._ur10 import FLANGE_FRAME, JOINT_NAMES, robot_data_dir, TOOL_FRAME, ur10_urdf_path
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.robot._ur10 import (FLANGE_FRAME, JOINT_NAMES, robot_data_dir, TOOL_FRAME,
+                                   ur10_urdf_path)
+
+import numpy as np
 
 #: Name of the fixed joint that carries the tool tip in :func:`robot_description`.
 TOOL_JOINT = f'{FLANGE_FRAME}-{TOOL_FRAME}_fixed_joint'
@@ -63,25 +65,6 @@ def robot_description(tool_offset=(0.0, 0.0, 0.0)):
     return ElementTree.tostring(robot, encoding='unicode', xml_declaration=True)
 
 
-def rpy_to_quaternion(roll, pitch, yaw):
-    """Return the quaternion of URDF's roll, pitch, yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-                     cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy])
-
-
-def quaternion_multiply(a, b):
-    """Return the Hamilton products ``a * b`` of quaternions ``[x, y, z, w]`` (..., 4)."""
-    ax, ay, az, aw = np.moveaxis(np.asarray(a, dtype=float), -1, 0)
-    bx, by, bz, bw = np.moveaxis(np.asarray(b, dtype=float), -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
-
-
 class FrameTree:
     """
     The link frames of a URDF, as robot_state_publisher computes them.
@@ -114,7 +97,7 @@ class FrameTree:
             axes.append(a / np.linalg.norm(a))
         self._axes = np.array(axes)
         # origin * (axis sin(q/2), cos(q/2)) is linear in sin and cos: = S sin(q/2) + C cos(q/2).
-        self._s = quaternion_multiply(self._origins, np.concatenate(
+        self._s = quat.multiply(self._origins, np.concatenate(
             [self._axes, np.zeros((len(axes), 1))], axis=1))
         self._c = self._origins
 
@@ -127,7 +110,7 @@ class FrameTree:
         """Return :meth:`moving` computed plainly: origin times the joint's rotation (tests)."""
         half = 0.5 * np.asarray(q, dtype=float)[:, None]
         turn = np.concatenate([self._axes * np.sin(half), np.cos(half)], axis=1)
-        return quaternion_multiply(self._origins, turn)
+        return quat.multiply(self._origins, turn)
 
     def transforms(self, q):
         """Return every transform, moving ones at ``q`` then the fixed ones (tests, tools)."""
@@ -149,7 +132,7 @@ def chain_pose(transforms, source, target):
         if frame not in by_child:
             raise ValueError(f'no chain of transforms from {source} to {target}')
         t = by_child[frame]
-        r = quaternion_to_matrix(t.quaternion)
+        r = quat.to_matrix(quat.normalized(t.quaternion))
         position = r @ position + np.asarray(t.translation, dtype=float)
         rotation = r @ rotation
         frame = t.parent
@@ -165,8 +148,8 @@ def camera_transforms(pose, parent='base_link'):
     sensor is the reference of this simulated camera, so no offset), and the optical frame
     rotated from it by :data:`OPTICAL_ROTATION`.
     """
-    optical = matrix_to_quaternion(pose.rotation)
-    link = quaternion_multiply(optical, OPTICAL_ROTATION * [-1, -1, -1, 1])   # R_opt R_o^T
+    optical = quat.from_matrix(pose.rotation)
+    link = quat.multiply(optical, OPTICAL_ROTATION * [-1, -1, -1, 1])   # R_opt R_o^T
     return [Transform(parent, CAMERA_LINK, tuple(map(float, pose.position)),
                       tuple(map(float, link))),
             Transform(CAMERA_LINK, CAMERA_COLOR_FRAME, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
@@ -182,4 +165,4 @@ def _joint_origin(joint):
     rpy = [float(v) for v in (origin.get('rpy', '0 0 0') if origin is not None else '0 0 0')
            .split()]
     return (joint.find('parent').get('link'), joint.find('child').get('link'), tuple(xyz),
-            tuple(rpy_to_quaternion(*rpy)))
+            tuple(quat.from_rpy(*rpy)))

@@ -12,14 +12,13 @@ with the reason; while it plays, each period's joint velocity command leads the 
 next joint positions (feed-forward plus a proportional term), as the hand's force would.
 
 What is recorded is what the arm did (the joint states), not the script: learning from the
-recording (:func:`etdmp_ros.skill_library.joint_state_path`) never sees the script.
+recording (:func:`etdmp_ros.skills.library.joint_state_path`) never sees the script.
 """
 
 import math
 
+from etdmp_ros.robot._trajectory import PoseTrajectory, TrajectoryError
 import numpy as np
-
-from ._trajectory import PoseTrajectory, TrajectoryError
 
 #: Proportional gain (1/s) pulling the joints back onto the script's joint path.
 GAIN = 20.0

@@ -33,10 +33,9 @@ below is the same computation, kept as the oracle of the tests (``solve(..., fas
 
 from dataclasses import dataclass
 
+from etdmp_ros.robot import _ik_fast
+from etdmp_ros.robot._ur10 import JOINT_NAMES
 import numpy as np
-
-from . import _ik_fast
-from ._ur10 import JOINT_NAMES
 
 #: Default joint acceleration limits (rad/s^2), shoulder pan ... wrist 3. UR publishes no
 #: acceleration limits (only torques: 330, 330, 150, 56, 56, 56 N m on the UR10); these are

@@ -3,8 +3,8 @@ The workcell every node shares, validated: :class:`SceneConfig`.
 
 Its values are flat parameter names (``camera.position``), as the nodes declare them; the
 defaults and the file ``config/scene.yaml`` are the system description's
-(:data:`etdmp_ros.system.SCENE`, :func:`etdmp_ros.system.scene_config`). The simulation builds
-from a SceneConfig, and the nodes build it from their parameters with
+(:data:`etdmp_ros.ros.system.SCENE`, :func:`etdmp_ros.ros.system.scene_config`). The simulation
+builds from a SceneConfig, and the nodes build it from their parameters with
 :meth:`SceneConfig.from_parameters`.
 
 Objects and the point that stands for each (all in base_link, metres; table top is z = 0):
@@ -23,9 +23,8 @@ Objects and the point that stands for each (all in base_link, metres; table top 
 from dataclasses import dataclass
 import math
 
+from etdmp_ros.geometry.camera import CameraPose
 import numpy as np
-
-from ._camera import CameraPose
 
 # Scene keys (flat ROS parameter names) that SceneConfig.from_parameters reads.
 SCENE_PARAMETERS = (
@@ -123,7 +122,7 @@ class SceneConfig:
     The validated workcell: robot start, tool, table, objects and camera pose (base_link, m).
 
     Build it with :meth:`from_parameters` (from a node's parameters, or
-    :func:`etdmp_ros.system.scene_config` for the defaults); the constructor takes the values
+    :func:`etdmp_ros.ros.system.scene_config` for the defaults); the constructor takes the values
     as they are and :meth:`from_parameters` validates them. Colours are rgba in 0..1.
     """
 

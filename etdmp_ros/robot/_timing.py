@@ -16,9 +16,8 @@ word). The module needs no ROS.
 
 from dataclasses import dataclass
 
+from etdmp_ros.robot._ur10 import JOINT_NAMES
 import numpy as np
-
-from ._ur10 import JOINT_NAMES
 
 #: Pose error (m and rad) above which a pose counts as out of reach of the IK.
 IK_RESIDUAL = 1e-4

@@ -8,11 +8,12 @@ nothing else: its feed-forward velocity is the secant of ``pose`` over one contr
 
 from bisect import bisect_right
 
+
+from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.robot import _ik_fast
+
 import numpy as np
 import pinocchio as pin
-
-from . import _ik_fast
-from ._camera import quaternion_to_matrix
 
 #: Smallest step between two time stamps (s); closer stamps are a malformed path.
 MIN_STAMP_STEP = 1e-6
@@ -41,7 +42,7 @@ def quaternions_to_rotations(quaternions):
     Quaternions are normalised; a zero or non-finite one raises TrajectoryError.
     """
     try:
-        return quaternion_to_matrix(np.asarray(quaternions, dtype=float).reshape(-1, 4))
+        return quat.to_matrix(quat.normalized(np.asarray(quaternions, dtype=float).reshape(-1, 4)))
     except ValueError as exc:
         raise TrajectoryError(f'bad orientation: {exc}') from None
 

@@ -50,10 +50,11 @@ import time
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
 
-from controller_plans import g_plan, Q_INITIAL, run_kinematic, TOOL_OFFSET  # noqa: E402
+from etdmp_ros.geometry import quaternion as quat  # noqa: E402
 from etdmp_ros.robot import ControllerConfig, TrajectoryController, UR10Model  # noqa: E402
 import numpy as np  # noqa: E402
 import pinocchio as pin  # noqa: E402
+from support.controller_plans import g_plan, Q_INITIAL, run_kinematic, TOOL_OFFSET  # noqa: E402
 
 RATE = 125.0
 
@@ -166,7 +167,7 @@ class _Recorder:
 
     def __init__(self, domain):
         import rclpy
-        from etdmp_ros.ros_conversions import stamp_to_ns
+        from etdmp_ros.ros.conversions import stamp_to_ns
         from geometry_msgs.msg import PoseStamped
         from nav_msgs.msg import Path as PathMsg
         from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -234,8 +235,7 @@ class _Recorder:
 
 def bench_ros(rate, ur10, path, duration_margin=3.0):
     """Run sim + controller at ``rate``; return loop timing and tracking figures."""
-    from etdmp_ros.robot import matrix_to_quaternion
-    from etdmp_ros.ros_conversions import serialize_path
+    from etdmp_ros.ros.conversions import serialize_path
     domain = 90 + os.getpid() % 10
     tmp = Path(tempfile.mkdtemp(prefix='bench_controller_'))
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
@@ -259,7 +259,7 @@ def bench_ros(rate, ur10, path, duration_margin=3.0):
         recorder.wait(lambda: recorder.state() == 'idle', 60.0)
         start = time.perf_counter()
         recorder.path_pub.publish(serialize_path(path.positions, path.t, stamp=0,
-                                                 orientation=matrix_to_quaternion(
+                                                 orientation=quat.from_matrix(
                                                      path.rotations[0])))
         recorder.wait(lambda: 'tracking' in recorder.status, 30.0)
         recorder.wait(lambda: recorder.state() == 'idle', 30.0)
@@ -289,7 +289,7 @@ def bench_ros(rate, ur10, path, duration_margin=3.0):
     tool = np.array([ur10.frame_pose(joints[s][0])[0] for s in stamps])
     # Tracking phase: reference samples moving along the path (not the approach/hold).
     t = np.array(stamps) * 1e-9
-    from controller_plans import path_time_offset
+    from support.controller_plans import path_time_offset
     tau = t - path_time_offset(path, t, ref)
     tracking = (tau > 0) & (tau < path.duration)
     errors = np.linalg.norm(tool - ref, axis=1)[tracking]

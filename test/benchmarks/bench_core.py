@@ -425,7 +425,7 @@ def _xyzw(q):
 
 def _orientation_error_deg(q, reference):
     """Max and RMS rotation angle (deg) between quaternions q and reference (n, 4), by sample."""
-    from etdmp_ros.dmp._quaternion import angle_between
+    from etdmp_ros.geometry.quaternion import angle_between
     angle = np.degrees(angle_between(q, reference))
     return float(angle.max()), float(np.sqrt(np.mean(angle ** 2)))
 
@@ -467,7 +467,7 @@ def orientation_section(repeats, batch_repeats):
     Returns (rows, errors, note): timing rows for :func:`_table`, orientation errors (deg), and a
     line saying why movement-primitives is missing, if it is.
     """
-    from etdmp_ros.dmp._quaternion import about_axis, from_matrix, multiply
+    from etdmp_ros.geometry.quaternion import about_axis, from_matrix, multiply
     demo = builtin_demo(ORIENTATION_SKILL)
     t, x, q = np.array(demo.t), np.array(demo.positions), np.array(demo.orientations)
     tau = float(t[-1])

@@ -47,8 +47,8 @@ GOAL = (0.74, 0.15, 0.0)
 def _obstacles_on_path():
     """Two obstacle points on G's obstacle-free path (at 30 % and 60 %), 8 cm up (cylinders)."""
     from etdmp_ros.dmp import builtin_demo, learn
-    from etdmp_ros.planning import plan_path, PlanSettings
-    from etdmp_ros.task_plane import TaskPlane
+    from etdmp_ros.skills.planning import plan_path, PlanSettings
+    from etdmp_ros.geometry.task_plane import TaskPlane
     plane = TaskPlane.create([0.75, 0.15, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.02)
     free = plan_path(learn(builtin_demo('G')), START, GOAL, (), PlanSettings(), plane)
     n = len(free.positions)
@@ -80,7 +80,7 @@ def floor_server(executor_kind):
     from rclpy.callback_groups import ReentrantCallbackGroup
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
     from nav_msgs.srv import GetPlan
-    from etdmp_ros.ros_conversions import path_from_numpy
+    from etdmp_ros.ros.conversions import path_from_numpy
 
     rclpy.init()
     node = rclpy.create_node(f'floor_{executor_kind}')
@@ -209,7 +209,7 @@ def _set_parameters(caller, **values):
 
 def _publish_obstacles(caller, points):
     from geometry_msgs.msg import PoseArray
-    from etdmp_ros.ros_conversions import pose_array_from_numpy
+    from etdmp_ros.ros.conversions import pose_array_from_numpy
     if not hasattr(caller, 'obstacles'):
         caller.obstacles = caller.node.create_publisher(PoseArray, '/etdmp/obstacles', 10)
     publisher = caller.obstacles
@@ -225,9 +225,9 @@ def _breakdown():
     """Time the parts of one request in this process (no DDS), medians in ms."""
     from etdmp_ros import limits
     from etdmp_ros.dmp import builtin_demo, learn
-    from etdmp_ros.planning import plan_path, PlanSettings
-    from etdmp_ros.ros_conversions import path_from_numpy, serialize_path
-    from etdmp_ros.task_plane import TaskPlane
+    from etdmp_ros.skills.planning import plan_path, PlanSettings
+    from etdmp_ros.ros.conversions import path_from_numpy, serialize_path
+    from etdmp_ros.geometry.task_plane import TaskPlane
     from nav_msgs.msg import Path
     from rclpy.serialization import deserialize_message, serialize_message
 
@@ -258,16 +258,19 @@ def _breakdown():
 
 def _timing_check(plan):
     """Run dmp_server's joint timing check on ``plan`` as the node does (initial joints)."""
-    from etdmp_ros import limits, system
-    from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, quaternion_to_matrix, UR10Model
+    from etdmp_ros import limits
+    from etdmp_ros.ros import system
+    from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, UR10Model
+    from etdmp_ros.geometry import quaternion as quat
     from etdmp_ros.robot._timing import timing_violation
     global _TIMING_MODEL
     if _TIMING_MODEL is None:
         _TIMING_MODEL = UR10Model(tool_offset=system.scene_defaults()['tool_offset'])
     q0 = system.scene_defaults()['initial_joint_positions']
-    return timing_violation(_TIMING_MODEL, plan.positions, quaternion_to_matrix(plan.orientation),
-                            plan.t, q0, _TIMING_MODEL.velocity_limits,
-                            DEFAULT_ACCELERATION_LIMITS, limits.TIMING_CHECK_SAMPLES)
+    return timing_violation(_TIMING_MODEL, plan.positions,
+                            quat.to_matrix(quat.normalized(plan.orientation)), plan.t, q0,
+                            _TIMING_MODEL.velocity_limits, DEFAULT_ACCELERATION_LIMITS,
+                            limits.TIMING_CHECK_SAMPLES)
 
 
 _TIMING_MODEL = None

@@ -7,8 +7,8 @@ A script, not a pytest test; it needs no peer library. Run from the repository r
         [--out out/bench_kinesthetic] [--json out/bench_kinesthetic.json]
 
 Each run does what ``make kinesthetic`` and then ``make demo SKILL=stir DEMO_FILE=<bag>`` do
-(:func:`etdmp_ros.kinesthetic.record`, :func:`etdmp_ros.demo.run_demo` with ``demo_file``; the
-nodes as processes on a DDS domain of their own) and reports:
+(:func:`etdmp_ros.demo.kinesthetic.record`, :func:`etdmp_ros.demo.run.run_demo` with
+``demo_file``; the nodes as processes on a DDS domain of their own) and reports:
 
 - the recording: joint states recorded, the learned path against the simulation's true tool
   tip at the same stamps (the same forward kinematics), its trimmed duration against the
@@ -28,13 +28,13 @@ import statistics
 import sys
 import time
 
-from etdmp_ros import demo, kinesthetic
-from etdmp_ros.bag import read_messages
+from etdmp_ros.demo import kinesthetic, run as demo
+from etdmp_ros.demo.scenario import Scenario
 from etdmp_ros.dmp import load_demo
-from etdmp_ros.processes import DISCOVERY_VARIABLES, isolated_environment
 from etdmp_ros.robot import UR10Model
-from etdmp_ros.scenario import Scenario
-from etdmp_ros.skill_library import _motion_span, load_demonstration
+from etdmp_ros.ros.processes import DISCOVERY_VARIABLES, isolated_environment
+from etdmp_ros.skills.library import _motion_span, load_demonstration
+from etdmp_ros.skills.recordings import read_messages
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.serialization import deserialize_message

@@ -36,17 +36,20 @@ import time
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
+sys.path.insert(0, str(REPO / 'test' / 'unit'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
-from etdmp_ros import system  # noqa: E402
-from etdmp_ros.config_files import read_node_parameters  # noqa: E402
+from etdmp_ros.demo.scenario import Scenario  # noqa: E402
 from etdmp_ros.dmp import builtin_demo, learn  # noqa: E402
-from etdmp_ros.planning import plan_path  # noqa: E402
-from etdmp_ros.robot import (Detector, detector_from_parameters,  # noqa: E402
-                             quaternion_to_matrix, SceneConfig, UR10Model, UR10Sim)
+from etdmp_ros.geometry import quaternion as quat  # noqa: E402
+from etdmp_ros.perception import Detector, detector_from_parameters  # noqa: E402
+from etdmp_ros.robot import SceneConfig, UR10Model  # noqa: E402
 from etdmp_ros.robot._arm_check import arm_obstacle_violation, ArmGeometry  # noqa: E402
 from etdmp_ros.robot._timing import plan_joints  # noqa: E402
-from etdmp_ros.scenario import Scenario  # noqa: E402
+from etdmp_ros.ros import system  # noqa: E402
+from etdmp_ros.ros.config_files import read_node_parameters  # noqa: E402
+from etdmp_ros.sim import UR10Sim  # noqa: E402
+from etdmp_ros.skills.planning import plan_path  # noqa: E402
 import numpy as np  # noqa: E402
 from test_vision import boxes_apart, image_box, place, visible_fraction  # noqa: E402
 
@@ -73,7 +76,7 @@ def bench_radii(scenes, repeats):
     known = _known_radius(detector)
     rng = np.random.default_rng(11)
     radius_errors, centre_errors, frames = [], [], []
-    with UR10Sim() as sim:
+    with UR10Sim(system.scene_config()) as sim:
         made = tries = 0
         while made < scenes:
             tries += 1
@@ -204,7 +207,7 @@ def bench_arm_check(rounds):
         radii = np.full(len(cfg.obstacle_positions), cfg.obstacle_radius)
         plan = plan_path(learn(builtin_demo(name)), start_point, goal, cfg.obstacle_positions,
                          settings.plan, settings.plane, obstacle_radii=radii)
-        rotations = quaternion_to_matrix(plan.orientations)
+        rotations = quat.to_matrix(quat.normalized(plan.orientations))
         ik, check = [], []
         for _ in range(rounds):
             t0 = time.perf_counter()

@@ -7,7 +7,7 @@ A script, not a pytest test; it needs no peer library. Run from the repository r
         [--skills G W stir] [--demo-skill G] [--load idle] [--json out/bench_online.json]
         [--no-demo] [--from out/demo_move ...]
 
-Core: ``etdmp_ros.planning.FollowedPlan.update``, what dmp_server calls when a followed goal
+Core: ``etdmp_ros.skills.planning.FollowedPlan.update``, what dmp_server calls when a followed goal
 moved (advance the online rollout to the switch, step it with the new goal, roll the remainder
 out to its end, map it to base_link and check the workspace), on G, W and stir planned as the
 demo plans them (the skill's layout, the tool at the simulation's initial joints, the scene's
@@ -19,9 +19,9 @@ dmp_server publishes and serializing it (what rclpy's publish does before DDS). 
 ms for the update.
 
 End to end: ``--runs`` closed-loop demos with the goal marker moved while the pen writes
-(``etdmp_ros.demo.run_demo`` with ``move_goal``, what ``make demo MOVE_GOAL=1`` runs; the four
+(``etdmp_ros.demo.run.run_demo`` with ``move_goal``, what ``make demo MOVE_GOAL=1`` runs; the four
 nodes as processes), read from each run's ``metrics.json`` ``goal_follow``, which the demo
-measures from its recording alone (``etdmp_ros.metrics.follow_latencies``: /etdmp/goal,
+measures from its recording alone (``etdmp_ros.demo.metrics.follow_latencies``: /etdmp/goal,
 /etdmp/path, the commands' receipt times and the nodes' /rosout lines):
 
 1. perception: the marker moved (simulated time of ur10_sim's parameter change) -> the first
@@ -53,15 +53,16 @@ sys.path.insert(0, str(REPO / 'test'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
 from conftest import busy_core  # noqa: E402
-from etdmp_ros import demo, system  # noqa: E402
+from etdmp_ros.demo import run as demo  # noqa: E402
+from etdmp_ros.demo.scenario import Scenario  # noqa: E402
 from etdmp_ros.dmp import builtin_demo  # noqa: E402
 from etdmp_ros.nodes.dmp_server import Settings  # noqa: E402
-from etdmp_ros.planning import FollowedPlan, plan_path, PlanningError  # noqa: E402
-from etdmp_ros.processes import isolated_environment  # noqa: E402
 from etdmp_ros.robot import UR10Model  # noqa: E402
-from etdmp_ros.ros_conversions import path_from_numpy, serialize_path  # noqa: E402
-from etdmp_ros.scenario import Scenario  # noqa: E402
-from etdmp_ros.skill_library import SkillLibrary  # noqa: E402
+from etdmp_ros.ros import system  # noqa: E402
+from etdmp_ros.ros.conversions import path_from_numpy, serialize_path  # noqa: E402
+from etdmp_ros.ros.processes import isolated_environment  # noqa: E402
+from etdmp_ros.skills.library import SkillLibrary  # noqa: E402
+from etdmp_ros.skills.planning import FollowedPlan, plan_path, PlanningError  # noqa: E402
 import numpy as np  # noqa: E402
 
 CORE_TARGET_MS = 2.0
@@ -129,7 +130,7 @@ def time_core(name, updates, rng):
     skill, plan, settings, plane, scene = demo_case(name)
     low, high = MOVE_RANGE.get(name, LETTER_MOVE)
     core, message, serialized, refused, poses = [], [], [], 0, []
-    # The nodes freeze what they hold after start-up (etdmp_ros.nodes._spin); so here. A full
+    # The nodes freeze what they hold after start-up (etdmp_ros.ros.spin); so here. A full
     # collection before each sample would leave the caches cold (2.7 against 1.6 ms for G).
     gc.collect()
     gc.freeze()

@@ -7,7 +7,7 @@ A script, not a pytest test. From the repository root::
 
 1. Processing time per frame, in this process, on frames rendered by the simulation
    (:class:`etdmp_ros.robot.UR10Sim`) with random placements of the goal and 1-4 obstacles
-   (the arm turned away, every object fully in view: the placements of test/test_vision.py):
+   (the arm turned away, every object fully in view: the placements of test/unit/test_vision.py):
 
    - ``detect``: :meth:`Detector.detect` alone (HSV, blobs, depth, deprojection, fits);
    - ``node frame``: what the perception node does per frame without the transport:
@@ -42,12 +42,15 @@ import time
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
+sys.path.insert(0, str(REPO / 'test' / 'unit'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
-from etdmp_ros.robot import detector_from_parameters, UR10Sim  # noqa: E402
-from etdmp_ros.ros_conversions import (camera_info_msg, image_from_msg, image_msg,  # noqa: E402
+from etdmp_ros.perception import detector_from_parameters  # noqa: E402
+from etdmp_ros.ros.conversions import (camera_info_msg, image_from_msg, image_msg,  # noqa: E402
                                        intrinsics_from_camera_info, ns_to_stamp,
-                                       pose_array_from_numpy, stamp_to_ns)
+                                       pose_array_from_numpy, stamp_to_ns)  # noqa: E402
+from etdmp_ros.ros.system import scene_config  # noqa: E402
+from etdmp_ros.sim import UR10Sim  # noqa: E402
 from geometry_msgs.msg import PointStamped  # noqa: E402
 import numpy as np  # noqa: E402
 from test_vision import match, parameters, random_placements  # noqa: E402
@@ -80,7 +83,7 @@ def bench_frames(n_frames, repeats):
     detector = detector_from_parameters(parameters())
     timings = {'detect': [], 'node frame': [], 'annotate': []}
     goal_errors, obstacle_errors = [], []
-    with UR10Sim() as sim:
+    with UR10Sim(scene_config()) as sim:
         k = sim.intrinsics
         info = camera_info_msg(k)
         frames = list(random_placements(sim, n_frames, seed=11))

@@ -31,11 +31,10 @@ REPO = Path(__file__).resolve().parents[2]
 os.environ.setdefault('MUJOCO_GL', 'egl')
 sys.path.insert(0, str(REPO))
 
-from etdmp_ros.nodes.background import BackgroundNode  # noqa: E402
-from etdmp_ros.processes import isolated_environment, SystemProcesses  # noqa: E402
-from etdmp_ros.ros_conversions import (path_to_numpy, point_to_numpy,  # noqa: E402
-                                       serialize_path)
-from etdmp_ros.scenario import Scenario  # noqa: E402
+from etdmp_ros.demo.scenario import Scenario  # noqa: E402
+from etdmp_ros.ros.background import BackgroundNode  # noqa: E402
+from etdmp_ros.ros.conversions import path_to_numpy, point_to_numpy, serialize_path  # noqa: E402
+from etdmp_ros.ros.processes import isolated_environment, SystemProcesses  # noqa: E402
 from geometry_msgs.msg import PointStamped  # noqa: E402
 from nav_msgs.msg import Path as PathMsg  # noqa: E402
 from nav_msgs.srv import GetPlan  # noqa: E402

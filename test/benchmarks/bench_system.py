@@ -6,7 +6,7 @@ A script, not a pytest test. Run from the repository root (``make bench-system``
     MUJOCO_GL=egl .venv/bin/python test/benchmarks/bench_system.py [--runs 3]
         [--skills G stir] [--load idle busy] [--rates 125 500] [--json out/bench_system.json]
 
-Each run is one ``make demo`` (``etdmp_ros.demo.run_demo``: the four nodes as separate
+Each run is one ``make demo`` (``etdmp_ros.demo.run.run_demo``: the four nodes as separate
 processes, the 30 Hz colour + depth camera, perception, the demo's recorder in this process),
 for every skill, load and control rate asked for (``--rates 500`` runs G at 500 Hz, the
 e-series, idle only). ``busy`` adds one process busy-looping on a core for the whole run
@@ -47,8 +47,8 @@ sys.path.insert(0, str(REPO / 'test'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
 from conftest import busy_core  # noqa: E402
-from etdmp_ros import demo  # noqa: E402
-from etdmp_ros.processes import isolated_environment  # noqa: E402
+from etdmp_ros.demo import run as demo  # noqa: E402
+from etdmp_ros.ros.processes import isolated_environment  # noqa: E402
 import yaml  # noqa: E402
 
 #: (key, label, target text, check) of the table's rows; check(value, rate) -> bool. The CPU
@@ -185,7 +185,7 @@ def table(skill, rate, results):
 #: Run in a fresh process per node: build it as its program does, time full collections.
 GC_PAUSE_PROGRAM = """
 import gc, importlib, statistics, sys, time
-from etdmp_ros.nodes import _spin
+from etdmp_ros.ros import spin as _spin
 module, cls = sys.argv[1].split(':')
 _spin.init()
 node = getattr(importlib.import_module(module), cls)()

@@ -1,0 +1,1 @@
+"""The offline command line ``etdmp`` (no ROS): generalize, reproduce the paper, plot."""

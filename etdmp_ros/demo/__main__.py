@@ -1,0 +1,7 @@
+"""``python -m etdmp_ros.demo``: the closed-loop demo (``make demo``)."""
+
+import sys
+
+from etdmp_ros.demo.run import main
+
+sys.exit(main())

@@ -1,0 +1,938 @@
+"""
+Goal marker and obstacles from a colour image and an aligned depth image (OpenCV + numpy, no ROS).
+
+What is reported. Every object of the workcell is an upright cylinder of known radius ``r``
+(the goal marker is a 2 mm thin disc, an obstacle a can of height ``h``), and the point that
+stands for it is the centre of its TOP face in base_link, as in the simulation's ground truth
+(see :mod:`etdmp_ros.robot._scene`).
+
+Pipeline of :meth:`Detector.detect`, per object class (goal, obstacle):
+
+1. Segmentation: colour to HSV (OpenCV units: H 0..179, S and V 0..255), ``cv2.inRange`` with
+   the class's :class:`HsvRange` (a hue range with low > high wraps through 0, as red needs),
+   8-connected components of at least ``min_blob_area`` pixels, cut at depth steps (below).
+2. Robust depth: the blob's pixels with depth (0 = no data, ignored); their median depth is the
+   blob's depth, and pixels farther from it than the object can extend (2 r + h + 2 cm: the
+   background seen through a hole, flying pixels at edges) are dropped. A blob with fewer than
+   ``min_depth_pixels`` left is rejected ("no depth").
+3. Deprojection of those pixels with the intrinsics (:meth:`CameraIntrinsics.deproject`) and
+   transform to base_link with the camera pose (:meth:`CameraPose.to_base`).
+4. Geometric correction from the known radius, so that the reported point is the top-face
+   centre whatever part of the object the camera sees:
+
+   - height of the top face ``z_top``: the median z of the points in the top band (within
+     ``top_band`` below the 95th percentile of z). A camera above an obstacle sees its top
+     face and its near side; the side's points are lower and left out.
+   - axis (x, y): every point of the blob's OUTLINE lies at horizontal distance ``r`` from the
+     axis: the far rim of the top face, the two silhouette lines of the side and the near rim
+     of the bottom (for the goal disc, simply its rim). A circle of radius ``r`` is fitted to
+     those outline points (Gauss-Newton, then once more without outliers), starting from the
+     centroid of the top-face points, which lies inside the circle. Outline pixels that are
+     not an edge of the object are left out: next to something nearer to the camera by more
+     than ``occlusion_gap`` (the arm or another object in front: an occlusion edge), on the
+     image border, or without depth. Outline pixels without depth on a flat object (the goal
+     disc) are kept, placed where their pixel ray meets the plane ``z = z_top``. (Those with
+     depth keep their own point: the disc's near outline is its 2 mm side, and moving it onto
+     the top plane along the ray would shift it by ~2 mm towards the camera.) So an object
+     partly hidden by the arm, cut by the image border or with holes in its depth is still
+     located from the visible part of its rim.
+   - fallback: with fewer than ``min_rim_points`` rim points, the centroid of the top-face
+     points (``Detection.rim_points == 0``), which is exact only for a fully visible top face.
+
+   The uncorrected estimate (blob centroid pixel deprojected at the median depth) is off by
+   25-40 mm for an obstacle seen at 45 degrees; the corrected one is within 3 mm of the ground
+   truth on rendered 640x480 frames, also partly occluded (median about 0.5 mm, slightly towards
+   the camera: outline pixels lie up to a pixel inside the true rim; test/unit/test_vision.py).
+
+Plausibility (limits in :mod:`etdmp_ros.limits`, section perception and camera input): the
+intrinsics must be a D435 colour camera's (:func:`check_intrinsics`: image size, field of view,
+square pixels, principal point near the centre), else the frame raises ValueError. A blob is
+refused (a :class:`Rejection` naming the reason) when its median depth is outside the D435's
+range, when it covers more of the image than its object can at that depth
+(``MAX_BLOB_AREA_FACTOR``: checked before the blob is deprojected, so an all-green frame costs
+little), or when the located object does not fit the workcell: its points spread wider than
+the object, its top face is above the object's height or below the table top (z = 0) by more
+than ``height_tolerance`` (lower than its height is what a partly hidden top face shows), or it
+lies off the table. So no absurd position is ever reported.
+
+Objects of one colour that overlap in the image (obstacles in a row towards the camera) form one
+blob: it is cut where the depth steps by more than ``occlusion_gap`` between neighbouring pixels
+(the nearer object's edge), and each part of at least ``min_blob_area`` pixels is an object.
+Cylinders closer than that (touching or intersecting) stay one blob; its circle fit is poor and
+the detection is flagged (``Detection.single`` False). Several goal blobs: the largest is the
+goal, the others are rejected. Obstacles are reported in decreasing blob area.
+
+:class:`FrameSynchronizer` matches colour, depth and camera_info by stamp for the node (no
+message_filters): it keeps the newest complete set only, so processing never falls behind.
+"""
+
+from collections import deque
+from dataclasses import dataclass, field
+import math
+
+import cv2
+from etdmp_ros import limits
+from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
+from etdmp_ros.robot._scene import GOAL_MARKER_THICKNESS
+import numpy as np
+
+#: Kinds of detected objects, as in :attr:`Detection.kind`.
+GOAL = 'goal'
+OBSTACLE = 'obstacle'
+BOTTLE = 'bottle'
+_RIM_KERNEL = np.ones((3, 3), np.uint8)
+# An occluder this many pixels from an outline pixel makes it an occlusion edge (2: across the
+# one-pixel line that _split removes between two objects of one colour).
+_MARGIN = 2
+_OCCLUDER_KERNEL = np.ones((2 * _MARGIN + 1, 2 * _MARGIN + 1), np.uint8)
+_NO_DEPTH = np.float32(np.inf)
+#: A measured radius needs rim points spanning at least this much of the circle (rad): on a
+#: shorter arc circles of quite different radii fit about as well.
+MIN_RIM_ARC = math.radians(180.0)
+# Depth pixels of a blob whose median checks it against the D435's range (a subsample of bigger
+# blobs: an all-green frame's median would cost 3 ms).
+_DEPTH_SAMPLES = 4096
+# Drawing colours (RGB) of the annotated image.
+_DRAW = {GOAL: (255, 230, 0), OBSTACLE: (0, 230, 255), BOTTLE: (255, 0, 255),
+         'rejected': (150, 150, 150)}
+
+
+def _a(noun):
+    """Return ``noun`` with its indefinite article (a goal, an obstacle)."""
+    return ('an ' if noun[:1] in 'aeiou' else 'a ') + noun
+
+
+@dataclass(frozen=True)
+class HsvRange:
+    """
+    A colour class as a box in OpenCV's HSV space: ``low`` and ``high`` are ``(h, s, v)``.
+
+    H is in 0..179 (degrees / 2), S and V in 0..255. When ``low[0] > high[0]`` the hue range wraps
+    through 0 (red: e.g. low h = 170, high h = 8).
+    """
+
+    low: tuple
+    high: tuple
+
+    def __post_init__(self):
+        """Validate: 3 integers each, H in 0..179, S and V in 0..255, S and V low <= high."""
+        bounds = (179, 255, 255)
+        values = []
+        for name, value in (('low', self.low), ('high', self.high)):
+            try:
+                triple = [float(v) for v in value]
+            except (TypeError, ValueError):
+                raise ValueError(f'HSV {name} must be 3 numbers [h, s, v], got {value!r}') \
+                    from None
+            if len(triple) != 3 or not all(v == int(v) and 0 <= v <= b
+                                           for v, b in zip(triple, bounds)):
+                raise ValueError(f'HSV {name} must be integers [h 0..179, s 0..255, v 0..255], '
+                                 f'got {list(value)}')
+            values.append(tuple(int(v) for v in triple))
+        low, high = values
+        if low[1] > high[1] or low[2] > high[2]:
+            raise ValueError(f'HSV range: S and V need low <= high, got low {list(low)}, '
+                             f'high {list(high)}')
+        object.__setattr__(self, 'low', low)
+        object.__setattr__(self, 'high', high)
+
+    @property
+    def wraps(self):
+        """Whether the hue range wraps through 0 (low h > high h)."""
+        return self.low[0] > self.high[0]
+
+    def mask(self, hsv):
+        """Return the uint8 image (255 inside the range) of an HSV image in OpenCV units."""
+        if not self.wraps:
+            return cv2.inRange(hsv, self.low, self.high)
+        upper = cv2.inRange(hsv, self.low, (179, self.high[1], self.high[2]))
+        lower = cv2.inRange(hsv, (0, self.low[1], self.low[2]), self.high)
+        return cv2.bitwise_or(upper, lower)
+
+
+@dataclass(frozen=True)
+class ObjectModel:
+    """
+    A class of objects: its colour and shape, an upright cylinder (radius, height) in metres.
+
+    The reported point of such an object is the centre of its top face. ``radius_range``:
+    ``(low, high)`` when each object's radius is measured (obstacles), ``radius`` then being
+    where the measurement starts and what is reported when the visible rim is too short to
+    measure it; None when every object has ``radius`` (the goal marker, the bottle).
+    """
+
+    kind: str
+    color: HsvRange
+    radius: float
+    height: float
+    radius_range: tuple = None
+
+    def __post_init__(self):
+        """Validate radius, height and radius_range (positive, finite, low < high)."""
+        for name in ('radius', 'height'):
+            value = float(getattr(self, name))
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f'{self.kind} {name} must be positive, got {value}')
+            object.__setattr__(self, name, value)
+        if self.radius_range is not None:
+            try:
+                low, high = (float(v) for v in self.radius_range)
+            except (TypeError, ValueError):
+                raise ValueError(f'{self.kind} radius range must be [low, high] (m), got '
+                                 f'{self.radius_range!r}') from None
+            if not (math.isfinite(high) and 0.0 < low < high):
+                raise ValueError(f'{self.kind} radius range must be 0 < low < high (m), got '
+                                 f'[{low}, {high}]')
+            object.__setattr__(self, 'radius_range', (low, high))
+
+    @property
+    def max_radius(self):
+        """Return the largest radius an object of this class can have (m)."""
+        return self.radius if self.radius_range is None else max(self.radius,
+                                                                 self.radius_range[1])
+
+    @property
+    def depth_extent(self):
+        """Largest depth difference between two points of the object, plus 2 cm (m)."""
+        return 2.0 * self.max_radius + self.height + 0.02
+
+
+@dataclass(frozen=True)
+class DetectorSettings:
+    """
+    Tuning of :class:`Detector` (pixels and metres).
+
+    ``min_blob_area``: smaller colour blobs are ignored (noise, far or mostly hidden objects).
+    ``min_depth_pixels``: a blob needs this many pixels with depth to be located.
+    ``top_band``: thickness of the band below the highest points taken as the top face (more
+    than the depth noise there). ``occlusion_gap``: an outline pixel next to something nearer to
+    the camera by more than this is an occlusion edge, not the object's rim. ``min_rim_points``:
+    fewer rim points than this and the top-face centroid is reported instead of the circle fit.
+    ``max_rim_rms``: a circle fit worse than this (RMS, m) flags the blob as not one object.
+    ``height_tolerance``: a located top face higher than this (m) above its object's height,
+    or lower below the table top, is refused.
+    """
+
+    min_blob_area: int = 40
+    min_depth_pixels: int = 20
+    top_band: float = 0.005
+    occlusion_gap: float = 0.01
+    min_rim_points: int = 8
+    max_rim_rms: float = 0.004
+    height_tolerance: float = 0.02
+
+    def __post_init__(self):
+        """Validate the values."""
+        for name in ('min_blob_area', 'min_depth_pixels', 'min_rim_points'):
+            value = getattr(self, name)
+            if int(value) != value or value < 1:
+                raise ValueError(f'{name} must be a positive integer, got {value}')
+            object.__setattr__(self, name, int(value))
+        for name in ('top_band', 'occlusion_gap', 'max_rim_rms', 'height_tolerance'):
+            value = float(getattr(self, name))
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f'{name} must be positive (m), got {value}')
+            object.__setattr__(self, name, value)
+
+
+@dataclass(frozen=True, eq=False)
+class Detection:
+    """
+    One located object.
+
+    ``position`` (3,): centre of the top face in base_link (m). ``pixel``: that point in the
+    image (u, v). ``area``: blob pixels; ``bbox``: (x, y, w, h) of the blob. ``depth``: the
+    blob's median depth (m); ``depth_fraction``: share of its pixels with depth. ``rim_points``:
+    outline points used by the circle fit (0: top-face centroid instead); ``rim_rms``: the fit's
+    RMS residual (m). ``single``: False when the fit is too poor for one cylinder (objects
+    overlapping in the image). ``radius`` (m): measured by the fit (``radius_measured``) when
+    its class's radius is measured and enough of the rim is seen, else its class's radius.
+    """
+
+    kind: str
+    position: np.ndarray
+    pixel: tuple
+    area: int
+    bbox: tuple
+    depth: float
+    depth_fraction: float
+    rim_points: int
+    rim_rms: float
+    single: bool = True
+    radius: float = float('nan')
+    radius_measured: bool = False
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """A blob that was not reported: its kind, bbox (x, y, w, h), area and the reason."""
+
+    kind: str
+    bbox: tuple
+    area: int
+    reason: str
+
+
+@dataclass(eq=False)
+class Detections:
+    """Result of one frame: the goal and the bottle (or None), the obstacles, rejected blobs."""
+
+    goal: Detection = None
+    obstacles: list = field(default_factory=list)
+    rejected: list = field(default_factory=list)
+    bottle: Detection = None
+
+    def obstacle_positions(self):
+        """Return the obstacle points (N, 3) in base_link (N may be 0)."""
+        if not self.obstacles:
+            return np.zeros((0, 3))
+        return np.array([d.position for d in self.obstacles])
+
+    def obstacle_radii(self):
+        """Return the obstacles' radii (N,) in metres, in the order of obstacle_positions."""
+        return np.array([d.radius for d in self.obstacles], dtype=float)
+
+
+def check_frame(rgb, depth_mm, intrinsics):
+    """
+    Raise ValueError unless the frame can be processed.
+
+    ``rgb``: uint8 (H, W, 3); ``depth_mm``: uint16 (H, W) aligned to it; ``intrinsics``: a
+    :class:`CameraIntrinsics` of size W x H.
+    """
+    rgb = np.asarray(rgb)
+    depth_mm = np.asarray(depth_mm)
+    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f'colour image must be uint8 (H, W, 3), got {rgb.dtype} {rgb.shape}')
+    if depth_mm.dtype != np.uint16 or depth_mm.ndim != 2:
+        raise ValueError(f'depth image must be uint16 (H, W) millimetres, got {depth_mm.dtype} '
+                         f'{depth_mm.shape}')
+    if depth_mm.shape != rgb.shape[:2]:
+        raise ValueError(f'depth {depth_mm.shape[1]}x{depth_mm.shape[0]} is not aligned to the '
+                         f'colour image {rgb.shape[1]}x{rgb.shape[0]}')
+    check_intrinsics(intrinsics)
+    if (intrinsics.width, intrinsics.height) != (rgb.shape[1], rgb.shape[0]):
+        raise ValueError(f'camera_info is {intrinsics.width}x{intrinsics.height} but the images '
+                         f'are {rgb.shape[1]}x{rgb.shape[0]}')
+
+
+def check_intrinsics(intrinsics):
+    """
+    Raise ValueError unless ``intrinsics`` can be a RealSense D435 colour camera's.
+
+    Image size, the fields of view that fx and fy give, square pixels and a principal point
+    near the image centre, within the limits of :mod:`etdmp_ros.limits` (a dozen float
+    operations).
+    """
+    if not isinstance(intrinsics, CameraIntrinsics):
+        raise ValueError(f'intrinsics must be a CameraIntrinsics, got {type(intrinsics).__name__}')
+    k = intrinsics
+    (w_low, w_high), (h_low, h_high) = limits.CAMERA_WIDTH_RANGE, limits.CAMERA_HEIGHT_RANGE
+    if not (w_low <= k.width <= w_high and h_low <= k.height <= h_high):
+        raise ValueError(f'camera_info image size {k.width}x{k.height} is no D435 colour mode '
+                         f'({w_low}x{h_low} to {w_high}x{h_high})')
+    for axis, size, f, (low, high) in (('horizontal', k.width, k.fx, limits.CAMERA_HFOV_RANGE),
+                                       ('vertical', k.height, k.fy, limits.CAMERA_VFOV_RANGE)):
+        fov = math.degrees(2.0 * math.atan(0.5 * size / f))
+        if not low <= fov <= high:
+            name = 'fx' if axis == 'horizontal' else 'fy'
+            raise ValueError(f'camera_info {name} = {f:.6g} px gives a {axis} field of view of '
+                             f'{fov:.1f} deg at {k.width}x{k.height}; a D435 sees {low:g} to '
+                             f'{high:g} deg')
+    if abs(k.fx - k.fy) > limits.MAX_FOCAL_ASPECT_ERROR * k.fx:
+        raise ValueError(f'camera_info fx = {k.fx:.6g} and fy = {k.fy:.6g} px differ by more '
+                         f'than {limits.MAX_FOCAL_ASPECT_ERROR:.0%} (a D435 has square pixels)')
+    offset = limits.MAX_PRINCIPAL_POINT_OFFSET
+    if abs(k.cx - 0.5 * (k.width - 1)) > offset * k.width or \
+            abs(k.cy - 0.5 * (k.height - 1)) > offset * k.height:
+        raise ValueError(f'camera_info principal point ({k.cx:.6g}, {k.cy:.6g}) px is more than '
+                         f'{offset:.0%} of the image size from the centre of {k.width}x{k.height}')
+
+
+def fit_circle_and_radius(points, start, radius, iterations=30):
+    """
+    Return (centre (2,), radius, rms) of the circle fitted to points (N, 2), radius free.
+
+    Least squares of the radial residuals ``|p - c| - r`` by Gauss-Newton in (c, r) from
+    ``start`` (a point inside the circle) and ``radius``. Well posed only when the points
+    cover enough of the circle (:func:`rim_arc`): a short arc fits circles of many radii.
+    """
+    p = np.asarray(points, dtype=float)
+    cx, cy = (float(v) for v in start)
+    r = float(radius)
+    for _ in range(iterations):
+        dx, dy = p[:, 0] - cx, p[:, 1] - cy
+        n = np.maximum(np.hypot(dx, dy), 1e-12)
+        residual = n - r
+        # Residuals' Jacobian: -(ux, uy, 1); normal equations J^T J step = -J^T residual.
+        jac = np.stack([-dx / n, -dy / n, -np.ones_like(n)], axis=1)
+        normal = jac.T @ jac
+        if np.linalg.cond(normal) > 1e12:
+            break
+        step = np.linalg.solve(normal, -jac.T @ residual)
+        cx, cy, r = cx + step[0], cy + step[1], r + step[2]
+        if step @ step < 1e-14:
+            break
+    residual = np.hypot(p[:, 0] - cx, p[:, 1] - cy) - r
+    return np.array([cx, cy]), float(r), float(np.sqrt(np.mean(residual ** 2)))
+
+
+def rim_arc(points, centre):
+    """Return the angle (rad) of the circle about ``centre`` that points (N, 2) span."""
+    d = np.asarray(points, dtype=float) - centre
+    angles = np.sort(np.arctan2(d[:, 1], d[:, 0]))
+    if len(angles) < 2:
+        return 0.0
+    gaps = np.diff(np.append(angles, angles[0] + 2.0 * np.pi))
+    return float(2.0 * np.pi - gaps.max())
+
+
+def fit_circle(points, radius, start, iterations=20):
+    """
+    Return (centre (2,), rms) of the circle of given radius fitted to points (N, 2).
+
+    Least squares of the radial residuals ``|p - c| - radius`` by Gauss-Newton from ``start``
+    (a point inside the circle: with a short arc the other solution, mirrored across the
+    chord, is then never reached).
+    """
+    p = np.asarray(points, dtype=float)
+    cx, cy = (float(v) for v in start)
+    for _ in range(iterations):
+        dx, dy = p[:, 0] - cx, p[:, 1] - cy
+        n = np.maximum(np.hypot(dx, dy), 1e-12)
+        residual = n - radius
+        ux, uy = dx / n, dy / n          # the Jacobian of the residuals is -(ux, uy)
+        a, b, c = float(ux @ ux), float(ux @ uy), float(uy @ uy)
+        det = a * c - b * b
+        if det < 1e-12 * (a + c) ** 2:   # all points on one line through the centre
+            break
+        gx, gy = float(ux @ residual), float(uy @ residual)
+        step_x, step_y = (c * gx - b * gy) / det, (a * gy - b * gx) / det
+        cx, cy = cx + step_x, cy + step_y
+        if step_x * step_x + step_y * step_y < 1e-14:
+            break
+    residual = np.hypot(p[:, 0] - cx, p[:, 1] - cy) - radius
+    return np.array([cx, cy]), float(np.sqrt(np.mean(residual ** 2)))
+
+
+class Detector:
+    """
+    Locate the goal marker and the obstacles in colour + aligned depth frames.
+
+    ``goal`` and ``obstacle`` are :class:`ObjectModel` instances, ``camera_pose`` the
+    :class:`CameraPose` of the colour optical frame in base_link, ``table`` the table top
+    ``(centre [x, y], size [x, y])`` (m, at z = 0) on which every object stands. ``bottle``:
+    the :class:`ObjectModel` of the open bottle (an upright cylinder whose top face is its
+    mouth: the reported point is the mouth's centre), or None not to look for it. Stateless
+    between frames.
+    """
+
+    def __init__(self, goal, obstacle, camera_pose, table, settings=None, bottle=None):
+        """Keep the object models, the camera pose, the table and the settings."""
+        if not isinstance(camera_pose, CameraPose):
+            raise ValueError(f'camera_pose must be a CameraPose, got {type(camera_pose).__name__}')
+        try:
+            centre, size = (np.array(v, dtype=float).reshape(2) for v in table)
+        except (TypeError, ValueError):
+            raise ValueError(f'table must be (centre [x, y], size [x, y]), got {table!r}') \
+                from None
+        if not (np.all(np.isfinite(centre)) and np.all(np.isfinite(size)) and np.all(size > 0)):
+            raise ValueError(f'table centre and size must be finite, the size positive, got '
+                             f'{centre.tolist()}, {size.tolist()}')
+        self.goal = goal
+        self.obstacle = obstacle
+        self.bottle = bottle
+        self.camera_pose = camera_pose
+        self.table = (centre, size)
+        self._table_low, self._table_high = centre - 0.5 * size, centre + 0.5 * size
+        self.settings = DetectorSettings() if settings is None else settings
+        self._rotation = camera_pose.rotation
+        self._position = np.asarray(camera_pose.position)
+
+    @classmethod
+    def from_scene(cls, scene, goal_color, obstacle_color, settings=None, bottle_color=None,
+                   obstacle_radius_range=None):
+        """
+        Return a detector for a :class:`SceneConfig` (object sizes, camera pose).
+
+        ``obstacle_radius_range``: (low, high) m to measure each obstacle's radius, None for
+        obstacles of the scene's ``obstacle.radius``.
+        """
+        bottle = None if bottle_color is None else ObjectModel(
+            BOTTLE, bottle_color, scene.bottle_radius, scene.bottle_height)
+        return cls(ObjectModel(GOAL, goal_color, scene.goal_radius, GOAL_MARKER_THICKNESS),
+                   ObjectModel(OBSTACLE, obstacle_color, scene.obstacle_radius,
+                               scene.obstacle_height, obstacle_radius_range),
+                   scene.camera_pose, (scene.table_center, scene.table_size), settings, bottle)
+
+    def detect(self, rgb, depth_mm, intrinsics, bgr=False):
+        """
+        Return the :class:`Detections` of one frame.
+
+        ``rgb``: uint8 (H, W, 3), RGB order (BGR with ``bgr=True``); ``depth_mm``: uint16
+        (H, W), z in the optical frame in millimetres, aligned to the colour image, 0 = no
+        data; ``intrinsics``: :class:`CameraIntrinsics` of the colour camera. Raises
+        ValueError for images that do not fit (see :func:`check_frame`).
+        """
+        check_frame(rgb, depth_mm, intrinsics)
+        # Rows of a message with padding (step > width) are not contiguous; OpenCV needs them so.
+        rgb, depth_mm = np.ascontiguousarray(rgb), np.ascontiguousarray(depth_mm)
+        hsv = cv2.cvtColor(rgb, cv2.COLOR_BGR2HSV if bgr else cv2.COLOR_RGB2HSV)
+        result = Detections()
+        goals = self._detect_class(self.goal, hsv, depth_mm, intrinsics, result.rejected)
+        if goals:
+            goals.sort(key=lambda g: -g.area)
+            result.goal = goals[0]
+            for extra in goals[1:]:
+                result.rejected.append(Rejection(GOAL, extra.bbox, extra.area,
+                                                 'another goal blob is larger'))
+        result.obstacles = self._detect_class(self.obstacle, hsv, depth_mm, intrinsics,
+                                              result.rejected)
+        if self.bottle is not None:
+            bottles = self._detect_class(self.bottle, hsv, depth_mm, intrinsics,
+                                         result.rejected)
+            if bottles:     # the largest; a stirrer in it can cut it in two (_split)
+                bottles.sort(key=lambda b: -b.area)
+                result.bottle = bottles[0]
+                for extra in bottles[1:]:
+                    result.rejected.append(Rejection(BOTTLE, extra.bbox, extra.area,
+                                                     'another bottle blob is larger'))
+        return result
+
+    def _detect_class(self, model, hsv, depth_mm, intrinsics, rejected):
+        mask = model.color.mask(hsv)
+        # Labelling costs ~1 ms on a full frame; the objects cover a small part of it. The
+        # region is MARGIN pixels larger than the mask's bounding box (clipped to the image),
+        # so that it holds the margin that _rim_points looks at around every blob.
+        rx, ry, rw, rh = cv2.boundingRect(mask)
+        found = []
+        if rw == 0:
+            return found
+        height, width = mask.shape
+        x0, y0 = max(rx - _MARGIN, 0), max(ry - _MARGIN, 0)
+        x1, y1 = min(rx + rw + _MARGIN, width), min(ry + rh + _MARGIN, height)
+        count, labels, stats, _ = cv2.connectedComponentsWithStats(mask[y0:y1, x0:x1],
+                                                                   connectivity=8)
+        for index in np.argsort(-stats[1:, cv2.CC_STAT_AREA]) + 1:
+            x, y, w, h, area = (int(v) for v in stats[index])
+            if area < self.settings.min_blob_area:
+                break
+            # The blob in a region MARGIN pixels larger than it, in image coordinates.
+            bx0, by0 = max(x + x0 - _MARGIN, 0), max(y + y0 - _MARGIN, 0)
+            bx1, by1 = min(x + x0 + w + _MARGIN, width), min(y + y0 + h + _MARGIN, height)
+            blob = labels[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] == index
+            depth = depth_mm[by0:by1, bx0:bx1]
+            reason = self._implausible_blob(model, blob, depth, area, intrinsics)
+            if reason:
+                rejected.append(Rejection(model.kind, (x + x0, y + y0, w, h), area, reason))
+                continue
+            for part in self._split(model, blob, depth):
+                detection = self._locate(model, part, depth, (bx0, by0), intrinsics)
+                if isinstance(detection, Rejection):
+                    rejected.append(detection)
+                else:
+                    found.append(detection)
+        return found
+
+    def _implausible_blob(self, model, blob, depth, area, intrinsics):
+        """
+        Return why a blob cannot be an object of ``model`` seen by a D435, or ''.
+
+        Its median depth (of at most _DEPTH_SAMPLES of its pixels) must be in the D435's range,
+        and its area at most MAX_BLOB_AREA_FACTOR times that of the sphere around the object
+        at that depth, as stretched by perspective in the image corners (module doc).
+        """
+        d = depth[blob]
+        d = d[d > 0]
+        if d.size < self.settings.min_depth_pixels:
+            return ''   # _locate gives the reason: no depth
+        z = float(np.median(d[::max(1, d.size // _DEPTH_SAMPLES)])) * 0.001
+        low, high = limits.DEPTH_RANGE
+        if not low <= z <= high:
+            return f'depth {z:.3f} m is outside what a D435 measures ({low:g} to {high:g} m)'
+        k = intrinsics
+        sphere = math.hypot(model.max_radius, 0.5 * model.height)
+        near = max(z - sphere, low)
+        # A sphere seen off the optical axis at angle a looks 1 / cos(a)^3 larger.
+        corner = math.hypot(0.5 * k.width / k.fx, 0.5 * k.height / k.fy)
+        stretch = (1.0 + corner * corner) ** 1.5
+        count = limits.MAX_MERGED_OBSTACLES if model.kind == OBSTACLE else 1
+        most = (limits.MAX_BLOB_AREA_FACTOR * count * stretch * math.pi * k.fx * k.fy
+                * sphere * sphere / max(near * near - sphere * sphere, 1e-6))
+        if area > most:
+            return (f'blob of {area} px: more than {_a(model.kind)} can cover at {z:.2f} m '
+                    f'depth (at most {most:.0f} px)')
+        return ''
+
+    def _implausible_position(self, model, points, position, single, radius):
+        """
+        Return why a located object does not fit the workcell, or ''.
+
+        ``points`` (N, 3): the blob's points in base_link; ``position``: its top-face centre;
+        ``radius``: its radius (measured, or its class's). At most MAX_OUTSIDE_FRACTION of the
+        points may lie farther from its axis (horizontally) than its radius plus
+        OBJECT_EXTENT_MARGIN (a merged obstacle blob: the farthest of
+        MAX_MERGED_OBSTACLES obstacles in a row), the top face must be between the table top
+        (z = 0) and the object's height, within ``height_tolerance``, and the centre on the
+        table. No sorting: about 10 us for 1000 points.
+        """
+        if not np.all(np.isfinite(position)):
+            return 'its position is not finite'
+        count = 1 if single or model.kind != OBSTACLE else limits.MAX_MERGED_OBSTACLES
+        reach = (2 * count - 1) * radius + limits.OBJECT_EXTENT_MARGIN
+        dx, dy = points[:, 0] - position[0], points[:, 1] - position[1]
+        outside = np.count_nonzero(dx * dx + dy * dy > reach * reach)
+        if outside > limits.MAX_OUTSIDE_FRACTION * len(points):
+            return (f'{outside} of its {len(points)} points are more than {reach * 1000:.0f} mm '
+                    f'from its axis: larger than {_a(model.kind)}')
+        # The highest points seen may be lower than the top face (the arm hides it), never
+        # higher, and never below the table top.
+        tolerance = self.settings.height_tolerance
+        if not -tolerance <= position[2] <= model.height + tolerance:
+            return (f'top face at z = {position[2]:.3f} m, off the table plane: '
+                    f'{_a(model.kind)} on the table has it at {model.height:.3f} m (seen: 0 '
+                    f'to {model.height:.3f} m, height_tolerance {tolerance:g} m)')
+        if np.any(position[:2] < self._table_low) or np.any(position[:2] > self._table_high):
+            (x0, y0), (x1, y1) = self._table_low, self._table_high
+            return (f'at x, y = {position[0]:.3f}, {position[1]:.3f} m, off the table (x '
+                    f'{x0:.2f} to {x1:.2f} m, y {y0:.2f} to {y1:.2f} m)')
+        return ''
+
+    def _split(self, model, blob, depth):
+        """
+        Return the blob cut at depth steps (objects of one colour overlapping in the image).
+
+        Where neighbouring pixels' depths differ by more than ``occlusion_gap`` the farther
+        pixel is removed; 4-connected parts of at least ``min_blob_area`` pixels are objects.
+        With fewer than two such parts, the blob is returned whole.
+        """
+        d = depth.astype(np.float32)
+        valid = blob & (depth > 0)
+        gap = np.float32(self.settings.occlusion_gap * 1000.0)
+        farther = np.zeros_like(blob)
+        for axis in (0, 1):
+            a = d[:-1] if axis == 0 else d[:, :-1]
+            b = d[1:] if axis == 0 else d[:, 1:]
+            both = (valid[:-1] & valid[1:]) if axis == 0 else (valid[:, :-1] & valid[:, 1:])
+            step = both & (np.abs(a - b) > gap)
+            if not step.any():
+                continue
+            if axis == 0:
+                farther[:-1] |= step & (a > b)
+                farther[1:] |= step & (b > a)
+            else:
+                farther[:, :-1] |= step & (a > b)
+                farther[:, 1:] |= step & (b > a)
+        if not farther.any():
+            return [blob]
+        count, labels, stats, _ = cv2.connectedComponentsWithStats(
+            (blob & ~farther).view(np.uint8), connectivity=4)
+        big = [i for i in range(1, count)
+               if stats[i, cv2.CC_STAT_AREA] >= self.settings.min_blob_area]
+        if len(big) < 2:
+            return [blob]
+        return [labels == i for i in sorted(big, key=lambda i: -stats[i, cv2.CC_STAT_AREA])]
+
+    def _locate(self, model, blob, depth, origin, intrinsics):
+        """
+        Return the Detection of one blob, or a Rejection saying why it cannot be located.
+
+        ``blob`` (bool) and ``depth`` (uint16 mm) cover the same region of the image, whose
+        top-left pixel is ``origin`` (x, y); the blob keeps MARGIN pixels from its edges
+        except at the image border.
+        """
+        s = self.settings
+        vs, us = np.nonzero(blob)
+        area = len(vs)
+        bbox = (int(us.min()) + origin[0], int(vs.min()) + origin[1],
+                int(us.max() - us.min()) + 1, int(vs.max() - vs.min()) + 1)
+        d = depth[vs, us]
+        valid = d > 0
+        if np.count_nonzero(valid) < s.min_depth_pixels:
+            return Rejection(model.kind, bbox, area, f'no depth ({np.count_nonzero(valid)} of '
+                             f'{area} pixels have depth)')
+        z_all = d[valid].astype(np.float32) * np.float32(0.001)
+        median = float(np.median(z_all))
+        near = np.abs(z_all - median) <= model.depth_extent
+        if np.count_nonzero(near) < s.min_depth_pixels:
+            return Rejection(model.kind, bbox, area, 'no consistent depth')
+        z_cam = z_all[near]
+        points = self._to_base(intrinsics.deproject(us[valid][near] + origin[0],
+                                                    vs[valid][near] + origin[1], z_cam))
+        z = points[:, 2]
+        top = z >= np.percentile(z, 95) - s.top_band
+        z_top = float(np.median(z[top]))
+        centroid = points[top, :2].mean(axis=0)
+
+        rim = self._rim_points(model, blob, depth, origin, median, z_top, intrinsics)
+        rim_rms, radius, measured = 0.0, model.radius, False
+        if len(rim) >= s.min_rim_points:
+            rim, centre, radius, rim_rms, measured = self._fit_rim(model, rim, centroid)
+            rim_count = len(rim)
+        else:
+            centre, rim_count = centroid, 0
+        position = np.array([centre[0], centre[1], z_top])
+        single = rim_count == 0 or rim_rms <= s.max_rim_rms
+        reason = self._implausible_position(model, points, position, single, radius)
+        if not reason and measured and not \
+                model.radius_range[0] <= radius <= model.radius_range[1]:
+            reason = (f'its radius measures {radius * 1e3:.1f} mm, outside the range of '
+                      f'{_a(model.kind)} ({model.radius_range[0] * 1e3:g} to '
+                      f'{model.radius_range[1] * 1e3:g} mm)')
+        if reason:
+            return Rejection(model.kind, bbox, area, reason)
+        pixel = intrinsics.project(self.camera_pose.from_base(position))[0]
+        return Detection(model.kind, position, (float(pixel[0]), float(pixel[1])), area,
+                         bbox, median, float(np.count_nonzero(valid)) / area, rim_count,
+                         rim_rms, single, radius, measured)
+
+    def _fit_rim(self, model, rim, inside):
+        """
+        Return (rim points kept, centre (2,), radius, rms, radius measured) of a blob's rim.
+
+        ``inside``: a point inside the circle (the top face's centroid) to start from. A class
+        of known radius: that radius is fitted; one whose radius is measured: the radius too,
+        when the points kept span at least MIN_RIM_ARC of the circle (else its class's radius).
+        Either way once more without outliers (residuals beyond 3 robust sigmas, 2 mm at
+        least: an edge of something else).
+        """
+        s = self.settings
+        free = model.radius_range is not None
+
+        def fit(points, start, radius):
+            """Return (centre, radius, rms); the class's radius unless it is measured."""
+            if free:
+                centre, radius, rms = fit_circle_and_radius(points, start, radius)
+                if np.all(np.isfinite(centre)) and math.isfinite(radius) and radius > 0.0:
+                    return centre, radius, rms
+            centre, rms = fit_circle(points, model.radius, start)
+            return centre, model.radius, rms
+
+        centre, radius, rms = fit(rim, inside, model.radius)
+        residual = np.abs(np.hypot(*(rim - centre).T) - radius)
+        mad = float(np.median(np.abs(residual - np.median(residual))))
+        inliers = residual <= max(3.0 * 1.4826 * mad, 0.002)
+        if s.min_rim_points <= np.count_nonzero(inliers) < len(rim):
+            rim = rim[inliers]
+            centre, radius, rms = fit(rim, centre, radius)
+        if free and radius != model.radius and rim_arc(rim, centre) >= MIN_RIM_ARC:
+            return rim, centre, radius, rms, True
+        if free:            # too short an arc to measure the radius: the class's radius
+            centre, rms = fit_circle(rim, model.radius, inside)
+        return rim, centre, model.radius, rms, False
+
+    def _rim_points(self, model, blob, depth, origin, median, z_top, intrinsics):
+        """Return the blob's real outline points (N, 2): x, y in base_link, see module doc."""
+        s = self.settings
+        blob8 = blob.view(np.uint8)
+        # Outline pixels: in the blob with a neighbour outside it. Erosion treats pixels beyond
+        # the image as blob, so a blob cut by the image border has no outline there.
+        outline = blob & (cv2.erode(blob8, _RIM_KERNEL) == 0)
+        outside = np.where(~blob & (depth > 0), depth.astype(np.float32), _NO_DEPTH)
+        nearest_outside = cv2.erode(outside, _OCCLUDER_KERNEL)
+        vs, us = np.nonzero(outline)
+        d = depth[vs, us].astype(np.float32)
+        has_depth = d > 0
+        reference = np.where(has_depth, d, np.float32(median * 1000.0))
+        edge = nearest_outside[vs, us] >= reference - np.float32(s.occlusion_gap * 1000.0)
+        # Depth of the outline pixel must agree with the blob (flying pixels do not).
+        has_depth &= np.abs(d * np.float32(0.001) - median) <= model.depth_extent
+        flat = model.height <= s.top_band
+        keep = edge & (has_depth | flat)
+        if not np.any(keep):
+            return np.zeros((0, 2))
+        # The outward normal of the outline (the blurred mask's gradient points inwards).
+        smooth = cv2.GaussianBlur(blob.astype(np.float32), (5, 5), 1.0)
+        gx = cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3)[vs[keep], us[keep]]
+        gy = cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3)[vs[keep], us[keep]]
+        us, vs, d, has_depth = us[keep] + origin[0], vs[keep] + origin[1], d[keep], has_depth[keep]
+        rays = self._to_base_directions(intrinsics.deproject(us, vs, 1.0))
+        points = self._position + rays * np.where(has_depth, d * 0.001, 0.0)[:, None]
+        # Outline pixels on the top face (its rim), and those of a flat object without depth:
+        # where the ray through the object's edge meets the top face's plane. A pixel belongs
+        # to the blob when its centre falls on the object, so the edge lies on average half a
+        # pixel beyond an outline pixel's centre, along the outward normal: without this the
+        # rim is seen 0.5-1 mm inside. (Pixels on the side lie on it, at the radius already.)
+        on_top = ~has_depth | (np.abs(points[:, 2] - z_top) <= s.top_band)
+        norm = np.hypot(gx, gy)
+        half = np.where(norm > 0.0, -0.5 / np.maximum(norm, 1e-12), 0.0)
+        edge_rays = self._to_base_directions(intrinsics.deproject(
+            us + half * gx, vs + half * gy, 1.0))
+        down = edge_rays[:, 2]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            t = (z_top - self._position[2]) / down
+        on_top &= np.isfinite(t) & (t > 0)
+        points[on_top] = self._position + edge_rays[on_top] * t[on_top, None]
+        return points[has_depth | on_top, :2]
+
+    def _to_base(self, points_cam):
+        return points_cam @ self._rotation.T + self._position
+
+    def _to_base_directions(self, vectors_cam):
+        return vectors_cam @ self._rotation.T
+
+    def annotate(self, rgb, detections, intrinsics, bgr=False):
+        """
+        Return a copy of the colour image with the detections drawn on it (same channel order).
+
+        Goal: yellow, obstacles: cyan, bottle: magenta (the fitted top-face circle, its centre
+        and x, y, z in mm); rejected blobs: grey boxes with the reason.
+        """
+        image = np.array(rgb, dtype=np.uint8, copy=True)
+        palette = {key: value[::-1] if bgr else value for key, value in _DRAW.items()}
+        items = ([detections.goal] if detections.goal is not None else []) + \
+            list(detections.obstacles) + \
+            ([detections.bottle] if detections.bottle is not None else [])
+        angles = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
+        models = {GOAL: self.goal, OBSTACLE: self.obstacle, BOTTLE: self.bottle}
+        for det in items:
+            model = models[det.kind]
+            color = palette[det.kind]
+            radius = det.radius if math.isfinite(det.radius) else model.radius
+            circle = det.position + radius * np.stack(
+                [np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
+            uv = intrinsics.project(self.camera_pose.from_base(circle))
+            if np.all(np.isfinite(uv)):
+                cv2.polylines(image, [np.round(uv).astype(np.int32)], True, color, 1,
+                              cv2.LINE_AA)
+            centre = tuple(int(round(c)) for c in det.pixel)
+            cv2.drawMarker(image, centre, color, cv2.MARKER_CROSS, 10, 1)
+            x, y, w, h = det.bbox
+            label = '{} {:.0f} {:.0f} {:.0f} mm{}{}'.format(
+                det.kind, *(det.position * 1000.0),
+                f' r {det.radius * 1000.0:.1f}' if det.radius_measured else '',
+                '' if det.single else ' (merged?)')
+            cv2.putText(image, label, (x, max(y - 4, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                        color, 1, cv2.LINE_AA)
+        for rejection in detections.rejected:
+            x, y, w, h = rejection.bbox
+            cv2.rectangle(image, (x, y), (x + w - 1, y + h - 1), palette['rejected'], 1)
+            cv2.putText(image, f'{rejection.kind}: {rejection.reason}', (x, max(y - 4, 10)),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.35, palette['rejected'], 1, cv2.LINE_AA)
+        return image
+
+
+#: Flat parameter names (config/scene.yaml + config/perception.yaml) that
+#: :func:`detector_from_parameters` reads.
+DETECTOR_PARAMETERS = (
+    'camera.position', 'camera.orientation', 'goal_marker.radius', 'obstacle.radius',
+    'obstacle.height', 'goal_hsv_low', 'goal_hsv_high', 'obstacle_hsv_low', 'obstacle_hsv_high',
+    'table.center', 'table.size', 'min_blob_area', 'min_depth_pixels', 'top_band',
+    'occlusion_gap', 'min_rim_points', 'max_rim_rms', 'height_tolerance',
+    'obstacle_radius_range',
+)
+#: Optional ones: with all four (and ``detect_bottle`` not false) the detector also looks for
+#: the bottle (the centre of its mouth).
+BOTTLE_PARAMETERS = ('bottle.radius', 'bottle.height', 'bottle_hsv_low', 'bottle_hsv_high')
+
+
+def detector_from_parameters(params):
+    """
+    Return the :class:`Detector` described by flat parameters (see DETECTOR_PARAMETERS).
+
+    The camera pose and object sizes are the scene's (config/scene.yaml: the ones the
+    simulation renders with), colours and tuning the perception node's. Raises ValueError
+    naming the first missing or invalid parameter.
+    """
+    missing = [name for name in DETECTOR_PARAMETERS if name not in params]
+    if missing:
+        raise ValueError(f'perception parameters missing: {", ".join(missing)}')
+    p = params
+    try:
+        pose = CameraPose(p['camera.position'], p['camera.orientation'])
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'camera pose: {exc}') from None
+    colors = {}
+    for kind in (GOAL, OBSTACLE):
+        try:
+            colors[kind] = HsvRange(p[f'{kind}_hsv_low'], p[f'{kind}_hsv_high'])
+        except ValueError as exc:
+            raise ValueError(f'{kind}_hsv_low/high: {exc}') from None
+    try:
+        settings = DetectorSettings(**{name: p[name] for name in (
+            'min_blob_area', 'min_depth_pixels', 'top_band', 'occlusion_gap', 'min_rim_points',
+            'max_rim_rms', 'height_tolerance')})
+        bottle = None
+        if p.get('detect_bottle', True) and all(p.get(name) is not None
+                                                for name in BOTTLE_PARAMETERS):
+            try:
+                color = HsvRange(p['bottle_hsv_low'], p['bottle_hsv_high'])
+            except ValueError as exc:
+                raise ValueError(f'bottle_hsv_low/high: {exc}') from None
+            bottle = ObjectModel(BOTTLE, color, p['bottle.radius'], p['bottle.height'])
+        return Detector(
+            ObjectModel(GOAL, colors[GOAL], p['goal_marker.radius'], GOAL_MARKER_THICKNESS),
+            ObjectModel(OBSTACLE, colors[OBSTACLE], p['obstacle.radius'], p['obstacle.height'],
+                        p['obstacle_radius_range']),
+            pose, (p['table.center'], p['table.size']), settings, bottle)
+    except TypeError as exc:   # a list where a number belongs, None
+        raise ValueError(f'perception parameters: {exc}') from None
+
+
+class FrameSynchronizer:
+    """
+    Match messages of several streams (colour, depth, camera_info) by their stamps.
+
+    :meth:`add` stores a message (keeping the last ``queue_size`` per stream) and returns the
+    NEWEST complete set whose stamps are all within ``tolerance_ns`` of each other and newer
+    than the last set returned, or None. Everything older than a returned set is dropped, so a
+    slow consumer only ever sees the latest frame. Stamps are integer nanoseconds; a stamp more
+    than ``reset_ns`` older than the last returned one means time went back (a restarted
+    simulation, a looping bag): the synchronizer starts over.
+    """
+
+    def __init__(self, streams, tolerance_ns, queue_size=4, reset_ns=1_000_000_000):
+        """Create empty queues for the named streams."""
+        if not streams:
+            raise ValueError('FrameSynchronizer needs at least one stream')
+        if tolerance_ns < 0:
+            raise ValueError(f'tolerance must be >= 0, got {tolerance_ns} ns')
+        self.streams = tuple(streams)
+        self.tolerance_ns = int(tolerance_ns)
+        self.reset_ns = int(reset_ns)
+        self._queues = {name: deque(maxlen=max(1, int(queue_size))) for name in self.streams}
+        self.last_stamp = None
+        self.dropped = 0
+
+    def reset(self):
+        """Forget all stored messages and the last returned stamp."""
+        for queue in self._queues.values():
+            queue.clear()
+        self.last_stamp = None
+
+    def add(self, stream, stamp_ns, message):
+        """Store a message; return ``(stamp_ns, {stream: message})`` when a set completes."""
+        stamp_ns = int(stamp_ns)
+        if self.last_stamp is not None and stamp_ns <= self.last_stamp:
+            if self.last_stamp - stamp_ns <= self.reset_ns:
+                self.dropped += 1
+                return None
+            self.reset()
+        self._queues[stream].append((stamp_ns, message))
+        return self._match()
+
+    def _match(self):
+        first = self.streams[0]
+        for stamp, message in sorted(self._queues[first], key=lambda item: -item[0]):
+            found = {first: message}
+            for name in self.streams[1:]:
+                best = min(self._queues[name], key=lambda item: abs(item[0] - stamp),
+                           default=None)
+                if best is None or abs(best[0] - stamp) > self.tolerance_ns:
+                    break
+                found[name] = best[1]
+            else:
+                self._drop_through(stamp)
+                return stamp, found
+        return None
+
+    def _drop_through(self, stamp):
+        limit = stamp + self.tolerance_ns
+        for queue in self._queues.values():
+            kept = [item for item in queue if item[0] > limit]
+            # Older sets that were never returned: the frames skipped to stay current.
+            if queue is self._queues[self.streams[0]]:
+                self.dropped += sum(item[0] < stamp - self.tolerance_ns for item in queue)
+            queue.clear()
+            queue.extend(kept)
+        self.last_stamp = stamp

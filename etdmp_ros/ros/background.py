@@ -1,0 +1,52 @@
+"""
+An rclpy node in a context of its own, spun by a background thread: for tools, tests, the demo.
+
+It spins with the executor every node program uses (:mod:`etdmp_ros.ros.spin`) and loads the
+package's DDS profile first, so what it measures is what a node would see.
+"""
+
+import threading
+
+from etdmp_ros.ros import spin as _spin
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+
+
+class BackgroundNode:
+    """
+    An rclpy node in a context of its own, spun by a background thread (for tools and tests).
+
+    Create subscriptions and clients on ``self.node``, then call :meth:`start`; :meth:`close`
+    stops the thread and shuts the context down. ``domain_id`` None means ROS_DOMAIN_ID.
+    """
+
+    def __init__(self, name, domain_id=None):
+        """Create the context and the node (not spinning yet)."""
+        _spin.use_dds_profile()
+        self.context = rclpy.Context()
+        kwargs = {} if domain_id is None else {'domain_id': int(domain_id)}
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO,
+                   **kwargs)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = _spin.make_executor(self.context)
+        self._thread = threading.Thread(target=self._spin, daemon=True, name=f'{name}_spin')
+
+    def start(self):
+        """Start spinning in the background thread; return self."""
+        self.executor.add_node(self.node)
+        self._thread.start()
+        return self
+
+    def _spin(self):
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=_spin.SLICE)
+            except Exception:   # noqa: B902 - the context was shut down while waiting
+                break
+
+    def close(self):
+        """Stop spinning, shut the context down and destroy the node."""
+        rclpy.shutdown(context=self.context)
+        if self._thread.is_alive():
+            self._thread.join(timeout=5)
+        self.node.destroy_node()

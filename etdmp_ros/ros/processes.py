@@ -1,0 +1,191 @@
+"""
+Starting the nodes as separate processes, as ``ros2 run`` does, on a DDS domain of their own.
+
+One launcher for the demo, the tests and the benchmarks:
+
+- :func:`isolated_environment`: a private ``ROS_DOMAIN_ID`` with localhost-only discovery, so
+  parallel runs on one machine cannot hear each other (nor other ROS users);
+- :func:`module_argv` / :func:`installed_argv`: the argv of one node, either this Python's
+  ``-m etdmp_ros.nodes.<node>`` or the colcon install's ``<install>/lib/etdmp_ros/<node>``
+  after sourcing the install, as a user runs it;
+- :class:`NodeProcess`: one node in its own process, its output in a log file, stopped with
+  SIGINT (Ctrl-C) and killed if it does not exit;
+- :class:`SystemProcesses`: the system's four nodes (:data:`etdmp_ros.ros.system.NODES`) in start
+  order, stopped with the simulation last.
+
+No ROS here: processes and environment variables only.
+"""
+
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from etdmp_ros.ros import system
+
+#: Environment variables that would widen discovery beyond this machine's private domain.
+DISCOVERY_VARIABLES = ('ROS_LOCALHOST_ONLY', 'ROS_STATIC_PEERS')
+
+
+class NodeExited(RuntimeError):
+    """A node process ended while it should be running; the message has the end of its log."""
+
+
+def isolated_environment(domain_id=None, base=None):
+    """
+    Return an environment for a private DDS domain: ``ROS_DOMAIN_ID`` and localhost discovery.
+
+    ``domain_id`` defaults to one derived from the process id in 1..101 (Fast DDS's range that
+    is safe from Linux's ephemeral ports); static peers and ROS_LOCALHOST_ONLY are dropped.
+    ``base``: the environment to start from (default ``os.environ``).
+    """
+    env = dict(os.environ if base is None else base)
+    env['ROS_DOMAIN_ID'] = str(domain_id if domain_id is not None else 1 + os.getpid() % 101)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    for name in DISCOVERY_VARIABLES:
+        env.pop(name, None)
+    return env
+
+
+def ros_arguments(param_files, extra_args=()):
+    """Return ``--ros-args --params-file <f> ...`` for ``param_files``, then ``extra_args``."""
+    return ['--ros-args', *[a for f in param_files for a in ('--params-file', str(f))],
+            *extra_args]
+
+
+def module_argv(node, param_files, extra_args=()):
+    """Return the argv starting ``node`` with this Python (what ``ros2 run`` runs)."""
+    return [sys.executable, '-m', system.node(node).module,
+            *ros_arguments(param_files, extra_args)]
+
+
+def sourced(install, command):
+    """Return an argv that runs a shell command after sourcing the install, as a user would."""
+    # local_setup.sh: colcon-core always writes it (setup.bash needs the colcon-bash extension).
+    return ['sh', '-c', f'. "{install}/local_setup.sh" && exec {command}']
+
+
+def installed_argv(install, node, param_files, extra_args=''):
+    """
+    Return the argv running the colcon install's executable of ``node`` after sourcing it.
+
+    ``extra_args``: appended verbatim to the shell command (e.g. ``-p name:=value``).
+    """
+    command = (f'{install}/lib/etdmp_ros/{system.node(node).executable} '
+               + ' '.join(ros_arguments(param_files)))
+    return sourced(install, command + (f' {extra_args}' if extra_args else ''))
+
+
+def installed_command(install):
+    """Return a ``command(node, param_files)`` that runs the installed executable."""
+    def command(node, param_files):
+        return installed_argv(install, node, param_files)
+    return command
+
+
+class NodeProcess:
+    """One node in its own process, its output (stdout and stderr) in ``log_path``."""
+
+    def __init__(self, argv, log_path, env, new_session=False):
+        """
+        Start ``argv`` with ``env`` (unbuffered, uncoloured output; MUJOCO_GL egl default).
+
+        ``new_session``: in a process group of its own, as a command in a terminal of its own.
+        """
+        env = dict(env, PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0')
+        env.setdefault('MUJOCO_GL', 'egl')
+        self.log_path = Path(log_path)
+        self._log = open(self.log_path, 'w')
+        self.process = subprocess.Popen(argv, env=env, stdout=self._log,
+                                        stderr=subprocess.STDOUT, start_new_session=new_session)
+
+    @property
+    def pid(self):
+        """Return the process id."""
+        return self.process.pid
+
+    @property
+    def returncode(self):
+        """Return the exit code, None while it runs."""
+        return self.process.poll()
+
+    def log(self):
+        """Return the node's output so far."""
+        return self.log_path.read_text(errors='replace')
+
+    def interrupt(self):
+        """Send SIGINT (Ctrl-C: a clean shutdown) if it still runs."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+
+    def wait(self, timeout=10.0):
+        """Wait up to ``timeout`` s for the exit, then kill; close the log; return the code."""
+        try:
+            self.process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+        self._log.close()
+        return self.process.returncode
+
+    def stop(self, timeout=10.0):
+        """SIGINT, then kill after ``timeout`` s; return the exit code."""
+        self.interrupt()
+        return self.wait(timeout)
+
+
+class SystemProcesses:
+    """The system's nodes, each in its own process, output in ``<log_dir>/<node>.log``."""
+
+    def __init__(self, param_files, log_dir, env, command=module_argv):
+        """
+        Start every node of :data:`etdmp_ros.ros.system.NODES` in order.
+
+        ``param_files(node, log_dir)`` returns a node's parameter files; ``command(node,
+        param_files)`` the argv of one node (:func:`module_argv`, or :func:`installed_command`).
+        """
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.processes = {}
+        for node in system.NODE_NAMES:
+            argv = command(node, param_files(node, self.log_dir))
+            self.processes[node] = NodeProcess(argv, self.log_dir / f'{node}.log', env)
+
+    def log(self, node):
+        """Return the output of ``node`` so far."""
+        return self.processes[node].log()
+
+    def check_alive(self):
+        """Raise NodeExited naming a node that has exited, with the end of its log."""
+        for node, process in self.processes.items():
+            if process.returncode is not None:
+                tail = '\n'.join(self.log(node).splitlines()[-15:])
+                raise NodeExited(f'{node} exited with code {process.returncode}:\n{tail}')
+
+    def last_error(self, node):
+        """Return the last ERROR line of ``node``'s log, or ''."""
+        lines = [line for line in self.log(node).splitlines() if '[ERROR]' in line]
+        return lines[-1] if lines else ''
+
+    def stop(self, timeout=10.0, interrupted=False):
+        """
+        SIGINT (Ctrl-C) to every node, the simulation last; kill stragglers; return exit codes.
+
+        ``interrupted``: the user pressed Ctrl-C, which the nodes (same process group) got too:
+        give them time to finish before a second SIGINT could cut their own clean-up short.
+        """
+        if interrupted:
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and any(
+                    p.returncode is None for p in self.processes.values()):
+                time.sleep(0.05)
+        first, last = system.NODE_NAMES[1:], system.NODE_NAMES[:1]
+        codes = {}
+        for group in (first, last):
+            for node in group:
+                self.processes[node].interrupt()
+            for node in group:
+                codes[node] = self.processes[node].wait(timeout)
+        return codes

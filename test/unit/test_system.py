@@ -1,0 +1,263 @@
+"""
+The system description (etdmp_ros.ros.system) is the one place of every parameter and node.
+
+The files written from it (config/*.yaml, the docs' parameter tables) must be up to date and
+give back its defaults; the nodes must declare exactly what it describes, with its descriptors.
+"""
+
+from conftest import REPO
+from etdmp_ros.ros import config_files, system
+from etdmp_ros.ros.parameters import as_declared, declare, descriptor, list_type
+import numpy as np
+import pytest
+import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+
+def test_config_files_and_docs_tables_are_written_from_the_description():
+    stale = [str(path.relative_to(REPO)) for path, text in config_files.generated_files(REPO)
+             .items() if path.read_text(encoding='utf-8') != text]
+    assert not stale, f'out of date (run `make config`): {stale}'
+
+
+@pytest.mark.parametrize('name', system.NODE_NAMES)
+def test_the_parameter_files_give_back_every_default(name):
+    spec = system.node(name)
+    from_files = config_files.read_node_parameters(name)
+    for p in spec.all_parameters:
+        if p.array_type and not p.default:
+            assert p.name not in from_files   # ROS cannot type an empty list: left out
+            continue
+        value = from_files[p.name]
+        assert type(value) is type(p.default), (p.name, value, p.default)
+        if isinstance(p.default, float) or (isinstance(p.default, list)
+                                            and isinstance(p.default[0], float)):
+            assert np.allclose(value, p.default, rtol=1e-15, atol=0), p.name
+        else:
+            assert value == p.default, p.name
+
+
+def test_a_default_outside_its_range_or_choices_is_refused():
+    with pytest.raises(ValueError, match='outside'):
+        system.Parameter('gain', 2.0, 'a gain', value_range=(0.0, 1.0))
+    with pytest.raises(ValueError, match='not in'):
+        system.Parameter('method', 'x', 'a method', choices=('etdmp', 'dmp'))
+    with pytest.raises(ValueError, match='array_type'):
+        system.Parameter('files', [], 'files')
+
+
+def test_wiring_scene_first_then_the_node_then_sim_time():
+    for spec in system.NODES:
+        files = system.parameter_files(spec.name)
+        assert [f.name for f in files] == ['scene.yaml', f'{spec.name}.yaml']
+        assert all(f.is_file() for f in files)
+        assert system.wiring_overrides(spec.name) == (
+            {'use_sim_time': True} if spec.sim_time else {})
+    assert [n.name for n in system.NODES if n.sim_time] == ['dmp_server', 'controller']
+    assert system.NODE_NAMES[0] == 'ur10_sim'   # started first: the others wait for it
+    with pytest.raises(KeyError, match='nodes: ur10_sim'):
+        system.node('planner')
+
+
+def test_scene_parameters_are_one_description_shared_by_the_nodes():
+    scene = {p.name: p for p in system.SCENE}
+    for spec in system.NODES:
+        for p in spec.scene:
+            assert p.default == scene[p.name].default, (spec.name, p.name)
+        own = {p.name for p in spec.parameters}
+        assert not own & set(scene), f'{spec.name} redefines scene parameters'
+    assert system.scene_config().goal_position.tolist() == scene['goal_position'].default
+
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, args=['--ros-args', '--disable-rosout-logs'])
+    yield ctx
+    ctx.try_shutdown()
+
+
+def _node(context, name, overrides=()):
+    return Node(name, context=context, parameter_overrides=list(overrides),
+                enable_rosout=False, start_parameter_services=False)
+
+
+def test_declare_gives_each_parameter_its_default_and_descriptor(context):
+    spec = system.node('dmp_server')
+    node = _node(context, spec.name)
+    try:
+        values = declare(node, spec)
+        assert values == {**spec.defaults()}
+        assert values['static_obstacles'] == [] and values['demo_files'] == []
+        k = node.describe_parameter('obstacle_k')
+        assert k.description.endswith('[1/m]') and not k.read_only
+        assert (k.floating_point_range[0].from_value, k.floating_point_range[0].to_value) == \
+            spec.parameter('obstacle_k').value_range
+        n = node.describe_parameter('n_basis')
+        assert (n.integer_range[0].from_value, n.integer_range[0].to_value) == (2, 1000)
+        assert node.describe_parameter('tool_offset').read_only
+        assert 'one of etdmp, dmp' in node.describe_parameter('method').additional_constraints
+        result = node.set_parameters([Parameter('obstacle_k', value=-1.0)])[0]
+        assert not result.successful   # below the range: refused by rcl
+        result = node.set_parameters([Parameter('tool_offset', value=[0.0, 0.0, 0.2])])[0]
+        assert not result.successful   # read-only
+    finally:
+        node.destroy_node()
+
+
+def test_declare_refuses_file_values_out_of_range_or_of_another_type(context):
+    spec = system.node('controller')
+    for override, error in ((Parameter('control_rate', value=5000.0),
+                             InvalidParameterValueException),
+                            (Parameter('control_rate', value=125), InvalidParameterTypeException)):
+        node = _node(context, spec.name, [override])
+        try:
+            with pytest.raises(error):
+                declare(node, spec)
+        finally:
+            node.destroy_node()
+
+
+LIST_TYPES = (Parameter.Type.BOOL_ARRAY, Parameter.Type.INTEGER_ARRAY,
+              Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY)
+
+
+@pytest.mark.parametrize('spec', system.NODES, ids=system.NODE_NAMES)
+def test_an_empty_list_of_any_type_is_the_declared_empty_list(spec):
+    """``ros2 param set <node> <list> "[]"`` sends bool[]: every list parameter takes it."""
+    lists = [p for p in spec.all_parameters if list_type(p) is not None]
+    assert lists
+    for p in lists:
+        for given in LIST_TYPES:
+            [converted] = as_declared(spec, [Parameter(p.name, given, [])])
+            assert (converted.name, converted.type_, list(converted.value)) == (
+                p.name, list_type(p), []), (p.name, given)
+
+
+def test_lists_the_command_line_types_otherwise_are_converted_or_left_to_be_refused():
+    perception, dmp_server = system.node('perception'), system.node('dmp_server')
+    cases = [   # (spec, given, expected type and value; None: left as it is)
+        (dmp_server, Parameter('static_obstacles', value=[1, 0, 0]),
+         (Parameter.Type.DOUBLE_ARRAY, [1.0, 0.0, 0.0])),
+        (perception, Parameter('goal_hsv_low', value=[45.0, 100.0, 50.0]),
+         (Parameter.Type.INTEGER_ARRAY, [45, 100, 50])),
+        (perception, Parameter('goal_hsv_low', value=[45.5, 100.0, 50.0]), None),
+        (perception, Parameter('goal_hsv_low', value=[float('inf'), 100.0, 50.0]), None),
+        (dmp_server, Parameter('static_obstacles', value='[]'), None),
+        (dmp_server, Parameter('static_obstacles', value=[True]), None),
+        (dmp_server, Parameter('demo_files', value=[1, 2]), None),
+        (dmp_server, Parameter('duration', value=[]), None),           # a scalar: left
+        (dmp_server, Parameter('not_declared', value=[]), None),
+    ]
+    for spec, given, expected in cases:
+        [converted] = as_declared(spec, [given])
+        if expected is None:
+            assert converted is given, given.name
+        else:
+            assert (converted.type_, list(converted.value)) == expected, given.name
+
+
+def test_set_parameters_takes_an_empty_list_and_refuses_a_wrong_type(context):
+    """What `ros2 param set /dmp_server static_obstacles "[]"` does, on a declared node."""
+    spec = system.node('dmp_server')
+    node = _node(context, spec.name)
+    try:
+        declare(node, spec)
+        obstacles = 'static_obstacles'
+        assert node.set_parameters([Parameter(obstacles, value=[0.7, 0.3, 0.0])])[0].successful
+        result = node.set_parameters([Parameter(obstacles, Parameter.Type.BOOL_ARRAY, [])])[0]
+        assert result.successful, result.reason
+        value = node.get_parameter(obstacles)
+        assert value.type_ == Parameter.Type.DOUBLE_ARRAY and list(value.value) == []
+        assert node.set_parameters([Parameter(obstacles, value=[1, 0, 0])])[0].successful
+        assert list(node.get_parameter(obstacles).value) == [1.0, 0.0, 0.0]
+        for wrong in ('abc', [True, False], ['a']):
+            result = node.set_parameters([Parameter(obstacles, value=wrong)])[0]
+            assert not result.successful
+            assert "Wrong parameter type, expected 'Type.DOUBLE_ARRAY'" in result.reason
+        assert list(node.get_parameter(obstacles).value) == [1.0, 0.0, 0.0]
+    finally:
+        node.destroy_node()
+
+
+def test_list_overrides_typed_by_the_command_line_are_converted_too(context):
+    """``--ros-args -p tool_orientation:=[0, 1, 0, 0]`` is integer[]: taken as the floats."""
+    spec = system.node('dmp_server')
+    node = _node(context, spec.name, [Parameter('tool_orientation', value=[0, 1, 0, 0])])
+    try:
+        assert declare(node, spec)['tool_orientation'] == [0.0, 1.0, 0.0, 0.0]
+        assert node.get_parameter('tool_orientation').type_ == Parameter.Type.DOUBLE_ARRAY
+    finally:
+        node.destroy_node()
+    node = _node(context, spec.name, [Parameter('tool_orientation', value=['a', 'b'])])
+    try:
+        with pytest.raises(InvalidParameterTypeException):
+            declare(node, spec)
+    finally:
+        node.destroy_node()
+
+
+def test_every_descriptor_matches_its_parameter():
+    for spec in system.NODES:
+        for p in spec.all_parameters:
+            d = descriptor(p)
+            assert d.name == p.name and d.read_only == (not p.dynamic)
+            assert d.dynamic_typing == p.dynamic_typing
+            assert bool(d.floating_point_range or d.integer_range) == (
+                p.value_range is not None and not isinstance(p.default, list))
+
+
+@pytest.mark.parametrize('spec', system.NODES, ids=system.NODE_NAMES)
+def test_each_node_declares_exactly_its_description(context, spec, monkeypatch, tmp_path):
+    # Without parameter files: the built-in defaults are the description's.
+    monkeypatch.setenv('ROS_HOME', str(tmp_path))
+    monkeypatch.setenv('MUJOCO_GL', 'egl')
+    from etdmp_ros.nodes.bringup import node_class
+    node = node_class(spec)(context=context)
+    try:
+        declared = set(node._parameters) - {'use_sim_time', 'start_type_description_service'}
+        assert declared == {p.name for p in spec.all_parameters}
+        for p in spec.all_parameters:
+            described = node.describe_parameter(p.name)
+            assert described.read_only == (not p.dynamic), p.name
+            if p.array_type and not p.default:
+                continue
+            value = node.get_parameter(p.name).value
+            value = list(value) if isinstance(p.default, list) else value
+            assert value == p.default, p.name
+    finally:
+        if hasattr(node, 'stop'):
+            node.stop()
+        node.destroy_node()
+
+
+#: A node program whose start-up gets SIGINT inside a C callback (as numba's compiler calls
+#: back while the controller warms up): Python prints the KeyboardInterrupt and drops it there.
+_STARTUP_SIGNAL = """
+import ctypes, os, signal, sys, time
+from etdmp_ros.ros import spin as _spin
+from rclpy.node import Node
+
+def make(nodes):
+    nodes.append(Node('startup_signal'))
+    @ctypes.CFUNCTYPE(None)
+    def callback():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)   # the signal is handled here, inside the callback
+    callback()
+
+sys.exit(_spin.run(make, 'startup_signal', ['startup_signal']))
+"""
+
+
+def test_a_signal_during_start_up_is_not_lost(ros_env):
+    import subprocess
+    import sys
+    try:
+        done = subprocess.run([sys.executable, '-c', _STARTUP_SIGNAL], env=ros_env, timeout=20,
+                              capture_output=True, text=True)
+    except subprocess.TimeoutExpired:
+        pytest.fail('the program kept running after a SIGINT during its start-up')
+    assert done.returncode == 0, done.stderr
