@@ -29,7 +29,7 @@ help:
 	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-obstacles|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
+	@echo "                one of them: make bench-core|bench-obstacles|bench-obstacle_volumes|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
 	@echo "make browser    headless Chromium + chromedriver for the teaching page's test (apt, as root; make test does it)"
@@ -141,7 +141,7 @@ $(BENCH_STAMP): requirements.txt $(BENCH_REQ) setup.py setup.cfg
 	  --no-deps --no-build-isolation -e .
 	@touch $@
 
-BENCHMARKS := core obstacles sim dmp_server controller perception system
+BENCHMARKS := core obstacles obstacle_volumes sim dmp_server controller perception system
 
 bench: $(addprefix bench-,$(BENCHMARKS))
 

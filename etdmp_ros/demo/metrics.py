@@ -21,9 +21,10 @@ How the numbers are measured (``metrics.json`` repeats this under ``definitions`
   the task plane (2D) or to the requested goal (stir).
 - clearance: smallest distance from the pen tip's surface (radius
   :data:`~etdmp_ros.robot.PEN_TIP_RADIUS`, 3 mm) to an obstacle cylinder's surface (true
-  positions from the simulation; cylinders of ``obstacle.radius`` standing on the table up to
-  their top point), over the whole executed motion; > 0: no contact. For a pen on the table it
-  is the distance to the axis minus 25 mm minus 3 mm.
+  positions from the simulation; cylinders of their radii, ``obstacle_radii`` or else
+  ``obstacle.radius``, standing on the table up to their top point), over the whole executed
+  motion; > 0: no contact of the tip. For a pen on the table it is the distance to the axis
+  minus 25 mm minus 3 mm. (The pen's body, 9 mm, and the arm: ``contacts``.)
 - orientation tracking (a skill with orientations, :func:`orientation_figures`): the true tool
   orientation, forward kinematics of the simulation's own ``/joint_states`` on the UR10 model
   with the scene's ``tool_offset`` (the simulation's ground truth publishes the tip's position
@@ -34,6 +35,11 @@ How the numbers are measured (``metrics.json`` repeats this under ``definitions`
   against the demonstration's at the same phase turned by the Euclidean transform's rotation
   (about the task plane's normal for 2D skills; ``R^T`` in 3D, mode 1), computed here from
   start and goal.
+- contacts: the simulation's ground truth (``/ur10_sim/ground_truth/contacts``, published at
+  every tick while the arm or the tool touches an obstacle, the bottle, the table or the
+  floor): ``contacts`` counts the ticks with one over the whole recording (0: none; None: the
+  topic was not recorded), ``contact_pairs`` names them (``part/item``),
+  ``contact_max_depth_mm`` the deepest.
 - commands: the largest ``|qd_j| / limit_j`` (limits: ``UR10Model.velocity_limits`` times the
   controller's ``velocity_scale``) and ``|qd_j[k] - qd_j[k-1]| * control_rate / a_j``
   (the controller's ``joint_acceleration_limits``) over every command received.
@@ -97,6 +103,10 @@ DEFINITIONS = {
                      'cylinder surface (true positions), over the executed motion; > 0: clear',
     'command_ratios': 'max |qd_j| / velocity limit_j and max |dqd_j| * control_rate / '
                       'acceleration limit_j over all joint-velocity commands received',
+    'contacts': "the simulation's contacts (/ur10_sim/ground_truth/contacts: a link or the "
+                'tool touching an obstacle, the bottle, the table or the floor; the tool tip '
+                'writing on the table is none): ticks with one over the whole recording (None: '
+                'not recorded), the pairs part/item, the deepest (mm)',
     'orientation_tracking': 'angle between the true tool orientation (forward kinematics of the '
                             "simulation's /joint_states) and the plan's at the same path time "
                             "(geodesic between poses), or the controller's reference at the "
@@ -189,12 +199,24 @@ def format_nrmse(value):
 # ------------------------------------------------------------------------------- geometry
 
 
+def obstacle_radii(run):
+    """Return the radius (m,) of each of the run's true obstacles (the scenario's)."""
+    from etdmp_ros.robot import obstacle_radii_for
+    scene = run.scene.scene
+    radii = getattr(run.scene, 'obstacle_radii', None)
+    if radii is None or len(radii) != len(np.reshape(run.obstacles_truth, (-1, 3))):
+        radii = obstacle_radii_for(len(np.reshape(run.obstacles_truth, (-1, 3))),
+                                   scene.get('obstacle_radii') or [], scene['obstacle.radius'])
+    return np.asarray(radii, dtype=float)
+
+
 def cylinder_gap(points, obstacles, radius):
     """
     Return the distance (n,) from points to the nearest upright cylinder's surface.
 
     Each obstacle point (m, 3) is the centre of a cylinder's top face; the cylinder of
-    ``radius`` stands on the table (z = 0) up to that point. Negative inside a cylinder.
+    ``radius`` (one for all, or one per obstacle) stands on the table (z = 0) up to that
+    point. Negative inside a cylinder.
     """
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     obstacles = np.asarray(obstacles, dtype=float).reshape(-1, 3)
@@ -440,7 +462,7 @@ def _dmp_plan(run):
 
 
 def _headline(run, tr, ex):
-    scene, radius = run.scene, float(run.scene.scene['obstacle.radius'])
+    scene, radius = run.scene, obstacle_radii(run)
     plan_t, plan_x = ex.t, ex.x
     dmp = _dmp_plan(run)
     errors = tracking_errors(run.rec, tr.t0, plan_t[-1])
@@ -462,7 +484,7 @@ def _headline(run, tr, ex):
 
 
 def _plan_details(run, tr, ex):
-    radius = float(run.scene.scene['obstacle.radius'])
+    radius = obstacle_radii(run)
     plan_t, plan_x = ex.t, ex.x
     dmp = _dmp_plan(run)
     return {
@@ -699,7 +721,7 @@ def goal_move_figures(run, tr, ex):
     """Return the figures of a run whose goal marker moved (the module docstring)."""
     scene = run.scene
     _, before, after = run.goal_move
-    radius = float(scene.scene['obstacle.radius'])
+    radius = obstacle_radii(run)
     first_goal = _placed(scene, before)[0] if scene.planar else run.goal
     figures = {
         'moved_object': 'bottle' if getattr(scene, 'perceived_bottle', False) else 'goal marker',
@@ -824,6 +846,19 @@ def orientation_figures(run, tr):
     return figures
 
 
+def contact_figures(rec):
+    """Return the contact figures of the recorded streams (module docstring)."""
+    messages = rec.get('contacts', [])
+    if not messages:
+        return {'contacts': None, 'contact_pairs': [], 'contact_max_depth_mm': None}
+    touching = [found for _, found in messages if found]
+    depths = [depth for found in touching for _, _, depth in found]
+    return {'contacts': len(touching),
+            'contact_pairs': sorted({f'{part}/{item}' for found in touching
+                                     for part, item, _ in found}),
+            'contact_max_depth_mm': float(max(depths) * 1e3) if depths else 0.0}
+
+
 def compute_metrics(run):
     """
     Return (metrics, extra) of a run (the module docstring defines them).
@@ -837,6 +872,7 @@ def compute_metrics(run):
     tr = _trace(run, ex)
     metrics = {**_headline(run, tr, ex), **_plan_details(run, tr, ex), **_positions(run, tr),
                **_perception(run), **command_ratios(run.scene, run.rec['commands']),
+               **contact_figures(run.rec),
                'plan_stamp_minus_sim_time_s': float((run.plan_stamp_ns - run.call_ns) * 1e-9),
                'controller_status': [text for _, text in run.status],
                'wall_time_s': float(run.wall_time),

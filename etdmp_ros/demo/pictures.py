@@ -15,7 +15,7 @@ a picture is made.
 """
 
 from etdmp_ros.apps.plotting import DEMO_STYLE, METHOD_STYLE, REPLACED_STYLE
-from etdmp_ros.demo.metrics import format_nrmse
+from etdmp_ros.demo.metrics import format_nrmse, obstacle_radii
 from etdmp_ros.dmp import learn, METHOD_LABELS
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.camera import CameraPose
@@ -146,11 +146,11 @@ def _draw_bottle(ax, run, view, xy):
 def _draw_obstacles(ax, run, view, xy, low, high):
     from matplotlib.patches import Circle, Rectangle
 
-    radius = float(run.scene.scene['obstacle.radius'])
     obstacles = np.asarray(run.obstacles_truth, dtype=float).reshape(-1, 3)
-    nearby = obstacles[np.all((obstacles[:, :2] > low[:2] - radius)
-                              & (obstacles[:, :2] < high[:2] + radius), axis=1)]
-    for j, o in enumerate(nearby):
+    radii = obstacle_radii(run)
+    near = np.all((obstacles[:, :2] > low[:2] - radii[:, None])
+                  & (obstacles[:, :2] < high[:2] + radii[:, None]), axis=1)
+    for j, (o, radius) in enumerate(zip(obstacles[near], radii[near])):
         (h,), (v,) = xy(o)
         kind = {'color': 'tab:red', 'alpha': 0.45, 'label': 'obstacle' if j == 0 else None}
         if view == 'top':

@@ -23,7 +23,8 @@ import time
 
 from etdmp_ros.ros.background import BackgroundNode
 from etdmp_ros.ros.conversions import (compress_image_cdr, COMPRESSED_IMAGE_TYPE,
-                                       COMPRESSED_SUFFIX, header_stamp_ns, image_from_cdr,
+                                       COMPRESSED_SUFFIX, contacts_from_markers,
+                                       header_stamp_ns, image_from_cdr,
                                        intrinsics_from_camera_info, joint_state_arrays,
                                        message_class, path_to_numpy, point_to_numpy,
                                        pose_array_to_numpy, stamp_to_ns)
@@ -39,6 +40,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray, String
+from visualization_msgs.msg import MarkerArray
 
 #: Keep every n-th camera frame for the animation (30 Hz camera: 15 frames per second).
 FRAME_EVERY = 2
@@ -60,6 +62,7 @@ GOAL_SEEN_TOPIC = '/etdmp/goal'
 BOTTLE_SEEN_TOPIC = '/etdmp/bottle'
 ROSOUT_TOPIC = '/rosout'
 JOINTS_TOPIC = '/joint_states'
+CONTACTS_TOPIC = '/ur10_sim/ground_truth/contacts'
 #: Topics left out of the recording, with the reason (metrics.json ``recording.not_recorded``).
 NOT_RECORDED = {
     '/etdmp/detections/image': 'a view of the recorded camera images that perception draws '
@@ -67,7 +70,8 @@ NOT_RECORDED = {
 }
 #: The streams :func:`read_streams` returns for the metrics.
 MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC, PATH_TOPIC,
-                   GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC, ROSOUT_TOPIC, JOINTS_TOPIC)
+                   GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC, ROSOUT_TOPIC, JOINTS_TOPIC,
+                   CONTACTS_TOPIC)
 
 
 class Stream:
@@ -402,10 +406,11 @@ def read_streams(path):
     positions (n, 3)); ``goal_seen``: /etdmp/goal as (m, 6) rows of simulated ns at receipt,
     receipt ns, header stamp ns, x, y, z; ``bottle_seen``: /etdmp/bottle as those; ``logs``:
     /rosout as [(stamp ns, node, text)] (the nodes stamp their log lines with the wall clock,
-    the clock of the receipt times).
+    the clock of the receipt times); ``contacts``: the simulation's contact ground truth as
+    [(stamp ns, [(part, item, depth m), ...])], one entry per message (an empty list: none).
     """
     tip, reference, commands, command_time, wall, status = [], [], [], [], [], []
-    joints = []
+    joints, contacts = [], []
     paths, goal_seen, bottle_seen, logs = [], [], [], []
     sim_ns = 0
     for topic, _, log_ns, data in bag.read_messages(path, MEASURED_TOPICS):
@@ -437,6 +442,10 @@ def read_streams(path):
             _, positions, _ = path_to_numpy(msg)
             stamps = np.array([stamp_to_ns(p.header.stamp) for p in msg.poses], dtype=np.int64)
             paths.append((sim_ns, log_ns, stamp_to_ns(msg.header.stamp), stamps, positions))
+        elif topic == CONTACTS_TOPIC:
+            msg = deserialize_message(data, MarkerArray)
+            stamp = stamp_to_ns(msg.markers[0].header.stamp) if msg.markers else sim_ns
+            contacts.append((stamp, contacts_from_markers(msg)))
         elif topic in (GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC):
             msg = deserialize_message(data, PointStamped)
             rows = goal_seen if topic == GOAL_SEEN_TOPIC else bottle_seen
@@ -458,7 +467,7 @@ def read_streams(path):
             'paths': paths,
             'goal_seen': np.array(goal_seen, dtype=float).reshape(-1, 6),
             'bottle_seen': np.array(bottle_seen, dtype=float).reshape(-1, 6),
-            'logs': logs}
+            'logs': logs, 'contacts': contacts}
 
 
 def save_recording(path, rec, plan, other, tracking_start, executed=None):

@@ -22,7 +22,10 @@ simulation's time; the others stamp with their inputs' stamps). Then it
    (:mod:`etdmp_ros.demo.metrics`, which defines the numbers; the controller's own tracking error
    comes from the summary it logs) and writes ``plot.png``, ``camera_start.png``,
    ``camera_middle.png``, ``camera_end.png``, ``animation.gif`` (:mod:`etdmp_ros.demo.pictures`),
-   ``metrics.json`` and ``recording.npz`` to the output folder, node logs to ``<out>/logs/``.
+   ``metrics.json`` and ``recording.npz`` to the output folder, node logs to ``<out>/logs/``;
+5. fails (exit code 1, after writing all of it) when the simulation saw the arm or the tool
+   touch an obstacle, the bottle or the table (``metrics.json``'s ``contacts``, the
+   simulation's ground truth), as it does when the controller stopped the motion.
 
 With ``--move-goal`` (``make demo MOVE_GOAL=1``) the demo moves the goal marker
 (:data:`etdmp_ros.demo.scenario.MOVE_GOAL_BY`, 4 cm) at
@@ -419,6 +422,16 @@ def _run_demo(options, env):
     return metrics, written
 
 
+def _contact_failure(metrics):
+    """Return why the run's contacts fail it (there were some, or they were not recorded)."""
+    if metrics['contacts'] is None:
+        return ('no contact ground truth was recorded (/ur10_sim/ground_truth/contacts): '
+                'whether the arm touched anything is unknown')
+    return (f'the arm touched the workcell in {metrics["contacts"]} ticks: '
+            f'{", ".join(metrics["contact_pairs"])} (up to '
+            f'{metrics["contact_max_depth_mm"]:.1f} mm deep)')
+
+
 # ---------------------------------------------------------------------------- command line
 
 
@@ -467,6 +480,9 @@ def summary(metrics, written):
         f'  commands: {m["commands_nonzero"]} moving; up to '
         f'{100 * m["max_joint_velocity_ratio"]:.0f} % of the velocity and '
         f'{100 * m["max_joint_acceleration_ratio"]:.0f} % of the acceleration limits',
+        '  contacts (simulation): ' + ('none: no link nor the tool touched an obstacle, the '
+                                       'bottle or the table' if m.get('contacts') == 0 else
+                                       _contact_failure(m)),
         f'  motion {m["duration_s"]:.2f} s simulated (approach {m["approach_duration_s"]:.2f} s,'
         f' plan {m["plan_duration_s"]:.2f} s); demo took {m["wall_time_s"]:.0f} s',
     ]
@@ -523,6 +539,10 @@ def parse_args(argv=None):
                         help='with --skill stir: a stir taught by moving the arm (rosbag2 .mcap '
                              'of /joint_states, python -m etdmp_ros.demo.kinesthetic), repeated '
                              'from another quadrant instead of the built-in stir')
+    parser.add_argument('--duration', default=None, type=float, metavar='SECONDS',
+                        help="the movement's tau (dmp_server's duration; default: the "
+                             "skill's, 4 s for letters, 5 s for wiping and stirring; 0: the "
+                             "demonstration's own)")
     parser.add_argument('--domain-id', default=None, type=int,
                         help='ROS_DOMAIN_ID of the demo (default: derived from the process id)')
     return parser.parse_args(argv)
@@ -537,7 +557,9 @@ def main(argv=None):
         os.environ.pop(name, None)
     options = Options(skill=args.skill, method=args.method, out=args.out,
                       animation=args.animation, layout=args.layout, timeout=args.timeout,
-                      move_goal=args.move_goal, demo_file=args.demo_file)
+                      move_goal=args.move_goal, demo_file=args.demo_file,
+                      parameters=({} if args.duration is None else
+                                  {'dmp_server': {'duration': args.duration}}))
     try:
         metrics, written = run_demo(options, env)
     except DemoError as err:
@@ -547,6 +569,9 @@ def main(argv=None):
         print('interrupted', file=sys.stderr)
         return 130
     print(summary(metrics, written), flush=True)
+    if metrics['contacts'] != 0:        # measured and written, but the run failed
+        print(f'demo failed: {_contact_failure(metrics)}', file=sys.stderr)
+        return 1
     return 0
 
 

@@ -153,6 +153,8 @@ class Scenario:
             self.overrides[name].update(values)
         if 'control_rate' in self.parameters.get('controller', {}):
             self.controller['control_rate'] = self.parameters['controller']['control_rate']
+        # What the run is measured with (its duration, its tau) is what dmp_server is given.
+        self.server.update(self.parameters.get('dmp_server', {}))
 
     def _use_taught_stir(self):
         """Replace the built-in stir by the recorded one of ``demo_file``."""
@@ -251,6 +253,14 @@ class Scenario:
                                         self.server.get('independent_axis', 2))
         turned = quat.multiply(quat.from_matrix(transform.R.T), demo.orientations[0])
         return quat.to_matrix(quat.normalized(turned))
+
+    @property
+    def obstacle_radii(self):
+        """Return each obstacle's radius (m) in the simulation: obstacle_radii, obstacle.radius."""
+        from etdmp_ros.robot import obstacle_radii_for
+        sim = {**self.scene, **self.overrides['ur10_sim']}
+        return obstacle_radii_for(self.obstacle_count, sim.get('obstacle_radii') or [],
+                                  sim['obstacle.radius'])
 
     @property
     def obstacle_count(self):

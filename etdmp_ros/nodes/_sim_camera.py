@@ -41,20 +41,21 @@ _HEADER = struct.Struct('<qdi')
 def encode(state, stamp_ns):
     """Return the bytes of a :class:`CameraState` and its stamp (what ur10_sim sends)."""
     return (_HEADER.pack(int(stamp_ns), state.time, state.obstacles)
-            + np.concatenate([state.qpos, state.mocap_pos.ravel(),
-                              state.mocap_quat.ravel()]).astype('<f8').tobytes())
+            + np.concatenate([state.qpos, state.mocap_pos.ravel(), state.mocap_quat.ravel(),
+                              state.obstacle_radii]).astype('<f8').tobytes())
 
 
-def decode(data, nq, nmocap):
+def decode(data, nq, nmocap, nobstacles):
     """Return ``(CameraState, stamp ns)`` from :func:`encode`'s bytes; ValueError if malformed."""
     from etdmp_ros.sim import CameraState
     values = np.frombuffer(data, dtype='<f8', offset=_HEADER.size)
-    if len(data) < _HEADER.size or values.size != nq + 7 * nmocap:
+    if len(data) < _HEADER.size or values.size != nq + 7 * nmocap + nobstacles:
         raise ValueError(f'camera snapshot of {len(data)} bytes does not fit the model')
     stamp_ns, time, obstacles = _HEADER.unpack_from(data)
-    mocap = values[nq:]
+    mocap = values[nq:nq + 7 * nmocap]
     return (CameraState(time, values[:nq].copy(), mocap[:3 * nmocap].reshape(nmocap, 3),
-                        mocap[3 * nmocap:].reshape(nmocap, 4), obstacles), stamp_ns)
+                        mocap[3 * nmocap:].reshape(nmocap, 4), obstacles,
+                        values[nq + 7 * nmocap:].copy()), stamp_ns)
 
 
 class CameraPublishers:
@@ -119,7 +120,7 @@ def main(argv=None):
     link = socket.socket(fileno=args.fd)
 
     from etdmp_ros.ros.spin import init
-    from etdmp_ros.sim import UR10Sim
+    from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
     from etdmp_ros.ros.conversions import ns_to_stamp
     import rclpy
     from rclpy.node import Node
@@ -150,7 +151,7 @@ def main(argv=None):
             except BlockingIOError:
                 pass
             link.setblocking(True)
-            state, stamp_ns = decode(data, nq, nmocap)
+            state, stamp_ns = decode(data, nq, nmocap, MAX_OBSTACLES)
             camera.publish(sim, state, ns_to_stamp(stamp_ns))
             published += 1
     except Exception as exc:   # noqa: B902 - say why the camera stopped, then exit

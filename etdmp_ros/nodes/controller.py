@@ -163,18 +163,37 @@ class InputWatch:
         if stamp_ns is not None:
             self._stamp = stamp_ns
 
-    def implausible(self, stamp_ns, robot_ns, simulated):
+    def implausible(self, stamp_ns, robot_ns, simulated, wall_ns=None):
         """
         Return why a joint state stamped ``stamp_ns`` cannot be the robot's ('' if it can).
 
         Its stamp must have advanced from the last accepted one's as the robot's time did, to
         within ``timeout``: a stamp far in the future would end the path at once (the
-        controller's time is the stamps'), one far in the past would read as a restart.
+        controller's time is the stamps'), one far in the past would read as a restart. On a
+        starved machine this process's view of the robot's clock (its /clock messages) and the
+        joint states arrive out of step, both ways, so:
+
+        - one that advanced, but less than the clock, is late, not false: this process was not
+          scheduled while the robot's clock went on (its /clock messages taken first), or the
+          transport held it back; refusing it stopped the arm as stale-input ("its stamp is
+          -0.104 s off the robot clock") on a machine loaded 9 times over;
+        - one ahead of the clock is the clock lagging (its /clock messages still queued) when
+          its stamp advanced no more than the wall clock (``wall_ns``, steady) did since the last
+          one was taken, plus ``timeout``: refusing it stopped the G next to a busy core ("+0.104
+          s off ... advanced 0.176 s ... while the clock advanced 0.072 s"). A stamp 100 s ahead
+          still is no stamp of the robot's.
+
+        The controller goes on from such a joint state; its missed steps re-synchronise the
+        path (etdmp_ros.robot._controller).
         """
         if self._stamp is None or simulated != self._simulated:
             return ''
-        skew = ((stamp_ns - self._stamp) - (robot_ns - self._robot)) * 1e-9
-        if abs(skew) <= self.timeout:
+        advance = (stamp_ns - self._stamp) * 1e-9
+        skew = advance - (robot_ns - self._robot) * 1e-9
+        if abs(skew) <= self.timeout or (skew < 0.0 and advance > 0.0):
+            return ''
+        if skew > 0.0 and wall_ns is not None and \
+                advance <= (wall_ns - self._wall) * 1e-9 + self.timeout:
             return ''
         return (f'its stamp is {skew:+.3f} s off the robot clock (advanced '
                 f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '
@@ -361,7 +380,15 @@ class ControllerNode(Node):
             self._stale = False
             self.get_logger().info('joint states are back')
         self._last_step = t
+        resyncs = self.controller.resyncs
         command = self.controller.step(q, t)
+        if self.controller.resyncs != resyncs:
+            at, gap, before, after = self.controller.last_gap
+            self.get_logger().warning(
+                f'no control step for {gap * 1e3:.0f} ms (joint states late: this process was '
+                f'not scheduled?); the arm went on with its last command meanwhile: the path '
+                f'goes on from path time {after:.3f} s, nearest to the tool, instead of '
+                f'{before:.3f} s')
         self._summarize(command, t)
         self._rotation = command.tool_rotation
         self._publish_command(command.qd)
@@ -378,7 +405,7 @@ class ControllerNode(Node):
             return None
         if stamp == 0:      # unstamped: measured when received
             stamp = self.get_clock().now().nanoseconds
-        implausible = self.watch.implausible(stamp, times[0], times[2])
+        implausible = self.watch.implausible(stamp, times[0], times[2], times[1])
         if implausible:
             self._ignore(implausible)
             return None

@@ -11,10 +11,11 @@ config/dmp_server.yaml``. The logic lives in ROS-free modules: :mod:`etdmp_ros.s
 parameters and keeps the latest inputs.
 
 Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward kinematics) or
-``/etdmp/tool_pose``, ``/etdmp/goal``, ``/etdmp/obstacles``, ``/etdmp/demonstrations`` (teaching);
-serves ``/generalize`` (nav_msgs/srv/GetPlan) and, for clients that must not share parameters
-with others, ``~/teach`` and ``~/generalize_with`` (rcl_interfaces/srv/SetParametersAtomically:
-the skill's name and settings in the request, described in etdmp_ros.ros.system); publishes
+``/etdmp/tool_pose``, ``/etdmp/goal``, ``/etdmp/obstacles`` with ``/etdmp/obstacle_volumes``
+(each obstacle's radius), ``/etdmp/demonstrations`` (teaching); serves ``/generalize``
+(nav_msgs/srv/GetPlan) and, for clients that must not share parameters with others,
+``~/teach`` and ``~/generalize_with`` (rcl_interfaces/srv/SetParametersAtomically: the skill's
+name and settings in the request, described in etdmp_ros.ros.system); publishes
 ``/etdmp/path`` (transient local) and ``/etdmp/markers``.
 
 Threads: the executor (``_spin.make_executor``) runs the input callbacks and parameters;
@@ -36,15 +37,16 @@ import threading
 import time
 
 from etdmp_ros import limits
-from etdmp_ros.dmp import builtin_demo, FORMULATIONS, METHODS, ObstacleGains
+from etdmp_ros.dmp import AVOIDANCES, builtin_demo, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, UR10Model
-from etdmp_ros.robot._timing import timing_violation
+from etdmp_ros.robot._arm_check import arm_obstacle_violation, ArmGeometry
+from etdmp_ros.robot._timing import joint_timing_violation, plan_joints
 from etdmp_ros.ros import system
-from etdmp_ros.ros.conversions import (joint_state_arrays, ns_to_stamp, path_from_cdr,
-                                       path_from_numpy, point_to_numpy, points_from_numpy,
-                                       pose_array_to_numpy, serialize_path)
+from etdmp_ros.ros.conversions import (cylinders_from_markers, joint_state_arrays, ns_to_stamp,
+                                       path_from_cdr, path_from_numpy, point_to_numpy,
+                                       points_from_numpy, pose_array_to_numpy, serialize_path)
 from etdmp_ros.ros.parameters import (declared_settings, InvalidConfiguration, plain,
                                       values as parameter_values)
 from etdmp_ros.ros.queued_service import QueuedService
@@ -120,6 +122,8 @@ class Settings:
     publish_markers: bool
     teach_overwrite: bool
     check_timing: bool
+    check_arm: bool
+    arm_clearance: float
     max_request_wait: float
     follow_goal: bool
     follow_threshold: float
@@ -151,7 +155,9 @@ class Settings:
             obstacle_margin=values['obstacle_margin'], goal_clearance=values['goal_clearance'],
             min_distance=values['min_distance'], orientation=values['tool_orientation'],
             orientation_mode=_choice(values, 'orientation_mode', PLAN_ORIENTATION_MODES),
-            workspace=workspace)
+            workspace=workspace, tool_radius=values['tool_radius'],
+            obstacle_clearance=values['obstacle_clearance'],
+            avoidance=_choice(values, 'avoidance', AVOIDANCES))
         plane = TaskPlane.create(values['task_plane.origin'], values['task_plane.x_axis'],
                                  values['task_plane.y_axis'], values['task_plane.scale'])
         return cls(
@@ -165,7 +171,8 @@ class Settings:
             recorded_dim=_choice(values, 'recorded_dim', RECORDED_DIMS),
             plane_tolerance=values['plane_tolerance'], execute=values['execute'],
             publish_markers=values['publish_markers'], teach_overwrite=values['teach_overwrite'],
-            check_timing=values['check_timing'], max_request_wait=values['max_request_wait'],
+            check_timing=values['check_timing'], check_arm=values['check_arm'],
+            arm_clearance=values['arm_clearance'], max_request_wait=values['max_request_wait'],
             follow_goal=values['follow_goal'], follow_threshold=values['follow_threshold'],
             follow_lead=values['follow_lead'],
             initial_joints=_joints(values['initial_joint_positions']),
@@ -225,9 +232,11 @@ class DmpServer(Node):
         self._goal = _Latest()
         self._bottle = _Latest()
         self._obstacles = _Latest()
+        self._volumes = _Latest()
         try:
             self._model = UR10Model(tool_offset=self.get_parameter('tool_offset').value)
             self._timing_model = UR10Model(tool_offset=self._model.tool_offset)  # _core_lock
+            self._arm = ArmGeometry(self._timing_model)                      # _core_lock
         except (OSError, ValueError) as err:   # no example-robot-data, or a bad tool_offset
             log.fatal(f'cannot load the UR10 model: {err}')
             raise InvalidConfiguration(str(err)) from None
@@ -248,6 +257,8 @@ class DmpServer(Node):
         self.create_subscription(PointStamped, 'etdmp/bottle', self._on_bottle, 10,
                                  callback_group=inputs)
         self.create_subscription(PoseArray, 'etdmp/obstacles', self._on_obstacles, 10,
+                                 callback_group=inputs)
+        self.create_subscription(MarkerArray, 'etdmp/obstacle_volumes', self._on_volumes, 10,
                                  callback_group=inputs)
         # Raw: the size is checked before the bytes are decoded (numpy, not message objects).
         # One teaching at a time, from the topic or the service.
@@ -549,6 +560,17 @@ class DmpServer(Node):
             self._obstacles.update(points)
         self._follow(obstacles=True)
 
+    def _on_volumes(self, msg):
+        """Keep the latest obstacle volumes: each obstacle's top-face centre and radius."""
+        try:
+            tops, radii = cylinders_from_markers(msg)
+        except ValueError as err:
+            self.get_logger().warn(f'/etdmp/obstacle_volumes: ignored: {err}',
+                                   throttle_duration_sec=_THROTTLE)
+            return
+        with self._state_lock:
+            self._volumes.update((tops, radii))
+
     def _tool_position(self, settings):
         source = settings.tool_position_source
         topic = '/joint_states' if source == 'joint_states' else '/etdmp/tool_pose'
@@ -580,17 +602,44 @@ class DmpServer(Node):
             return goal + settings.goal_offset
 
     def _current_obstacles(self, settings):
+        """Return the obstacles to plan around: points (m, 3)."""
+        return self._current_volumes(settings)[0]
+
+    def _current_volumes(self, settings):
+        """
+        Return the obstacles to plan around: (points (m, 3), radii (m,) in metres).
+
+        The perceived ones (/etdmp/obstacles), each with the radius of the nearest volume
+        (/etdmp/obstacle_volumes, within FOLLOW_MATCH_RADIUS: perception sends both for every
+        frame), then ``static_obstacles`` (points: radius 0). A perceived obstacle without a
+        volume is a point (warned).
+        """
         with self._state_lock:
             seen = self._obstacles.fresh(settings.obstacle_max_age)
             stale = seen is None and self._obstacles.value is not None and \
                 len(self._obstacles.value) > 0
+            volumes = self._volumes.fresh(settings.obstacle_max_age)
         if stale:
             self.get_logger().warn('/etdmp/obstacles is older than obstacle_max_age '
                                    f'{settings.obstacle_max_age:g} s: ignored',
                                    throttle_duration_sec=_THROTTLE)
+        static = settings.static_obstacles
         if seen is None or len(seen) == 0:
-            return settings.static_obstacles
-        return np.concatenate([seen, settings.static_obstacles])
+            return static, np.zeros(len(static))
+        radii = np.zeros(len(seen))
+        if volumes is not None and len(volumes[0]):
+            gaps = np.linalg.norm(seen[:, None] - volumes[0][None], axis=2)
+            nearest = gaps.argmin(axis=1)
+            sized = gaps[np.arange(len(seen)), nearest] <= FOLLOW_MATCH_RADIUS
+            radii[sized] = volumes[1][nearest[sized]]
+        else:
+            sized = np.zeros(len(seen), bool)
+        if not np.all(sized):
+            self.get_logger().warn(
+                f'{np.count_nonzero(~sized)} perceived obstacle(s) without a volume on '
+                '/etdmp/obstacle_volumes: planned as points (radius 0)',
+                throttle_duration_sec=_THROTTLE)
+        return np.concatenate([seen, static]), np.concatenate([radii, np.zeros(len(static))])
 
     def _request_point(self, pose_stamped, what, settings):
         frame = pose_stamped.header.frame_id
@@ -617,19 +666,51 @@ class DmpServer(Node):
                                  f'MAX_GOAL_PLANE_DISTANCE = {limits.MAX_GOAL_PLANE_DISTANCE:g} '
                                  f'm: not a goal for the 2D skill {settings.skill!r}')
 
-    def _check_timing(self, plan, skill, settings):
-        """Refuse a plan whose timing the arm cannot follow; say the shortest duration."""
+    def _check_plan(self, plan, skill, settings, obstacles, radii):
+        """
+        Refuse a plan the arm cannot follow in time, or along which it would touch an obstacle.
+
+        One IK along the plan (TIMING_CHECK_SAMPLES poses from the current joints) serves both
+        checks (``check_timing``, ``check_arm``); ``obstacles`` (m, 3) and ``radii`` (m,) are the
+        obstacles as perceived (top-face centres in base_link, not projected onto the plane).
+        """
+        if not (settings.check_timing or settings.check_arm):
+            return
         with self._state_lock:
             q = self._joint_state.fresh(settings.tool_state_max_age)
         q = settings.initial_joints if q is None else q
-        fraction = limits.TIMING_LIMIT_FRACTION
-        model = self._timing_model
-        violation = timing_violation(
-            model, plan.positions, quat.to_matrix(quat.normalized(plan.orientation)), plan.t, q,
-            model.velocity_limits * fraction,
-            np.asarray(DEFAULT_ACCELERATION_LIMITS) * fraction, limits.TIMING_CHECK_SAMPLES)
-        if violation is None:
-            return
+        rotations = quat.to_matrix(quat.normalized(plan.orientation))
+        idx, joints, violation = plan_joints(self._timing_model, plan.positions, rotations,
+                                             plan.t, q, limits.TIMING_CHECK_SAMPLES)
+        if settings.check_timing:
+            if violation is None:
+                fraction = limits.TIMING_LIMIT_FRACTION
+                violation = joint_timing_violation(
+                    plan.t[idx], joints, self._timing_model.velocity_limits * fraction,
+                    np.asarray(DEFAULT_ACCELERATION_LIMITS) * fraction)
+            if violation is not None:
+                self._refuse_timing(violation, plan, skill, settings)
+        if settings.check_arm and len(joints):
+            touch = arm_obstacle_violation(self._arm, joints, plan.t[idx], obstacles, radii,
+                                           settings.arm_clearance)
+            if touch is not None:
+                self._refuse_touch(touch, obstacles, radii, settings)
+
+    @staticmethod
+    def _refuse_touch(touch, obstacles, radii, settings):
+        """Raise the arm check's refusal (an ArmViolation): the part, the obstacle, when."""
+        o, r, t = obstacles[touch.obstacle], radii[touch.obstacle], touch.t
+        how = (f'{-touch.gap * 1000:.0f} mm into' if touch.gap < 0.0 else
+               f'within {touch.gap * 1000:.1f} mm of')
+        raise ValueError(
+            f'the plan would bring the {touch.part} {how} the obstacle at ({o[0]:.3f}, '
+            f'{o[1]:.3f}, {o[2]:.3f}) (radius {r * 1000:.0f} mm) at t = {t:.2f} s, closer than '
+            f'arm_clearance {settings.arm_clearance * 1000:g} mm (IK of the plan from the '
+            'current joints: the plan keeps the tool clear of obstacles, not the arm); move the '
+            'obstacle or the start')
+
+    def _refuse_timing(self, violation, plan, skill, settings):
+        """Raise the timing check's refusal; say the shortest feasible duration."""
         tau = settings.plan.duration or skill.tau
         if np.isfinite(violation.slowdown):
             needed = np.ceil(tau * violation.slowdown * 100.0) / 100.0
@@ -711,14 +792,13 @@ class DmpServer(Node):
         Raises ValueError or ArithmeticError with the reason: the goal's checks, the planning's
         and the timing check's.
         """
-        obstacles = self._current_obstacles(settings)
+        obstacles, radii = self._current_volumes(settings)
         skill = self._library.skill(settings.skill, settings.formulation, settings.n_basis)
         self._check_goal(goal, skill, settings)
         with self._core_lock, np.errstate(over='raise', invalid='raise', divide='raise'):
             plan = plan_path(skill, start, goal, obstacles, settings.plan, settings.plane,
-                             goal_orientation=goal_orientation)
-            if settings.check_timing:
-                self._check_timing(plan, skill, settings)
+                             goal_orientation=goal_orientation, obstacle_radii=radii)
+            self._check_plan(plan, skill, settings, obstacles, radii)
         return skill, plan
 
     def _execute(self, settings, skill, plan, stamp, perceived_goal, header):
@@ -805,9 +885,10 @@ class DmpServer(Node):
                     new_goal = goal
             new_obstacles = None
             if obstacles:
-                merged = _merged_obstacles(f.plan.obstacles,
-                                           f.plan.placed(self._current_obstacles(settings)),
-                                           threshold)
+                seen, seen_radii = self._current_volumes(settings)
+                merged, merged_radii = _merged_obstacles(
+                    f.plan.obstacles, f.plan.obstacle_sizes, f.plan.placed(seen), seen_radii,
+                    threshold)
                 if f.obstacles_seen.confirm(merged, _obstacles_moved, threshold) and \
                         _obstacles_moved(f.plan.obstacles, merged, threshold) and \
                         _obstacles_moved(f.refused_obstacles, merged, threshold):
@@ -822,7 +903,9 @@ class DmpServer(Node):
                                                   divide='raise'):
                     if new_goal is not None:
                         self._check_goal(new_goal, f.skill, settings)
-                    first = f.plan.update(t_switch, goal=new_goal, obstacles=new_obstacles)
+                    first = f.plan.update(
+                        t_switch, goal=new_goal, obstacles=new_obstacles,
+                        obstacle_radii=None if new_obstacles is None else merged_radii)
             except (ValueError, ArithmeticError) as err:
                 # Said once for this goal or obstacle set, not at every message that shows it.
                 f.refused_goal = f.goal_seen.candidate if new_goal is not None else None
@@ -963,17 +1046,19 @@ class _Confirmed:
         return self.count >= FOLLOW_CONFIRMATIONS
 
 
-def _merged_obstacles(used, seen, threshold):
+def _merged_obstacles(used, used_radii, seen, seen_radii, threshold):
     """
-    Return the obstacles a plan in execution follows: ``used`` updated by what is ``seen``.
+    Return the obstacles (m, 3) and radii (m,) a plan in execution follows: ``used`` updated.
 
     A seen obstacle within FOLLOW_MATCH_RADIUS of a used one is that one (moved, if by more than
-    ``threshold``); the nearest such wins, others near it are the same obstacle seen twice. A
-    seen obstacle near none appeared. A used obstacle that is not seen is kept where it was:
-    the arm may be hiding it from the camera.
+    ``threshold``, and then with its seen radius); the nearest such wins, others near it are
+    the same obstacle seen twice. A seen obstacle near none appeared. A used obstacle that is
+    not seen is kept where it was: the arm may be hiding it from the camera.
     """
     used, seen = np.asarray(used).reshape(-1, 3), np.asarray(seen).reshape(-1, 3)
-    merged, appeared = used.copy(), []
+    merged, radii = used.copy(), np.array(used_radii, dtype=float).reshape(-1)
+    seen_radii = np.asarray(seen_radii, dtype=float).reshape(-1)
+    appeared = list(range(len(seen)))
     if len(used):
         gaps = np.linalg.norm(seen[:, None] - used[None], axis=2)
         nearest = gaps.argmin(axis=1) if len(seen) else np.zeros(0, int)
@@ -982,12 +1067,9 @@ def _merged_obstacles(used, seen, threshold):
             if len(mine):
                 best = mine[np.argmin(gaps[mine, j])]
                 if gaps[best, j] > threshold:
-                    merged[j] = seen[best]
-        appeared = [p for i, p in enumerate(seen) if gaps[i].min() > FOLLOW_MATCH_RADIUS]
-    else:
-        appeared = list(seen)
-    return np.vstack([merged] + [np.reshape(p, (1, 3)) for p in appeared]) \
-        if appeared else merged
+                    merged[j], radii[j] = seen[best], seen_radii[best]
+        appeared = [i for i in range(len(seen)) if gaps[i].min() > FOLLOW_MATCH_RADIUS]
+    return (np.vstack([merged, seen[appeared]]), np.concatenate([radii, seen_radii[appeared]]))
 
 
 def _goal_moved(before, now, threshold):

@@ -14,6 +14,11 @@ newest complete frame. Publishes, stamped with the image's stamp, in base_link:
   when no goal is visible (and a throttled warning);
 - ``/etdmp/obstacles`` (geometry_msgs/PoseArray): centres of the obstacles' top faces, every
   processed frame, empty when none are visible;
+- ``/etdmp/obstacle_volumes`` (visualization_msgs/MarkerArray): the same obstacles as upright
+  cylinders with their measured radii (a CYLINDER marker each, in the PoseArray's order and
+  with its stamp: diameter ``scale.x = scale.y``, height ``scale.z`` from the table to the top
+  face; :mod:`etdmp_ros.ros.conversions._markers`), every processed frame: what dmp_server
+  plans around and what RViz or Foxglove show;
 - ``/etdmp/bottle`` (geometry_msgs/PointStamped): centre of the open bottle's mouth (while
   ``detect_bottle``); nothing when it is not seen. dmp_server takes it as the goal object of a
   skill with ``goal_object: bottle`` (stirring; docs/dmp_server.md);
@@ -37,7 +42,7 @@ import time
 import cv2
 from etdmp_ros.perception import detector_from_parameters, FrameSynchronizer
 from etdmp_ros.ros import system
-from etdmp_ros.ros.conversions import (camera_image_from_msg, image_msg,
+from etdmp_ros.ros.conversions import (camera_image_from_msg, cylinder_markers, image_msg,
                                        intrinsics_from_camera_info, pose_array_from_numpy,
                                        stamp_to_ns)
 from etdmp_ros.ros.parameters import declare, plain, values as parameter_values
@@ -47,6 +52,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
+from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'perception'
 COLOR_TOPIC = 'camera/camera/color/image_raw'
@@ -54,6 +60,7 @@ DEPTH_TOPIC = 'camera/camera/aligned_depth_to_color/image_raw'
 INFO_TOPIC = 'camera/camera/color/camera_info'
 GOAL_TOPIC = 'etdmp/goal'
 OBSTACLES_TOPIC = 'etdmp/obstacles'
+VOLUMES_TOPIC = 'etdmp/obstacle_volumes'
 BOTTLE_TOPIC = 'etdmp/bottle'
 DEBUG_IMAGE_TOPIC = 'etdmp/detections/image'
 BASE_FRAME = 'base_link'
@@ -127,6 +134,7 @@ class PerceptionNode(Node):
                                  QoSProfile(depth=5, reliability=reliability))
         self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, 10)
         self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, 10)
+        self._volumes_pub = self.create_publisher(MarkerArray, VOLUMES_TOPIC, 10)
         self._bottle_pub = self.create_publisher(PointStamped, BOTTLE_TOPIC, 10)
         self._debug_pub = self.create_publisher(Image, DEBUG_IMAGE_TOPIC, 1)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -266,8 +274,11 @@ class PerceptionNode(Node):
                 self._goal_seen = True
                 self.get_logger().info('goal marker at {:.3f} {:.3f} {:.3f} m'.format(
                     *detections.goal.position))
-        self._obstacles_pub.publish(pose_array_from_numpy(detections.obstacle_positions(),
-                                                          frame_id=BASE_FRAME, stamp=stamp))
+        tops = detections.obstacle_positions()
+        self._obstacles_pub.publish(pose_array_from_numpy(tops, frame_id=BASE_FRAME,
+                                                          stamp=stamp))
+        self._volumes_pub.publish(cylinder_markers(tops, detections.obstacle_radii(), stamp,
+                                                   BASE_FRAME))
         if detections.bottle is not None:
             bottle = PointStamped()
             bottle.header.stamp = stamp
@@ -291,6 +302,12 @@ class PerceptionNode(Node):
         if refused:
             self._warn(f'{len(refused)} obstacle blob(s) not reported: ' + '; '.join(refused),
                        key='obstacle')
+        unmeasured = sum(not d.radius_measured for d in detections.obstacles)
+        if unmeasured:
+            self._warn(f'{unmeasured} obstacle(s) seen over less than half their rim (hidden): '
+                       f'radius not measured, obstacle.radius '
+                       f'{self.settings.detector.obstacle.radius * 1e3:g} mm reported',
+                       key='radius')
         merged = sum(not d.single for d in detections.obstacles)
         if merged:
             self._warn(f'{merged} obstacle blob(s) do not fit one cylinder (obstacles '

@@ -11,6 +11,11 @@ velocities in rad/s, UR order). Publishes, stamped with the simulated time:
 - ``/ur10_sim/ground_truth/goal``, ``.../obstacles`` and ``.../bottle`` (the centre of the
   bottle's mouth; base_link) with each camera frame,
   stamped like it (what the camera saw), or at 10 Hz when the camera is off;
+- ``/ur10_sim/ground_truth/contacts`` (visualization_msgs/MarkerArray, transient local): the
+  robot's contacts with the obstacles, the bottle, the table and the floor
+  (:attr:`etdmp_ros.robot.UR10Sim.contacts`; a SPHERE per contact, its text ``<part> <item>
+  <depth mm>``, see :mod:`etdmp_ros.ros.conversions._markers`), at every tick while there are
+  any, once empty when they end (and at start);
 - as a UR driver, robot_state_publisher and realsense-ros would: ``/robot_description``
   (std_msgs/String, transient local: the UR10 URDF the simulation is built from, with the tool
   tip link ``tool_tip``), ``/tf`` (the six joint transforms, base_link ... wrist_3_link, at
@@ -27,8 +32,8 @@ and publishes the images: the physics and the joint states never wait for render
 transport, nor share an interpreter lock with them. The executor thread only receives commands
 and parameter changes, validates them and hands them over. Parameters: config/scene.yaml and
 config/ur10_sim.yaml (their values are also the built-in defaults: etdmp_ros.ros.system);
-``goal_position``, ``obstacle_positions``, ``bottle.position``, ``real_time_factor``,
-``watchdog_timeout`` and ``teach_script`` can be changed at runtime.
+``goal_position``, ``obstacle_positions``, ``obstacle_radii``, ``bottle.position``,
+``real_time_factor``, ``watchdog_timeout`` and ``teach_script`` can be changed at runtime.
 
 Teaching mode (kinesthetic teaching, simulated): with ``teach_script`` set, a script leads the
 tool as a hand in freedrive would (:class:`etdmp_ros.robot.GuidedMotion`) while velocity commands
@@ -47,11 +52,11 @@ from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_com
                                          encode as camera_snapshot)
 from etdmp_ros.robot import (CAMERA_OPTICAL_FRAME, camera_transforms, FrameTree, GuidedMotion,
                              GuideError, parse_bottle_position, parse_goal_position,
-                             parse_obstacle_positions, robot_description)
+                             parse_obstacle_positions, parse_obstacle_radii, robot_description)
 from etdmp_ros.ros import system
-from etdmp_ros.ros.conversions import (joint_state_msg, MovingTransforms, ns_to_stamp,
-                                       pose_array_from_numpy, tf_available, tf_message,
-                                       velocity_command_array)
+from etdmp_ros.ros.conversions import (contact_markers, joint_state_msg, MovingTransforms,
+                                       ns_to_stamp, pose_array_from_numpy, tf_available,
+                                       tf_message, velocity_command_array)
 from etdmp_ros.ros.parameters import declare
 from etdmp_ros.ros.spin import rate_qos, run
 from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
@@ -64,6 +69,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
+from visualization_msgs.msg import MarkerArray
 import yaml
 
 NODE_NAME = 'ur10_sim'
@@ -79,6 +85,7 @@ GOAL_TOPIC = '~/ground_truth/goal'
 OBSTACLES_TOPIC = '~/ground_truth/obstacles'
 BOTTLE_TOPIC = '~/ground_truth/bottle'
 TOOL_TIP_TOPIC = '~/ground_truth/tool_tip'
+CONTACTS_TOPIC = '~/ground_truth/contacts'
 TEACHING_TOPIC = '~/teaching'
 DESCRIPTION_TOPIC = 'robot_description'
 TF_TOPIC = 'tf'
@@ -111,8 +118,9 @@ class UR10SimNode(Node):
         # _number_list takes them all as numbers. `obstacle_positions: []` in YAML leaves the
         # parameter unset: no obstacles.
         p = declare(self, DESCRIPTION)
-        if p['obstacle_positions'] is None:
-            p['obstacle_positions'] = []
+        for name in ('obstacle_positions', 'obstacle_radii'):
+            if p[name] is None:
+                p[name] = []
         self._parameter_values = p   # (not _parameters: rclpy Node uses that name)
         self.sim = UR10Sim.from_parameters(p)
         self.steps_per_tick = max(1, round(1.0 / (p['control_rate'] * self.sim.timestep)))
@@ -136,6 +144,8 @@ class UR10SimNode(Node):
         self._pending_goal = None
         self._pending_bottle = None
         self._pending_obstacles = None
+        self._pending_radii = None
+        self._in_contact = None       # the contacts last published (None: nothing published)
         self._stop = threading.Event()
         self._thread = None
         self.failed = False
@@ -148,7 +158,8 @@ class UR10SimNode(Node):
         self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
                       'publish_state': 0.0, 'publish_tf': 0.0, 'ticks': 0, 'frames': 0,
                       'frames_dropped': 0, 'max_tick_gap': 0.0, 'late_ticks': 0,
-                      'waits': 0, 'waits_expired': 0, 'wait_time': 0.0}
+                      'waits': 0, 'waits_expired': 0, 'wait_time': 0.0,
+                      'contact_ticks': 0, 'contact_pairs': set()}
 
         reliable = QoSProfile(depth=10)
         # A second of history: a slow reader must never block the simulation's publish().
@@ -161,6 +172,11 @@ class UR10SimNode(Node):
         self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, reliable)
         self._bottle_pub = self.create_publisher(PointStamped, BOTTLE_TOPIC, reliable)
         self._tool_pub = self.create_publisher(PointStamped, TOOL_TIP_TOPIC, state)
+        # Every message matters (the metrics count them), and a late subscriber gets the latest.
+        self._contacts_pub = self.create_publisher(
+            MarkerArray, CONTACTS_TOPIC,
+            QoSProfile(depth=rate_qos(1.0 / self.tick_period).depth,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self._camera_publishers = None   # made by frame(), for run_for(): images in-process
         self._tf_pub = None
         self._publish_description()
@@ -189,6 +205,10 @@ class UR10SimNode(Node):
                     points = self.sim.scene.placed(parameter.name, _number_list(parameter))
                     if len(points) > MAX_OBSTACLES:
                         raise ValueError(f'at most {MAX_OBSTACLES} obstacles, got {len(points)}')
+                elif parameter.name == 'obstacle_radii':
+                    radii = parse_obstacle_radii(_number_list(parameter))
+                    if len(radii) > MAX_OBSTACLES:
+                        raise ValueError(f'at most {MAX_OBSTACLES} radii, got {len(radii)}')
                 elif parameter.name == 'teach_script' and parameter.value:
                     self._checked_guide = (parameter.value, self._load_guide(parameter.value))
             except ValueError as exc:
@@ -204,6 +224,8 @@ class UR10SimNode(Node):
                     self._pending_bottle = parse_bottle_position(_number_list(parameter))
                 elif parameter.name == 'obstacle_positions':
                     self._pending_obstacles = parse_obstacle_positions(_number_list(parameter))
+                elif parameter.name == 'obstacle_radii':
+                    self._pending_radii = parse_obstacle_radii(_number_list(parameter))
                 elif parameter.name == 'real_time_factor':
                     self.real_time_factor = float(parameter.value)
                 elif parameter.name == 'watchdog_timeout':
@@ -290,7 +312,10 @@ class UR10SimNode(Node):
                 f'largest wall-clock gap between two {stats["max_tick_gap"] * 1e3:.1f} ms; camera '
                 f'frames published {stats["frames"]}, dropped {stats["frames_dropped"]}; '
                 f'waited for a late command {stats["waits"]} times '
-                f'({stats["wait_time"] * 1e3:.0f} ms), {stats["waits_expired"]} in vain')
+                f'({stats["wait_time"] * 1e3:.0f} ms), {stats["waits_expired"]} in vain; '
+                f'contacts in {stats["contact_ticks"]} ticks'
+                + (': ' + ', '.join(sorted(f'{a}/{b}' for a, b in stats['contact_pairs']))
+                   if stats['contact_pairs'] else ''))
 
     def _run(self):
         try:
@@ -367,6 +392,7 @@ class UR10SimNode(Node):
             goal, self._pending_goal = self._pending_goal, None
             bottle, self._pending_bottle = self._pending_bottle, None
             obstacles, self._pending_obstacles = self._pending_obstacles, None
+            radii, self._pending_radii = self._pending_radii, None
             guide = self._guide
         if guide is not None:
             command = guide.command(sim.q)
@@ -388,8 +414,8 @@ class UR10SimNode(Node):
             sim.set_goal(goal)
         if bottle is not None:
             sim.set_bottle(bottle)
-        if obstacles is not None:
-            sim.set_obstacles(obstacles)
+        if obstacles is not None or radii is not None:
+            sim.set_obstacles(sim.obstacle_positions if obstacles is None else obstacles, radii)
 
         c0 = time.process_time()
         sim.step(self.steps_per_tick)
@@ -401,6 +427,7 @@ class UR10SimNode(Node):
         stamp = ns_to_stamp(round(sim.time * 1e9))
         self._answered.clear()      # the next command answers these joint states
         self._publish_state(stamp)
+        self._publish_contacts(stamp)
         c2 = time.process_time()
         stats['physics'] += c1 - c0
         stats['publish_state'] += c2 - c1
@@ -459,6 +486,25 @@ class UR10SimNode(Node):
             self._tf_pub.publish(self._moving.update(self._frames.moving(sim.q), stamp.sec,
                                                      stamp.nanosec))
             self.stats['publish_tf'] += time.process_time() - c0
+
+    def _publish_contacts(self, stamp):
+        """Publish the contacts while there are any, and once when they are gone (or at start)."""
+        contacts = self.sim.contacts
+        if contacts:
+            self.stats['contact_ticks'] += 1
+            pairs = {(c.part, c.item) for c in contacts}
+            new = pairs - self.stats['contact_pairs']
+            self.stats['contact_pairs'] |= pairs
+            if new:
+                self.get_logger().error(
+                    'contact: ' + ', '.join(f'{c.part} touches {c.item} ({c.depth * 1e3:.1f} '
+                                            f'mm deep)' for c in contacts
+                                            if (c.part, c.item) in new)
+                    + f' at t = {self.sim.time:.3f} s')
+        elif self._in_contact == ():
+            return
+        self._in_contact = contacts
+        self._contacts_pub.publish(contact_markers(contacts, stamp))
 
     def _publish_ground_truth(self, stamp):
         sim = self.sim

@@ -86,6 +86,9 @@ _RIM_KERNEL = np.ones((3, 3), np.uint8)
 _MARGIN = 2
 _OCCLUDER_KERNEL = np.ones((2 * _MARGIN + 1, 2 * _MARGIN + 1), np.uint8)
 _NO_DEPTH = np.float32(np.inf)
+#: A measured radius needs rim points spanning at least this much of the circle (rad): on a
+#: shorter arc circles of quite different radii fit about as well.
+MIN_RIM_ARC = math.radians(180.0)
 # Depth pixels of a blob whose median checks it against the D435's range (a subsample of bigger
 # blobs: an all-green frame's median would cost 3 ms).
 _DEPTH_SAMPLES = 4096
@@ -152,26 +155,46 @@ class ObjectModel:
     """
     A class of objects: its colour and shape, an upright cylinder (radius, height) in metres.
 
-    The reported point of such an object is the centre of its top face.
+    The reported point of such an object is the centre of its top face. ``radius_range``:
+    ``(low, high)`` when each object's radius is measured (obstacles), ``radius`` then being
+    where the measurement starts and what is reported when the visible rim is too short to
+    measure it; None when every object has ``radius`` (the goal marker, the bottle).
     """
 
     kind: str
     color: HsvRange
     radius: float
     height: float
+    radius_range: tuple = None
 
     def __post_init__(self):
-        """Validate radius and height (positive, finite)."""
+        """Validate radius, height and radius_range (positive, finite, low < high)."""
         for name in ('radius', 'height'):
             value = float(getattr(self, name))
             if not math.isfinite(value) or value <= 0:
                 raise ValueError(f'{self.kind} {name} must be positive, got {value}')
             object.__setattr__(self, name, value)
+        if self.radius_range is not None:
+            try:
+                low, high = (float(v) for v in self.radius_range)
+            except (TypeError, ValueError):
+                raise ValueError(f'{self.kind} radius range must be [low, high] (m), got '
+                                 f'{self.radius_range!r}') from None
+            if not (math.isfinite(high) and 0.0 < low < high):
+                raise ValueError(f'{self.kind} radius range must be 0 < low < high (m), got '
+                                 f'[{low}, {high}]')
+            object.__setattr__(self, 'radius_range', (low, high))
+
+    @property
+    def max_radius(self):
+        """Return the largest radius an object of this class can have (m)."""
+        return self.radius if self.radius_range is None else max(self.radius,
+                                                                 self.radius_range[1])
 
     @property
     def depth_extent(self):
         """Largest depth difference between two points of the object, plus 2 cm (m)."""
-        return 2.0 * self.radius + self.height + 0.02
+        return 2.0 * self.max_radius + self.height + 0.02
 
 
 @dataclass(frozen=True)
@@ -222,7 +245,8 @@ class Detection:
     blob's median depth (m); ``depth_fraction``: share of its pixels with depth. ``rim_points``:
     outline points used by the circle fit (0: top-face centroid instead); ``rim_rms``: the fit's
     RMS residual (m). ``single``: False when the fit is too poor for one cylinder (objects
-    overlapping in the image).
+    overlapping in the image). ``radius`` (m): measured by the fit (``radius_measured``) when
+    its class's radius is measured and enough of the rim is seen, else its class's radius.
     """
 
     kind: str
@@ -235,6 +259,8 @@ class Detection:
     rim_points: int
     rim_rms: float
     single: bool = True
+    radius: float = float('nan')
+    radius_measured: bool = False
 
 
 @dataclass(frozen=True)
@@ -261,6 +287,10 @@ class Detections:
         if not self.obstacles:
             return np.zeros((0, 3))
         return np.array([d.position for d in self.obstacles])
+
+    def obstacle_radii(self):
+        """Return the obstacles' radii (N,) in metres, in the order of obstacle_positions."""
+        return np.array([d.radius for d in self.obstacles], dtype=float)
 
 
 def check_frame(rgb, depth_mm, intrinsics):
@@ -317,6 +347,44 @@ def check_intrinsics(intrinsics):
             abs(k.cy - 0.5 * (k.height - 1)) > offset * k.height:
         raise ValueError(f'camera_info principal point ({k.cx:.6g}, {k.cy:.6g}) px is more than '
                          f'{offset:.0%} of the image size from the centre of {k.width}x{k.height}')
+
+
+def fit_circle_and_radius(points, start, radius, iterations=30):
+    """
+    Return (centre (2,), radius, rms) of the circle fitted to points (N, 2), radius free.
+
+    Least squares of the radial residuals ``|p - c| - r`` by Gauss-Newton in (c, r) from
+    ``start`` (a point inside the circle) and ``radius``. Well posed only when the points
+    cover enough of the circle (:func:`rim_arc`): a short arc fits circles of many radii.
+    """
+    p = np.asarray(points, dtype=float)
+    cx, cy = (float(v) for v in start)
+    r = float(radius)
+    for _ in range(iterations):
+        dx, dy = p[:, 0] - cx, p[:, 1] - cy
+        n = np.maximum(np.hypot(dx, dy), 1e-12)
+        residual = n - r
+        # Residuals' Jacobian: -(ux, uy, 1); normal equations J^T J step = -J^T residual.
+        jac = np.stack([-dx / n, -dy / n, -np.ones_like(n)], axis=1)
+        normal = jac.T @ jac
+        if np.linalg.cond(normal) > 1e12:
+            break
+        step = np.linalg.solve(normal, -jac.T @ residual)
+        cx, cy, r = cx + step[0], cy + step[1], r + step[2]
+        if step @ step < 1e-14:
+            break
+    residual = np.hypot(p[:, 0] - cx, p[:, 1] - cy) - r
+    return np.array([cx, cy]), float(r), float(np.sqrt(np.mean(residual ** 2)))
+
+
+def rim_arc(points, centre):
+    """Return the angle (rad) of the circle about ``centre`` that points (N, 2) span."""
+    d = np.asarray(points, dtype=float) - centre
+    angles = np.sort(np.arctan2(d[:, 1], d[:, 0]))
+    if len(angles) < 2:
+        return 0.0
+    gaps = np.diff(np.append(angles, angles[0] + 2.0 * np.pi))
+    return float(2.0 * np.pi - gaps.max())
 
 
 def fit_circle(points, radius, start, iterations=20):
@@ -382,13 +450,19 @@ class Detector:
         self._position = np.asarray(camera_pose.position)
 
     @classmethod
-    def from_scene(cls, scene, goal_color, obstacle_color, settings=None, bottle_color=None):
-        """Return a detector for a :class:`SceneConfig` (object sizes, camera pose)."""
+    def from_scene(cls, scene, goal_color, obstacle_color, settings=None, bottle_color=None,
+                   obstacle_radius_range=None):
+        """
+        Return a detector for a :class:`SceneConfig` (object sizes, camera pose).
+
+        ``obstacle_radius_range``: (low, high) m to measure each obstacle's radius, None for
+        obstacles of the scene's ``obstacle.radius``.
+        """
         bottle = None if bottle_color is None else ObjectModel(
             BOTTLE, bottle_color, scene.bottle_radius, scene.bottle_height)
         return cls(ObjectModel(GOAL, goal_color, scene.goal_radius, GOAL_MARKER_THICKNESS),
                    ObjectModel(OBSTACLE, obstacle_color, scene.obstacle_radius,
-                               scene.obstacle_height),
+                               scene.obstacle_height, obstacle_radius_range),
                    scene.camera_pose, (scene.table_center, scene.table_size), settings, bottle)
 
     def detect(self, rgb, depth_mm, intrinsics, bgr=False):
@@ -477,7 +551,7 @@ class Detector:
         if not low <= z <= high:
             return f'depth {z:.3f} m is outside what a D435 measures ({low:g} to {high:g} m)'
         k = intrinsics
-        sphere = math.hypot(model.radius, 0.5 * model.height)
+        sphere = math.hypot(model.max_radius, 0.5 * model.height)
         near = max(z - sphere, low)
         # A sphere seen off the optical axis at angle a looks 1 / cos(a)^3 larger.
         corner = math.hypot(0.5 * k.width / k.fx, 0.5 * k.height / k.fy)
@@ -490,13 +564,14 @@ class Detector:
                     f'depth (at most {most:.0f} px)')
         return ''
 
-    def _implausible_position(self, model, points, position, single):
+    def _implausible_position(self, model, points, position, single, radius):
         """
         Return why a located object does not fit the workcell, or ''.
 
-        ``points`` (N, 3): the blob's points in base_link; ``position``: its top-face centre.
-        At most MAX_OUTSIDE_FRACTION of the points may lie farther from its axis (horizontally)
-        than its radius plus OBJECT_EXTENT_MARGIN (a merged obstacle blob: the farthest of
+        ``points`` (N, 3): the blob's points in base_link; ``position``: its top-face centre;
+        ``radius``: its radius (measured, or its class's). At most MAX_OUTSIDE_FRACTION of the
+        points may lie farther from its axis (horizontally) than its radius plus
+        OBJECT_EXTENT_MARGIN (a merged obstacle blob: the farthest of
         MAX_MERGED_OBSTACLES obstacles in a row), the top face must be between the table top
         (z = 0) and the object's height, within ``height_tolerance``, and the centre on the
         table. No sorting: about 10 us for 1000 points.
@@ -504,7 +579,7 @@ class Detector:
         if not np.all(np.isfinite(position)):
             return 'its position is not finite'
         count = 1 if single or model.kind != OBSTACLE else limits.MAX_MERGED_OBSTACLES
-        reach = (2 * count - 1) * model.radius + limits.OBJECT_EXTENT_MARGIN
+        reach = (2 * count - 1) * radius + limits.OBJECT_EXTENT_MARGIN
         dx, dy = points[:, 0] - position[0], points[:, 1] - position[1]
         outside = np.count_nonzero(dx * dx + dy * dy > reach * reach)
         if outside > limits.MAX_OUTSIDE_FRACTION * len(points):
@@ -590,27 +665,61 @@ class Detector:
         centroid = points[top, :2].mean(axis=0)
 
         rim = self._rim_points(model, blob, depth, origin, median, z_top, intrinsics)
-        rim_rms = 0.0
+        rim_rms, radius, measured = 0.0, model.radius, False
         if len(rim) >= s.min_rim_points:
-            centre, rim_rms = fit_circle(rim, model.radius, centroid)
-            residual = np.abs(np.hypot(*(rim - centre).T) - model.radius)
-            mad = float(np.median(np.abs(residual - np.median(residual))))
-            inliers = residual <= max(3.0 * 1.4826 * mad, 0.002)
-            if s.min_rim_points <= np.count_nonzero(inliers) < len(rim):
-                rim = rim[inliers]
-                centre, rim_rms = fit_circle(rim, model.radius, centre)
+            rim, centre, radius, rim_rms, measured = self._fit_rim(model, rim, centroid)
             rim_count = len(rim)
         else:
             centre, rim_count = centroid, 0
         position = np.array([centre[0], centre[1], z_top])
         single = rim_count == 0 or rim_rms <= s.max_rim_rms
-        reason = self._implausible_position(model, points, position, single)
+        reason = self._implausible_position(model, points, position, single, radius)
+        if not reason and measured and not \
+                model.radius_range[0] <= radius <= model.radius_range[1]:
+            reason = (f'its radius measures {radius * 1e3:.1f} mm, outside the range of '
+                      f'{_a(model.kind)} ({model.radius_range[0] * 1e3:g} to '
+                      f'{model.radius_range[1] * 1e3:g} mm)')
         if reason:
             return Rejection(model.kind, bbox, area, reason)
         pixel = intrinsics.project(self.camera_pose.from_base(position))[0]
         return Detection(model.kind, position, (float(pixel[0]), float(pixel[1])), area,
                          bbox, median, float(np.count_nonzero(valid)) / area, rim_count,
-                         rim_rms, single)
+                         rim_rms, single, radius, measured)
+
+    def _fit_rim(self, model, rim, inside):
+        """
+        Return (rim points kept, centre (2,), radius, rms, radius measured) of a blob's rim.
+
+        ``inside``: a point inside the circle (the top face's centroid) to start from. A class
+        of known radius: that radius is fitted; one whose radius is measured: the radius too,
+        when the points kept span at least MIN_RIM_ARC of the circle (else its class's radius).
+        Either way once more without outliers (residuals beyond 3 robust sigmas, 2 mm at
+        least: an edge of something else).
+        """
+        s = self.settings
+        free = model.radius_range is not None
+
+        def fit(points, start, radius):
+            """Return (centre, radius, rms); the class's radius unless it is measured."""
+            if free:
+                centre, radius, rms = fit_circle_and_radius(points, start, radius)
+                if np.all(np.isfinite(centre)) and math.isfinite(radius) and radius > 0.0:
+                    return centre, radius, rms
+            centre, rms = fit_circle(points, model.radius, start)
+            return centre, model.radius, rms
+
+        centre, radius, rms = fit(rim, inside, model.radius)
+        residual = np.abs(np.hypot(*(rim - centre).T) - radius)
+        mad = float(np.median(np.abs(residual - np.median(residual))))
+        inliers = residual <= max(3.0 * 1.4826 * mad, 0.002)
+        if s.min_rim_points <= np.count_nonzero(inliers) < len(rim):
+            rim = rim[inliers]
+            centre, radius, rms = fit(rim, centre, radius)
+        if free and radius != model.radius and rim_arc(rim, centre) >= MIN_RIM_ARC:
+            return rim, centre, radius, rms, True
+        if free:            # too short an arc to measure the radius: the class's radius
+            centre, rms = fit_circle(rim, model.radius, inside)
+        return rim, centre, model.radius, rms, False
 
     def _rim_points(self, model, blob, depth, origin, median, z_top, intrinsics):
         """Return the blob's real outline points (N, 2): x, y in base_link, see module doc."""
@@ -632,16 +741,36 @@ class Detector:
         keep = edge & (has_depth | flat)
         if not np.any(keep):
             return np.zeros((0, 2))
+        # The outward normal of the outline (the blurred mask's gradient points inwards).
+        smooth = cv2.GaussianBlur(blob.astype(np.float32), (5, 5), 1.0)
+        gx = cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3)[vs[keep], us[keep]]
+        gy = cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3)[vs[keep], us[keep]]
         us, vs, d, has_depth = us[keep] + origin[0], vs[keep] + origin[1], d[keep], has_depth[keep]
         rays = self._to_base_directions(intrinsics.deproject(us, vs, 1.0))
         points = self._position + rays * np.where(has_depth, d * 0.001, 0.0)[:, None]
-        # Outline pixels of a flat object without depth: where their ray meets its top plane.
-        on_top = ~has_depth
-        down = rays[:, 2]
+        # Outline pixels on the top face of a cylinder (its rim): where the ray through the
+        # object's edge meets the top face's plane. A pixel belongs to the blob when its centre
+        # falls on the object, so the edge lies on average half a pixel beyond an outline
+        # pixel's centre, along the outward normal: without this the rim is seen 0.5-1 mm
+        # inside. (Pixels on the side lie on it, at the radius already.) A flat object (the
+        # goal disc): its outline pixels with depth keep their own point (its near outline is
+        # its 2 mm side: moved onto the top plane along the ray it would come ~2 mm towards
+        # the camera, 0.85 mm in the median goal error where it is 0.5 mm so), those without
+        # depth where their own ray meets the top plane.
+        if flat:
+            on_top = ~has_depth
+            edge_rays = rays
+        else:
+            on_top = ~has_depth | (np.abs(points[:, 2] - z_top) <= s.top_band)
+            norm = np.hypot(gx, gy)
+            half = np.where(norm > 0.0, -0.5 / np.maximum(norm, 1e-12), 0.0)
+            edge_rays = self._to_base_directions(intrinsics.deproject(
+                us + half * gx, vs + half * gy, 1.0))
+        down = edge_rays[:, 2]
         with np.errstate(divide='ignore', invalid='ignore'):
             t = (z_top - self._position[2]) / down
         on_top &= np.isfinite(t) & (t > 0)
-        points[on_top] = self._position + rays[on_top] * t[on_top, None]
+        points[on_top] = self._position + edge_rays[on_top] * t[on_top, None]
         return points[has_depth | on_top, :2]
 
     def _to_base(self, points_cam):
@@ -667,7 +796,8 @@ class Detector:
         for det in items:
             model = models[det.kind]
             color = palette[det.kind]
-            circle = det.position + model.radius * np.stack(
+            radius = det.radius if math.isfinite(det.radius) else model.radius
+            circle = det.position + radius * np.stack(
                 [np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
             uv = intrinsics.project(self.camera_pose.from_base(circle))
             if np.all(np.isfinite(uv)):
@@ -676,8 +806,10 @@ class Detector:
             centre = tuple(int(round(c)) for c in det.pixel)
             cv2.drawMarker(image, centre, color, cv2.MARKER_CROSS, 10, 1)
             x, y, w, h = det.bbox
-            label = '{} {:.0f} {:.0f} {:.0f} mm{}'.format(
-                det.kind, *(det.position * 1000.0), '' if det.single else ' (merged?)')
+            label = '{} {:.0f} {:.0f} {:.0f} mm{}{}'.format(
+                det.kind, *(det.position * 1000.0),
+                f' r {det.radius * 1000.0:.1f}' if det.radius_measured else '',
+                '' if det.single else ' (merged?)')
             cv2.putText(image, label, (x, max(y - 4, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                         color, 1, cv2.LINE_AA)
         for rejection in detections.rejected:
@@ -695,6 +827,7 @@ DETECTOR_PARAMETERS = (
     'obstacle.height', 'goal_hsv_low', 'goal_hsv_high', 'obstacle_hsv_low', 'obstacle_hsv_high',
     'table.center', 'table.size', 'min_blob_area', 'min_depth_pixels', 'top_band',
     'occlusion_gap', 'min_rim_points', 'max_rim_rms', 'height_tolerance',
+    'obstacle_radius_range',
 )
 #: Optional ones: with all four (and ``detect_bottle`` not false) the detector also looks for
 #: the bottle (the centre of its mouth).
@@ -737,7 +870,8 @@ def detector_from_parameters(params):
             bottle = ObjectModel(BOTTLE, color, p['bottle.radius'], p['bottle.height'])
         return Detector(
             ObjectModel(GOAL, colors[GOAL], p['goal_marker.radius'], GOAL_MARKER_THICKNESS),
-            ObjectModel(OBSTACLE, colors[OBSTACLE], p['obstacle.radius'], p['obstacle.height']),
+            ObjectModel(OBSTACLE, colors[OBSTACLE], p['obstacle.radius'], p['obstacle.height'],
+                        p['obstacle_radius_range']),
             pose, (p['table.center'], p['table.size']), settings, bottle)
     except TypeError as exc:   # a list where a number belongs, None
         raise ValueError(f'perception parameters: {exc}') from None

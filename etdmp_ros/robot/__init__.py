@@ -12,7 +12,8 @@ from ._description import (CAMERA_OPTICAL_FRAME, camera_transforms, chain_pose, 
                            robot_description, Transform)
 from ._guide import GuidedMotion, GuideError
 from ._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, IKResult
-from ._scene import (parse_bottle_position, parse_goal_position, parse_obstacle_positions,
+from ._scene import (obstacle_radii_for, parse_bottle_position, parse_goal_position,
+                     parse_obstacle_positions, parse_obstacle_radii, PEN_RADIUS, PEN_TIP_LENGTH,
                      PEN_TIP_RADIUS, SCENE_PARAMETERS, SceneConfig)
 from ._trajectory import (MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
                           trajectory_from_path, TrajectoryError)
@@ -22,10 +23,10 @@ from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_
 __all__ = [
     'CAMERA_OPTICAL_FRAME', 'Command', 'ControllerConfig', 'DEFAULT_ACCELERATION_LIMITS',
     'DelayEstimator', 'DifferentialIK', 'FrameTree', 'GuidedMotion', 'GuideError', 'IKResult',
-    'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_TIP_RADIUS',
-    'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES', 'SceneConfig', 'TrajectoryController',
-    'Transform', 'TrajectoryError', 'UR10Model', 'camera_transforms', 'chain_pose',
-    'parse_bottle_position', 'parse_goal_position', 'parse_obstacle_positions',
-    'quaternions_to_rotations', 'robot_data_dir', 'robot_description', 'trajectory_from_path',
-    'ur10_urdf_path',
+    'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_RADIUS', 'PEN_TIP_LENGTH',
+    'PEN_TIP_RADIUS', 'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES', 'SceneConfig',
+    'TrajectoryController', 'Transform', 'TrajectoryError', 'UR10Model', 'camera_transforms',
+    'chain_pose', 'obstacle_radii_for', 'parse_bottle_position', 'parse_goal_position',
+    'parse_obstacle_positions', 'parse_obstacle_radii', 'quaternions_to_rotations',
+    'robot_data_dir', 'robot_description', 'trajectory_from_path', 'ur10_urdf_path',
 ]

@@ -29,6 +29,18 @@ path's first pose at a safe speed), ``tracking``, ``holding`` (the last pose, fo
 ``stale-input``. Halts and the end of a path brake at the acceleration limits to zero; pause and
 lost input send zero at once. Pausing freezes the path clock; resuming approaches the pose where
 the path was paused and goes on, the path clock ramping back to full speed (minimum-jerk rate).
+
+Missed control steps. The controller steps when a measurement arrives; one that comes more than
+:data:`MISSED_STEPS` periods after the previous step (the controller's process was not
+scheduled, or joint states were held back) means the arm went on without it: on its last
+command (a velocity interface applies it until a watchdog stops it), not along the path. The
+path clock, though, kept running on the measurements' time, so the reference is as far ahead
+as the gap is long: 0.25 s at the 0.27 m/s of the letter W written in its own 2 s is 50 mm,
+beyond ``max_tracking_error``, for an arm that only coasted. Such a gap therefore re-synchronises
+the path clock to the arm (:meth:`TrajectoryController.missed_steps`): the path goes on from the
+path time, between the last step's and now, whose pose is nearest to the tool, so the arm is
+not asked to catch up with time it did not have. A tracking error that still stops the arm
+after a gap says so in its reason.
 """
 
 from dataclasses import dataclass, fields
@@ -54,6 +66,14 @@ STATUSES = (IDLE, APPROACHING, TRACKING, HOLDING, PAUSED, HALTED_SINGULARITY,
             HALTED_JOINT_LIMIT, UNREACHABLE, STALE_INPUT)
 #: States in which the controller commands motion along a reference.
 MOVING = (APPROACHING, TRACKING, HOLDING)
+
+#: A measurement this many control periods or more after the previous step means missed steps:
+#: the path clock is re-synchronised to the arm (module docstring).
+MISSED_STEPS = 2.5
+#: Path time step (s) of the search for the pose nearest to the tool after missed steps.
+RESYNC_STEP = 0.001
+#: A tracking-error stop this long (s) after missed steps names them in its reason.
+GAP_MEMORY = 1.0
 
 #: Tool speeds below these count as "at rest" when a path starts (m/s, rad/s).
 REST_SPEED = 1e-3
@@ -278,6 +298,10 @@ class TrajectoryController:
         self._last_theta = 0.0
         self._t_last = None
         self._slowed = None              # condition number while slowing for a singularity
+        #: Times the path clock was re-synchronised after missed steps, and the last such gap
+        #: as (measurement time, gap s, path time before, path time after).
+        self.resyncs = 0
+        self.last_gap = None
 
     def _make_ik(self, model):
         c = self.config
@@ -482,6 +506,7 @@ class TrajectoryController:
         """Compute the command (see :meth:`step`)."""
         if self._t_last is not None and t < self._t_last - 1e-9:
             self.input_lost(f'joint state time went back from {self._t_last:.3f} to {t:.3f} s')
+        gap = t - self._t_last if self._t_last is not None else 0.0
         self._t_last = t
         if self._status == STALE_INPUT:
             self._set(IDLE)
@@ -497,6 +522,8 @@ class TrajectoryController:
             return Command(self._previous.copy(), self._status, self._reason, p, rot)
 
         c = self.config
+        if gap >= MISSED_STEPS * self.period and t > self._t_start:
+            self.missed_steps(t, gap, p)
         theta = t - self._t_start
         self._last_theta = theta
         p_ref, rot_ref, phase, tau = self._reference(theta)
@@ -507,6 +534,10 @@ class TrajectoryController:
         if error > c.max_tracking_error:
             too_far = (f'tracking error {error * 1000:.0f} mm exceeds max_tracking_error '
                        f'{c.max_tracking_error * 1000:.0f} mm (at path time {tau:.2f} s)')
+            if self.last_gap is not None and t - self.last_gap[0] <= GAP_MEMORY:
+                too_far += (f', {t - self.last_gap[0]:.2f} s after {self.last_gap[1] * 1e3:.0f} '
+                            'ms without a control step (the arm moved on its last command '
+                            'meanwhile)')
             if self._slowed is not None:    # the lag is the singularity slow-down's doing
                 return self._stop(HALTED_SINGULARITY, f'slowed down near a singularity (Jacobian'
                                   f' condition number {self._slowed:.1f} > '
@@ -546,6 +577,32 @@ class TrajectoryController:
         return Command(result.qd.copy(), self._status, self._reason, p, rot, p_ref, rot_ref,
                        error, result.condition,
                        {'scale': result.scale, 'damping': result.damping})
+
+    def missed_steps(self, t, gap, p):
+        """
+        Re-synchronise the path clock after ``gap`` s without a step (see the module docstring).
+
+        ``t``: the measurement time now, ``p``: the tool position measured. While the schedule
+        is on the path (not approaching, ramping in or holding its end), the path goes on from
+        the path time, between the previous step's and now, whose pose is nearest to ``p``
+        (searched every :data:`RESYNC_STEP` s). Elsewhere nothing changes (an approach is slow;
+        holding is at rest). Noted in :attr:`last_gap` and :attr:`resyncs` either way.
+        """
+        theta_then, theta_now = self._last_theta, t - self._t_start
+        t_app = self._approach.duration if self._approach is not None else 0.0
+        tau_then, tau_now = self._path_time(theta_then), self._path_time(theta_now)
+        tau = tau_now
+        if theta_then >= t_app + self._ramp and tau_then < self._path.duration:
+            end = min(tau_now, self._path.duration)
+            taus = np.linspace(tau_then, end, max(2, int(math.ceil((end - tau_then)
+                                                                   / RESYNC_STEP)) + 1))
+            gaps = [np.sum((self._path.pose(x, self.fast)[0] - p) ** 2) for x in taus]
+            tau = float(taus[int(np.argmin(gaps))])
+            self._path_start, self._t_start = tau, t
+            self._approach, self._ramp = None, 0.0
+            self._last_theta = 0.0
+            self.resyncs += 1
+        self.last_gap = (t, gap, tau_now, tau)
 
     def _stop(self, status, reason, p, rot, p_ref, rot_ref, error):
         self._path = None

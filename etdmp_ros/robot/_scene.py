@@ -11,9 +11,10 @@ Objects and the point that stands for each (all in base_link, metres; table top 
 
 - goal marker: a flat disc of radius ``goal_marker.radius``, 2 mm thick; ``goal_position`` is the
   centre of its TOP face (default z = 0.002: the disc lies on the table).
-- obstacles: upright cylinders of radius ``obstacle.radius`` and height ``obstacle.height``;
-  each position in ``obstacle_positions`` is the centre of a cylinder's TOP face (z equal to the
-  height: it stands on the table). The top face is what a camera above sees.
+- obstacles: upright cylinders of height ``obstacle.height``; each position in
+  ``obstacle_positions`` is the centre of a cylinder's TOP face (z equal to the height: it
+  stands on the table). The top face is what a camera above sees. Obstacle ``i`` has radius
+  ``obstacle_radii[i]``; those beyond that list (all, when it is empty) ``obstacle.radius``.
 - bottle: an open cylindrical container standing on the table at ``bottle.position`` [x, y];
   its mouth is at z = ``bottle.height`` (the built-in "stir" demo's origin is on the bottle axis
   at the mouth).
@@ -34,11 +35,19 @@ SCENE_PARAMETERS = (
     'whiteboard.size', 'whiteboard.color',
     'bottle.position', 'bottle.radius', 'bottle.height', 'bottle.color',
     'goal_position', 'goal_marker.radius', 'goal_marker.color',
-    'obstacle_positions', 'obstacle.radius', 'obstacle.height', 'obstacle.color',
+    'obstacle_positions', 'obstacle_radii', 'obstacle.radius', 'obstacle.height',
+    'obstacle.color',
 )
+#: Scene keys that may be missing (a YAML file cannot type an empty list: it leaves it unset).
+OPTIONAL_SCENE_PARAMETERS = ('obstacle_radii',)
 GOAL_MARKER_THICKNESS = 0.002
-#: m, radius of the pen's tip (its clearance to an obstacle counts from the surface).
+#: The tool held along the flange axis from tool0 to the tool tip (pen, stirrer): a cylinder of
+#: PEN_RADIUS (m) whose last PEN_TIP_LENGTH (m) is its tip, of PEN_TIP_RADIUS (m; its clearance
+#: to an obstacle counts from that surface). The simulation builds it, the arm check and
+#: dmp_server's ``tool_radius`` take its sizes from here.
+PEN_RADIUS = 0.009
 PEN_TIP_RADIUS = 0.003
+PEN_TIP_LENGTH = 0.02
 
 
 def _vector(name, value, size=None, multiple_of=None):
@@ -89,6 +98,24 @@ def parse_bottle_position(value):
     return _in_workcell('bottle.position', _vector('bottle.position', value, size=2))
 
 
+def parse_obstacle_radii(value):
+    """
+    Return ``obstacle_radii`` (flat [r1, r2, ...], m) as an array (N,); [] means none given.
+
+    ValueError unless every value is a finite positive number.
+    """
+    radii = _vector('obstacle_radii', value)
+    if np.any(radii <= 0.0):
+        raise ValueError(f'obstacle_radii must be positive (m), got {radii.tolist()}')
+    return radii
+
+
+def obstacle_radii_for(count, radii, default):
+    """Return the radius (count,) of each of ``count`` obstacles: ``radii``, then ``default``."""
+    radii = np.asarray(radii, dtype=float).reshape(-1)[:count]
+    return np.concatenate([radii, np.full(count - len(radii), float(default))])
+
+
 def parse_obstacle_positions(value):
     """
     Return ``obstacle_positions`` (flat [x1, y1, z1, x2, ...]) as an array (N, 3).
@@ -137,6 +164,7 @@ class SceneConfig:
     goal_radius: float
     goal_color: np.ndarray
     obstacle_positions: np.ndarray
+    obstacle_radii: np.ndarray
     obstacle_radius: float
     obstacle_height: float
     obstacle_color: np.ndarray
@@ -148,7 +176,8 @@ class SceneConfig:
 
         Raises ValueError naming the first missing or invalid parameter.
         """
-        missing = [name for name in SCENE_PARAMETERS if name not in params]
+        missing = [name for name in SCENE_PARAMETERS
+                   if name not in params and name not in OPTIONAL_SCENE_PARAMETERS]
         if missing:
             raise ValueError(f'scene parameters missing: {", ".join(missing)}')
         p = params
@@ -181,6 +210,7 @@ class SceneConfig:
             goal_radius=_positive('goal_marker.radius', p['goal_marker.radius']),
             goal_color=_color('goal_marker.color', p['goal_marker.color']),
             obstacle_positions=parse_obstacle_positions(p['obstacle_positions']),
+            obstacle_radii=parse_obstacle_radii(p.get('obstacle_radii') or []),
             obstacle_radius=_positive('obstacle.radius', p['obstacle.radius']),
             obstacle_height=_positive('obstacle.height', p['obstacle.height']),
             obstacle_color=_color('obstacle.color', p['obstacle.color']),

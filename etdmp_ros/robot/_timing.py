@@ -31,23 +31,24 @@ class TimingViolation:
     slowdown: float
 
 
-def timing_violation(model, positions, rotation, t, q_seed, velocity_limits,
-                     acceleration_limits, samples=64, iterations=1):
+def plan_joints(model, positions, rotation, t, q_seed, samples=64, iterations=1):
     """
-    Return a TimingViolation if the joints cannot follow ``positions`` at times ``t``, or None.
+    Return ``(idx, joints, violation)``: the arm's joints at poses of a path, by pose IK.
 
     ``positions`` (n, 3) tool tip positions in base_link, all with ``rotation`` (3, 3) or each
-    with its own (``rotation`` (n, 3, 3)); ``t``
-    (n,) seconds; ``q_seed`` (6,) joints to start the IK from (the current ones); the limits
-    (6,) in rad/s and rad/s^2. IK is solved at up to ``samples`` poses (``iterations`` Newton
-    steps each after the first, warm-started). A path of fewer than 3 poses has no timing to
-    follow and is refused. Unreachable poses are refused too (the reason says where).
+    with its own (``rotation`` (n, 3, 3)); ``t`` (n,) seconds; ``q_seed`` (6,) joints to start
+    the IK from (the current ones). IK is solved at up to ``samples`` poses evenly spaced in
+    time, ``idx`` their indices (``iterations`` Newton steps each after the first,
+    warm-started); ``joints`` (len(idx), 6). ``violation``: a TimingViolation for a path of
+    fewer than 3 poses or a pose out of reach (the reason says where; ``joints`` then holds
+    the poses solved before it), else None.
     """
     positions = np.asarray(positions, dtype=float)
     t = np.asarray(t, dtype=float)
     n = len(t)
     if n < 3:
-        return TimingViolation(f'the plan has {n} pose(s): too short to be followed', np.inf)
+        return (np.zeros(0, int), np.zeros((0, 6)),
+                TimingViolation(f'the plan has {n} pose(s): too short to be followed', np.inf))
     idx = np.unique(np.linspace(0, n - 1, min(n, max(3, int(samples)))).round().astype(int))
     q = np.asarray(q_seed, dtype=float)
     rotation = np.asarray(rotation, dtype=float)
@@ -63,11 +64,20 @@ def timing_violation(model, positions, rotation, t, q_seed, velocity_limits,
         if residual > IK_RESIDUAL:
             p = positions[i]
             what = '' if rotation.ndim == 2 else ' with its orientation'
-            return TimingViolation(f'pose at t = {t[i]:.2f} s, ({p[0]:.3f}, {p[1]:.3f}, '
-                                   f'{p[2]:.3f}) m{what}, is out of reach of the arm (IK misses '
-                                   f'it by {residual * 1000:.1f} mm)', np.inf)
+            return idx[:k], joints[:k], TimingViolation(
+                f'pose at t = {t[i]:.2f} s, ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m{what}, is out '
+                f'of reach of the arm (IK misses it by {residual * 1000:.1f} mm)', np.inf)
         joints[k] = q
-    times = t[idx]
+    return idx, joints, None
+
+
+def joint_timing_violation(times, joints, velocity_limits, acceleration_limits):
+    """
+    Return a TimingViolation if joints (k, 6) at ``times`` (k,) exceed the limits, or None.
+
+    Velocities and accelerations are finite differences between the rows.
+    """
+    times = np.asarray(times, dtype=float)
     qd = np.diff(joints, axis=0) / np.diff(times)[:, None]
     qdd = np.diff(qd, axis=0) / (0.5 * (times[2:] - times[:-2]))[:, None]
     v_ratio = np.abs(qd) / np.asarray(velocity_limits, dtype=float)
@@ -87,3 +97,24 @@ def timing_violation(model, positions, rotation, t, q_seed, velocity_limits,
                 'rad/s^2')
     return TimingViolation(f'the arm cannot follow the plan in time: it needs {what}',
                            max(rv, float(np.sqrt(ra))))
+
+
+def timing_violation(model, positions, rotation, t, q_seed, velocity_limits,
+                     acceleration_limits, samples=64, iterations=1):
+    """
+    Return a TimingViolation if the joints cannot follow ``positions`` at times ``t``, or None.
+
+    ``positions`` (n, 3) tool tip positions in base_link, all with ``rotation`` (3, 3) or each
+    with its own (``rotation`` (n, 3, 3)); ``t``
+    (n,) seconds; ``q_seed`` (6,) joints to start the IK from (the current ones); the limits
+    (6,) in rad/s and rad/s^2. IK is solved at up to ``samples`` poses (``iterations`` Newton
+    steps each after the first, warm-started: :func:`plan_joints`). A path of fewer than 3
+    poses has no timing to follow and is refused. Unreachable poses are refused too (the reason
+    says where).
+    """
+    idx, joints, violation = plan_joints(model, positions, rotation, t, q_seed, samples,
+                                         iterations)
+    if violation is not None:
+        return violation
+    return joint_timing_violation(np.asarray(t, dtype=float)[idx], joints, velocity_limits,
+                                  acceleration_limits)

@@ -24,7 +24,7 @@ import math
 from pathlib import Path
 
 from etdmp_ros import limits
-from etdmp_ros.dmp import builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
+from etdmp_ros.dmp import AVOIDANCES, builtin_demo_names, FORMULATIONS, METHODS, ObstacleGains
 from etdmp_ros.robot import (ControllerConfig, DEFAULT_ACCELERATION_LIMITS, SCENE_PARAMETERS,
                              SceneConfig)
 from etdmp_ros.ros.paths import config_path
@@ -204,7 +204,12 @@ SCENE = (
       'demo): 20 mm beside the obstacle-free ET-DMP path of the G from the default start to '
       "goal_position (a quarter and half-way along it, inside the letter's bowl): that path "
       'would run through both cylinders (the pen tip needs 25 + 3 mm from an axis).'),
-    P('obstacle.radius', 0.025, 'Radius of the obstacle cylinders.', unit='m',
+    P('obstacle_radii', [], 'Radius of each obstacle cylinder, in the order of '
+      'obstacle_positions; obstacles beyond this list (all, when it is empty) have '
+      'obstacle.radius.', unit='m', value_range=(0.005, 0.5), array_type=DOUBLE_ARRAY,
+      example=[0.025, 0.04]),
+    P('obstacle.radius', 0.025, 'Radius of the obstacle cylinders that obstacle_radii does not '
+      'size; perception starts its measurement of a radius from it.', unit='m',
       value_range=(0.005, 0.5)),
     P('obstacle.height', 0.08, 'Height of the obstacle cylinders.', unit='m',
       value_range=(0.01, 1.0)),
@@ -225,7 +230,8 @@ _SIM_DYNAMIC = {'dynamic': True, 'dynamic_typing': True}
 #: What the simulation builds from: the parameters of SceneConfig.
 _SIM_RUNTIME_SCENE = ('goal_position', 'obstacle_positions', 'bottle.position')
 UR10_SIM_SCENE = tuple(
-    _scene(name, **(_SIM_DYNAMIC if name in _SIM_RUNTIME_SCENE else {}))[0]
+    _scene(name, **(_SIM_DYNAMIC if name in _SIM_RUNTIME_SCENE else
+                    {'dynamic': True} if name == 'obstacle_radii' else {}))[0]
     for name in SCENE_PARAMETERS)
 UR10_SIM = (
     P('control_rate', 125.0, 'Rate of /joint_states, /clock and the ground truth; velocity '
@@ -302,9 +308,13 @@ PERCEPTION = (
       "than this is an occlusion edge (the arm in front), not the object's rim.", unit='m',
       value_range=(1e-3, 1.0), **_DETECTION),
     P('min_rim_points', 8, 'Fewer usable rim pixels than this: the centroid of the top face '
-      'instead of the radius-constrained circle fit.', value_range=(3, 100_000), **_DETECTION),
+      'instead of the circle fit.', value_range=(3, 100_000), **_DETECTION),
     P('max_rim_rms', 0.004, 'A worse rim fit (RMS) flags the blob as two objects overlapping '
       'in the image.', unit='m', value_range=(1e-4, 0.1), **_DETECTION),
+    P('obstacle_radius_range', [0.005, 0.1], 'Radii [low, high] an obstacle may have: each '
+      "obstacle's radius is measured from its rim (when the rim seen spans half the circle or "
+      'more; else obstacle.radius is reported), and one measured outside this range is not '
+      'reported.', unit='m', value_range=(1e-4, 1.0), dynamic=True, dynamic_typing=True),
     P('height_tolerance', 0.02, 'A goal or obstacle whose top face is seen higher than this '
       'above its height (goal marker 2 mm, obstacle.height) or lower below the table top is '
       'refused, as is one off the table (table.center, table.size).', unit='m',
@@ -384,9 +394,13 @@ DMP_SERVER = (
     P('orientation_mode', _PLAN.orientation_mode, "demo: a skill's own orientations, turned "
       'with the motion (or converging to the goal orientation of a request), when it has them; '
       'tool: always tool_orientation.', choices=PLAN_ORIENTATION_MODES, **_RUNTIME),
-    P('obstacle_gamma', _GAINS.gamma, 'Steering gain gamma (paper Eq. 24).',
-      value_range=(0.0, 1e5),
-      section='Obstacles (paper Eq. 22-27)', **_RUNTIME),
+    P('avoidance', 'detour', 'How a plan avoids obstacles: detour = a local smooth detour of '
+      "the obstacle-free plan that keeps each obstacle's radius + tool_radius + "
+      'obstacle_clearance from its centre (checked; docs/design.md, Obstacles with a size); '
+      "paper = the paper's point-obstacle coupling (Eq. 22-27, the gains below), the baseline.",
+      choices=AVOIDANCES, section='Obstacles', **_RUNTIME),
+    P('obstacle_gamma', _GAINS.gamma, 'Steering gain gamma (paper Eq. 24; avoidance paper).',
+      value_range=(0.0, 1e5), **_RUNTIME),
     P('obstacle_beta', _GAINS.beta, 'Steering decay beta (paper Eq. 24; 20/pi).',
       value_range=(0.0, 1e3), **_RUNTIME),
     P('obstacle_gamma2', _GAINS.gamma2, 'Distance gain gamma2 (paper Eq. 26).',
@@ -399,12 +413,23 @@ DMP_SERVER = (
     P('obstacle_k_relative', _GAINS.k_relative, 'k times |start - goal| when obstacle_k is 0.',
       value_range=(0.0, 1e3), **_RUNTIME),
     P('obstacle_margin', _PLAN.obstacle_margin, 'Extra time, as a fraction of tau, of a plan '
-      'with obstacles (the detour).', value_range=(0.0, 10.0), **_RUNTIME),
-    P('obstacle_max_age', 2.0, '/etdmp/obstacles older than this are ignored; 0 = no limit.',
-      unit='s', value_range=_DAY, **_RUNTIME),
+      "with obstacles avoided by the paper's coupling (its detour arrives later; the detour "
+      'keeps the timing).', value_range=(0.0, 10.0), **_RUNTIME),
+    P('obstacle_max_age', 2.0, '/etdmp/obstacles (and /etdmp/obstacle_volumes) older than this '
+      'are ignored; 0 = no limit.', unit='s', value_range=_DAY, **_RUNTIME),
     P('static_obstacles', [], 'Obstacle points always used, flat [x1, y1, z1, x2, ...] in '
-      'base_link.', unit='m', value_range=_WORKCELL, array_type=DOUBLE_ARRAY,
-      example=[0.8, 0.1, 0.0], **_RUNTIME),
+      'base_link (radius 0: points; as cylinders from the table up to them in the arm check).',
+      unit='m', value_range=_WORKCELL, array_type=DOUBLE_ARRAY, example=[0.8, 0.1, 0.0],
+      **_RUNTIME),
+    P('tool_radius', _PLAN.tool_radius, "Radius of the tool (the simulation's pen and stirrer: "
+      "9 mm): added to each obstacle's radius for the clearance a plan keeps from its centre.",
+      unit='m', value_range=(0.0, 0.5), **_RUNTIME),
+    P('obstacle_clearance', _PLAN.obstacle_clearance, "Safety margin added to each obstacle's "
+      "radius and the tool's: the gap a plan keeps between the tool's surface and an "
+      "obstacle's.", unit='m', value_range=(0.0, 0.5), **_RUNTIME,
+      note="Safety margin between the tool's surface and an obstacle's: 5 mm wanted (issue 25) "
+      '+ 3 mm for what is not exact: the measured radius and centre (under 1 mm), the '
+      "controller's tracking (under 0.5 mm) and the plan's sampling."),
     P('goal_clearance', _PLAN.goal_clearance, 'A request with an obstacle closer than this to '
       'the goal fails.', unit='m', value_range=(0.0, 1.0), **_RUNTIME),
     P('tool_position_source', 'joint_states', 'Tool position for an empty start frame: '
@@ -434,6 +459,12 @@ DMP_SERVER = (
     P('check_timing', True, 'Refuse a plan whose joint velocities or accelerations (IK along '
       "the plan from the current joints, or initial_joint_positions) exceed the controller's "
       'UR10 limits; the reason gives the shortest feasible duration.', **_RUNTIME),
+    P('check_arm', True, 'Refuse a plan that would bring a link of the arm (spheres enclosing '
+      'its collision mesh, at the joints of the IK along the plan) closer than arm_clearance to '
+      'an obstacle (an upright cylinder of its perceived radius); the reason names the link. '
+      "The tool is the plan's (tool_radius, obstacle_clearance).", **_RUNTIME),
+    P('arm_clearance', 0.005, 'Smallest gap between a link of the arm and an obstacle that '
+      'check_arm accepts.', unit='m', value_range=(0.0, 0.5), **_RUNTIME),
     P('follow_goal', True, 'While a plan executes, follow the perceived goal (when the request '
       'used it) and the obstacles: when one moves by more than follow_threshold, the rest of '
       'the movement is re-planned online from where the controller is (online ET-DMP) and '

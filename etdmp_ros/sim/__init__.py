@@ -5,6 +5,6 @@ Built from the same ``example-robot-data`` UR10 as :class:`etdmp_ros.robot.UR10M
 ``ur10_sim`` is its ROS shell. Importing this package imports MuJoCo.
 """
 
-from etdmp_ros.sim._sim import CameraState, MAX_OBSTACLES, UR10Sim
+from etdmp_ros.sim._sim import CameraState, Contact, MAX_OBSTACLES, UR10Sim
 
-__all__ = ['CameraState', 'MAX_OBSTACLES', 'UR10Sim']
+__all__ = ['CameraState', 'Contact', 'MAX_OBSTACLES', 'UR10Sim']

@@ -23,10 +23,21 @@ velocities are tracked with no steady-state error and a time constant of a few m
 Torques are not limited (a servo saturating at the URDF effort leaves the implicit scheme and
 oscillated on the light wrist links); joints carry the reflected rotor inertia (``armature``)
 of geared drives. Commands are clamped to :attr:`UR10Model.velocity_limits`; a step from rest
-to full speed overshoots them by about 0.15 % (measured; inertial coupling). Contacts are
-disabled: the scene's objects are visual (the pen may touch the table or pass through an
-obstacle; avoiding them is the planner's job, and the test of it is the clearance it
-reports). Joint position limits are enforced.
+to full speed overshoots them by about 0.15 % (measured; inertial coupling). Joint position
+limits are enforced.
+
+Contacts are seen, not felt. The dynamics have no contacts (``mjDSBL_CONTACT``): nothing pushes
+the arm away, as nothing would stop a real one but a protective stop. After each
+:meth:`UR10Sim.step` call (one control period in the node) a collision-only pass (MuJoCo's
+``mj_collision`` with contacts enabled for that call alone) finds every geom of the arm (its
+links' URDF collision meshes, by their convex hulls) or of the tool that touches an obstacle,
+the bottle, the table (top, legs), the whiteboard or the floor: :attr:`UR10Sim.contacts`. The
+collision bitmasks leave out pairs of arm links (the URDF's meshes overlap at the joints), the
+base on the table it is bolted to, and the tool tip on the writing surface (the task): the tip
+counts against the table only once it is pressed in deeper than :data:`WRITING_DEPTH`, never
+against the whiteboard sheet or the goal marker it writes on. The bottle is open: its mesh is
+drawn, and for collisions it is a ring of thin boxes (its wall, :data:`BOTTLE_WALL_BOXES`) and
+a disc (its floor), since MuJoCo collides a mesh by its convex hull, which would fill it.
 
 Watchdog. A real ``forward_velocity_controller`` applies the last command forever; here a
 command older than ``watchdog_timeout`` seconds of simulated time is replaced by zero (brake),
@@ -48,9 +59,10 @@ import sys
 import xml.etree.ElementTree as ElementTree
 
 from etdmp_ros.geometry.camera import CameraIntrinsics
-from etdmp_ros.robot._scene import (GOAL_MARKER_THICKNESS, parse_bottle_position,
-                                    parse_goal_position, parse_obstacle_positions,
-                                    PEN_TIP_RADIUS, SceneConfig)
+from etdmp_ros.robot._scene import (GOAL_MARKER_THICKNESS, obstacle_radii_for,
+                                    parse_bottle_position, parse_goal_position,
+                                    parse_obstacle_positions, parse_obstacle_radii, PEN_RADIUS,
+                                    PEN_TIP_LENGTH, PEN_TIP_RADIUS, SceneConfig)
 from etdmp_ros.robot._ur10 import JOINT_NAMES, robot_data_dir, ur10_urdf_path, UR10Model
 import numpy as np
 
@@ -81,9 +93,19 @@ DEFAULT_KV = (2000.0, 2000.0, 1000.0, 100.0, 100.0, 100.0)
 ARMATURE = 0.1   # kg m^2
 ROBOT_COLOR = (0.72, 0.74, 0.78, 1.0)
 PEN_COLOR = (0.15, 0.15, 0.18, 1.0)
-PEN_RADIUS = 0.009
-PEN_TIP_LENGTH = 0.02
 WHITEBOARD_THICKNESS = 0.0005
+BOTTLE_WALL = 0.004
+BOTTLE_FLOOR = 0.01
+#: Boxes making the bottle's wall for collisions: the polygon's faces lie at most
+#: (radius - wall) (1 / cos(pi / n) - 1), 0.35 mm, outside the round wall's inner surface.
+BOTTLE_WALL_BOXES = 24
+#: A tool tip pressed into the table deeper than this (m) is a contact; less is writing.
+WRITING_DEPTH = 0.002
+# Collision bitmasks (contype of the robot's geoms, conaffinity of the objects'): a pair
+# collides when the robot geom's bit is in the object's mask. Objects have contype 0 and robot
+# geoms conaffinity 0, so neither two objects nor two robot geoms are ever a pair.
+_ARM, _TIP, _BASE = 1, 2, 4
+_ANY_ROBOT = _ARM | _TIP | _BASE
 TABLE_THICKNESS = 0.04
 # Geom groups: MjvOption shows groups 0-2 by default; obstacles not in use go to group 3.
 VISIBLE_GROUP = 0
@@ -145,8 +167,9 @@ class CameraState:
     """
     What the camera sees at one instant: simulated time (s), joint and mocap positions.
 
-    ``obstacles``: how many obstacles are in use (the others are hidden). Everything a render
-    needs besides the model, so a copy of the model (another process) can render it too.
+    ``obstacles``: how many obstacles are in use (the others are hidden); ``obstacle_radii``
+    (MAX_OBSTACLES,): each one's radius (m). Everything a render needs besides the model, so a
+    copy of the model (another process) can render it too.
     """
 
     time: float
@@ -154,6 +177,24 @@ class CameraState:
     mocap_pos: np.ndarray
     mocap_quat: np.ndarray
     obstacles: int
+    obstacle_radii: np.ndarray = None
+
+
+@dataclass(frozen=True)
+class Contact:
+    """
+    A part of the robot touching an object of the workcell (see the module docstring).
+
+    ``part``: the robot's link (URDF name, e.g. ``wrist_2_link``), or ``tool`` / ``tool_tip``
+    for the pen or stirrer; ``item``: what of the workcell it touches, ``obstacle_<i>``,
+    ``bottle``, ``table``, ``whiteboard``, ``goal_marker`` or ``floor``; ``position`` (3,):
+    the contact point in base_link; ``depth``: how far the two geometries overlap (m, >= 0).
+    """
+
+    part: str
+    item: str
+    position: np.ndarray
+    depth: float
 
 
 class UR10Sim:
@@ -168,7 +209,8 @@ class UR10Sim:
 
     def __init__(self, scene, *, timestep=0.002, watchdog_timeout=0.1,
                  image_size=(640, 480), fovy_deg=42.5, depth_range=(0.1, 3.0),
-                 depth_noise=0.0, seed=None, multisamples=0, kv=DEFAULT_KV):
+                 depth_noise=0.0, seed=None, multisamples=0, kv=DEFAULT_KV,
+                 detect_contacts=True):
         """
         Build the model of the workcell ``scene``, a :class:`SceneConfig`.
 
@@ -180,7 +222,8 @@ class UR10Sim:
         about 42.5). ``depth_range``: (min, max) metres; depth outside it reads 0.
         ``depth_noise``: standard deviation of the depth noise at 1 m (metres), growing with
         z^2 like a stereo camera's; 0 for none. ``multisamples``: MSAA samples (0 is fastest).
-        ``kv``: velocity-servo gains per joint (N m s/rad).
+        ``kv``: velocity-servo gains per joint (N m s/rad). ``detect_contacts``: find the
+        contacts after each :meth:`step` call (False: :attr:`contacts` stays empty; benchmarks).
         """
         self.scene = scene
         _import_mujoco()
@@ -199,6 +242,8 @@ class UR10Sim:
         self.velocity_limits = self.ur10.velocity_limits.copy()
         self.joint_names = JOINT_NAMES
         self._rng = np.random.default_rng(seed)
+        self.contacts_enabled = bool(detect_contacts)
+        self.contacts = ()
         self.model = self._build(timestep, multisamples, np.broadcast_to(kv, (6,)))
         self.data = mujoco.MjData(self.model)
         self._ids()
@@ -232,6 +277,9 @@ class UR10Sim:
         for geom in spec.geoms:      # the robot: URDF collision meshes, drawn in one colour
             geom.rgba = ROBOT_COLOR
             geom.group = VISIBLE_GROUP
+            # The base is bolted to the table; every other link may touch it.
+            geom.contype = _BASE if geom.parent.name in ('base_link', 'base') else _ARM
+            geom.conaffinity = 0
         for name in JOINT_NAMES:
             # Reflected rotor inertia of the geared joints (MuJoCo Menagerie's UR10e value);
             # the bare wrist links (~5e-4 kg m^2) would make the servo needlessly stiff.
@@ -254,48 +302,74 @@ class UR10Sim:
             if np.linalg.norm(tip_start) > 1e-6:
                 tool0.add_geom(name='pen', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                                fromto=[0, 0, 0, *tip_start], size=[PEN_RADIUS, 0, 0],
-                               rgba=PEN_COLOR)
+                               rgba=PEN_COLOR, contype=_ARM, conaffinity=0)
             tool0.add_geom(name='pen_tip', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                            fromto=[*tip_start, *offset], size=[PEN_TIP_RADIUS, 0, 0],
-                           rgba=PEN_COLOR)
+                           rgba=PEN_COLOR, contype=_TIP, conaffinity=0)
 
         world = spec.worldbody
         world.add_light(name='sun', pos=[0.5, 0.0, 3.0], dir=[0.0, 0.0, -1.0],
                         diffuse=[0.5, 0.5, 0.5], specular=[0.1, 0.1, 0.1], castshadow=False)
+        # Objects: contype 0; conaffinity says which parts of the robot they collide with.
         world.add_geom(name='floor', type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1],
-                       pos=[0, 0, -s.table_height], rgba=[0.35, 0.36, 0.38, 1])
+                       pos=[0, 0, -s.table_height], rgba=[0.35, 0.36, 0.38, 1],
+                       contype=0, conaffinity=_ANY_ROBOT)
         half = np.asarray(s.table_size) / 2
+        # The tip collides with the table top too: contacts() keeps it past WRITING_DEPTH only.
         world.add_geom(name='table', type=mujoco.mjtGeom.mjGEOM_BOX,
                        size=[*half, TABLE_THICKNESS / 2],
-                       pos=[*s.table_center, -TABLE_THICKNESS / 2], rgba=s.table_color)
+                       pos=[*s.table_center, -TABLE_THICKNESS / 2], rgba=s.table_color,
+                       contype=0, conaffinity=_ARM | _TIP)
         leg = (s.table_height - TABLE_THICKNESS) / 2
-        for sx in (-1, 1):
-            for sy in (-1, 1):
-                world.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.03, 0.03, leg],
-                               pos=[s.table_center[0] + sx * (half[0] - 0.05),
-                                    s.table_center[1] + sy * (half[1] - 0.05),
-                                    -TABLE_THICKNESS - leg], rgba=s.table_color)
+        for k, (sx, sy) in enumerate(((-1, -1), (-1, 1), (1, -1), (1, 1))):
+            world.add_geom(name=f'table_leg_{k}', type=mujoco.mjtGeom.mjGEOM_BOX,
+                           size=[0.03, 0.03, leg],
+                           pos=[s.table_center[0] + sx * (half[0] - 0.05),
+                                s.table_center[1] + sy * (half[1] - 0.05),
+                                -TABLE_THICKNESS - leg], rgba=s.table_color,
+                           contype=0, conaffinity=_ANY_ROBOT)
         if np.all(s.whiteboard_size > 0):
             world.add_geom(name='whiteboard', type=mujoco.mjtGeom.mjGEOM_BOX,
                            size=[*(s.whiteboard_size / 2), WHITEBOARD_THICKNESS / 2],
                            pos=[*s.task_plane_origin[:2], WHITEBOARD_THICKNESS / 2],
-                           rgba=s.whiteboard_color)
-        vertices, faces = _tube_mesh(s.bottle_radius, s.bottle_height, wall=0.004, floor=0.01)
+                           rgba=s.whiteboard_color, contype=0, conaffinity=_ARM)
+        vertices, faces = _tube_mesh(s.bottle_radius, s.bottle_height, wall=BOTTLE_WALL,
+                                     floor=BOTTLE_FLOOR)
         spec.add_mesh(name='bottle', uservert=vertices.ravel(), userface=faces.ravel())
-        # A mocap body: it moves at runtime (set_bottle), its collision geometry with it.
+        # A mocap body: it moves at runtime (set_bottle), its collision geometry with it. The
+        # mesh is drawn only; the wall's boxes and the floor's disc collide, undrawn.
         bottle = world.add_body(name='bottle', mocap=True, pos=[*s.bottle_position, 0.0])
         bottle.add_geom(name='bottle', type=mujoco.mjtGeom.mjGEOM_MESH, meshname='bottle',
-                        rgba=s.bottle_color)
+                        rgba=s.bottle_color, contype=0, conaffinity=0)
+        n = BOTTLE_WALL_BOXES
+        middle = s.bottle_radius - BOTTLE_WALL / 2
+        for k in range(n):
+            a = 2.0 * math.pi * k / n
+            bottle.add_geom(name=f'bottle_wall_{k}', type=mujoco.mjtGeom.mjGEOM_BOX,
+                            size=[BOTTLE_WALL / 2, s.bottle_radius * math.tan(math.pi / n),
+                                  s.bottle_height / 2],
+                            pos=[middle * math.cos(a), middle * math.sin(a),
+                                 s.bottle_height / 2],
+                            quat=[math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)],
+                            group=HIDDEN_GROUP, rgba=[0, 0, 0, 0], contype=0,
+                            conaffinity=_ANY_ROBOT)
+        bottle.add_geom(name='bottle_floor', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                        size=[s.bottle_radius, BOTTLE_FLOOR / 2, 0],
+                        pos=[0.0, 0.0, BOTTLE_FLOOR / 2], group=HIDDEN_GROUP, rgba=[0, 0, 0, 0],
+                        contype=0, conaffinity=_ANY_ROBOT)
 
+        # The goal marker lies on the table: the pen writes on it, a link would touch the table.
         goal = world.add_body(name='goal_marker', mocap=True, pos=s.goal_position)
         goal.add_geom(name='goal_marker', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                       size=[s.goal_radius, GOAL_MARKER_THICKNESS / 2, 0],
-                      pos=[0, 0, -GOAL_MARKER_THICKNESS / 2], rgba=s.goal_color)
+                      pos=[0, 0, -GOAL_MARKER_THICKNESS / 2], rgba=s.goal_color,
+                      contype=0, conaffinity=_ARM)
         for i in range(MAX_OBSTACLES):
             body = world.add_body(name=f'obstacle_{i}', mocap=True)
             body.add_geom(name=f'obstacle_{i}', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                           size=[s.obstacle_radius, s.obstacle_height / 2, 0],
-                          pos=[0, 0, -s.obstacle_height / 2], rgba=s.obstacle_color)
+                          pos=[0, 0, -s.obstacle_height / 2], rgba=s.obstacle_color,
+                          contype=0, conaffinity=_ANY_ROBOT)
 
         world.add_camera(name=CAMERA_NAME, pos=self.camera_pose.position,
                          quat=_mujoco_camera_quat(self.camera_pose),
@@ -315,6 +389,23 @@ class UR10Sim:
         self._obstacle_mocap = [m.body_mocapid[m.body(f'obstacle_{i}').id]
                                 for i in range(MAX_OBSTACLES)]
         self._obstacle_geoms = [m.geom(f'obstacle_{i}').id for i in range(MAX_OBSTACLES)]
+        # _set_radii resizes an obstacle's one bounding-volume node with its one geom.
+        assert all(m.body_bvhnum[m.geom_bodyid[g]] == 1 for g in self._obstacle_geoms)
+        # What a contact's geoms are called: the robot's by link (tool, tool_tip), the
+        # objects' by name (a table leg is the table, the bottle's wall boxes the bottle).
+        tool = {'pen': 'tool', 'pen_tip': 'tool_tip'}
+        self._contact_names = []
+        for g in range(m.ngeom):
+            name = m.geom(g).name
+            if m.geom_contype[g]:
+                name = tool.get(name, m.body(m.geom_bodyid[g]).name)
+            elif name.startswith('table_leg_'):
+                name = 'table'
+            elif name.startswith('bottle_'):
+                name = 'bottle'
+            self._contact_names.append(name)
+        self._tip_geom = m.geom('pen_tip').id if _has_geom(m, 'pen_tip') else -1
+        self._table_geom = m.geom('table').id
 
     # ------------------------------------------------------------------------------- state
     def reset(self, q=None):
@@ -330,8 +421,9 @@ class UR10Sim:
         self.watchdog_active = self.watchdog_timeout > 0
         self.set_goal(self.scene.goal_position)
         self.set_bottle(self.scene.bottle_position)
-        self.set_obstacles(self.scene.obstacle_positions)
+        self.set_obstacles(self.scene.obstacle_positions, self.scene.obstacle_radii)
         mujoco.mj_forward(self.model, self.data)
+        self.contacts = self.detect_contacts() if self.contacts_enabled else ()
 
     @property
     def time(self):
@@ -369,11 +461,13 @@ class UR10Sim:
                 self.data.site_xmat[site_id].reshape(3, 3).copy())
 
     def set_joint_positions(self, q):
-        """Teleport the joints to ``q`` (6,) at rest and update kinematics (tests, reset)."""
+        """Teleport the joints to ``q`` (6,) at rest; update kinematics and contacts (tests)."""
         q = np.asarray(q, dtype=float).reshape(6)
         self.data.qpos[self._qpos_adr] = q
         self.data.qvel[self._dof_adr] = 0.0
         mujoco.mj_forward(self.model, self.data)
+        if self.contacts_enabled:
+            self.contacts = self.detect_contacts()
 
     # ------------------------------------------------------------------------------ commands
     def validate_velocity_command(self, qd):
@@ -414,7 +508,12 @@ class UR10Sim:
             self.data.ctrl[self._actuator_ids] = 0.0
 
     def step(self, n=1):
-        """Advance ``n`` physics steps (watchdog checked at every step)."""
+        """
+        Advance ``n`` physics steps (watchdog checked at every step), then find the contacts.
+
+        :attr:`contacts` holds those at the end of the call (module docstring); :meth:`reset`
+        and :meth:`set_joint_positions` update it too, :meth:`detect_contacts` finds them now.
+        """
         m, d = self.model, self.data
         for _ in range(int(n)):
             self._check_watchdog()
@@ -426,6 +525,43 @@ class UR10Sim:
         # mj_step leaves positions of bodies and sites at the state BEFORE its last integration:
         # recompute them so the tool tip, ground truth and camera match q.
         mujoco.mj_kinematics(m, d)
+        if self.contacts_enabled:
+            self.contacts = self.detect_contacts()
+
+    def detect_contacts(self):
+        """
+        Return the contacts of the robot with the workcell now: a tuple of :class:`Contact`.
+
+        One per pair of a robot part and an object, at its deepest point.
+
+        A collision-only pass on the current kinematics (the dynamics never see contacts):
+        MuJoCo's broad phase leaves out every pair whose bounding boxes are apart, so with
+        nothing near the arm it costs a few microseconds.
+        """
+        m, d = self.model, self.data
+        flags = m.opt.disableflags
+        m.opt.disableflags = flags & ~int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
+        try:
+            mujoco.mj_collision(m, d)
+        finally:
+            m.opt.disableflags = flags
+        if d.ncon == 0:
+            return ()
+        n, contact = d.ncon, d.contact
+        geoms, depths = contact.geom[:n], np.maximum(0.0, -contact.dist[:n])
+        positions = contact.pos[:n].copy()
+        d.ncon = 0              # the dynamics have none (the next step would clear them too)
+        names, found = self._contact_names, {}
+        for (a, b), depth, position in zip(geoms, depths, positions):
+            robot, other = (a, b) if m.geom_contype[a] else (b, a)
+            if robot == self._tip_geom and other == self._table_geom and \
+                    depth <= WRITING_DEPTH:
+                continue        # the pen writing on the table, not pressed through it
+            # One per pair of part and item (MuJoCo gives up to 4 points a pair): the deepest.
+            pair = (names[robot], names[other])
+            if pair not in found or depth > found[pair].depth:
+                found[pair] = Contact(*pair, position, float(depth))
+        return tuple(found.values())
 
     def advance(self, duration):
         """Advance ``duration`` seconds of simulated time (rounded to whole physics steps)."""
@@ -462,15 +598,27 @@ class UR10Sim:
         """Obstacle positions (N, 3): centres of the cylinders' top faces, base_link."""
         return self._obstacles.copy()
 
-    def set_obstacles(self, positions):
+    @property
+    def obstacle_radii(self):
+        """Obstacle radii (N,) in metres, in the order of :attr:`obstacle_positions`."""
+        return self._radii[:len(self._obstacles)].copy()
+
+    def set_obstacles(self, positions, radii=None):
         """
         Place obstacles at ``positions`` ((N, 3) or flat [x1, y1, z1, ...]); ValueError if bad.
 
-        At most :data:`MAX_OBSTACLES`; the others are hidden.
+        ``radii``: each one's radius (m; those beyond the list have the scene's
+        ``obstacle.radius``), None to keep the radii they have. At most :data:`MAX_OBSTACLES`;
+        the others are hidden.
         """
         points = parse_obstacle_positions(positions)
         if len(points) > MAX_OBSTACLES:
             raise ValueError(f'at most {MAX_OBSTACLES} obstacles, got {len(points)}')
+        if radii is not None:
+            radii = obstacle_radii_for(MAX_OBSTACLES, parse_obstacle_radii(radii),
+                                       self.scene.obstacle_radius)
+            self._set_radii(self.model, radii)
+            self._radii = radii
         for i, (mocap, geom) in enumerate(zip(self._obstacle_mocap, self._obstacle_geoms)):
             used = i < len(points)
             # Unused ones are hidden from the camera and parked far below the floor.
@@ -478,6 +626,22 @@ class UR10Sim:
             self.model.geom_group[geom] = VISIBLE_GROUP if used else HIDDEN_GROUP
         self._obstacles = points
         mujoco.mj_kinematics(self.model, self.data)
+
+    def set_obstacle_radii(self, radii):
+        """Size the obstacles: ``radii`` as in :meth:`set_obstacles`; ValueError if bad."""
+        self.set_obstacles(self._obstacles, radii)
+
+    def _set_radii(self, model, radii):
+        """Give the obstacle cylinders of ``model`` these radii (MAX_OBSTACLES,)."""
+        half = 0.5 * self.scene.obstacle_height
+        for geom, r in zip(self._obstacle_geoms, radii):
+            model.geom_size[geom, 0] = r
+            # What the collision broad phase bounds the cylinder by: its bounding sphere and
+            # box, and its body's bounding volume hierarchy (one node: the body has one geom).
+            model.geom_rbound[geom] = math.hypot(r, half)
+            model.geom_aabb[geom, 3:] = (r, r, half)
+            body = model.geom_bodyid[geom]
+            model.bvh_aabb[model.body_bvhadr[body], 3:] = (r, r, half)
 
     # -------------------------------------------------------------------------------- camera
     def camera_state(self):
@@ -490,7 +654,7 @@ class UR10Sim:
         """
         d = self.data
         return CameraState(float(d.time), d.qpos.copy(), d.mocap_pos.copy(),
-                           d.mocap_quat.copy(), len(self._obstacles))
+                           d.mocap_quat.copy(), len(self._obstacles), self._radii.copy())
 
     def render_rgb_depth(self, state=None):
         """
@@ -516,6 +680,10 @@ class UR10Sim:
             for i, geom in enumerate(self._obstacle_geoms):
                 self.model.geom_group[geom] = VISIBLE_GROUP if i < state.obstacles \
                     else HIDDEN_GROUP
+            if state.obstacle_radii is not None and \
+                    not np.array_equal(state.obstacle_radii, self._radii):
+                self._set_radii(self.model, state.obstacle_radii)
+                self._radii = np.array(state.obstacle_radii, dtype=float)
             mujoco.mj_kinematics(self.model, data)
             mujoco.mj_camlight(self.model, data)
         rgb, depth = self._camera.render(data)
@@ -551,6 +719,15 @@ class UR10Sim:
     def __exit__(self, *exc):
         """Close the camera."""
         self.close()
+
+
+def _has_geom(model, name):
+    """Return whether ``model`` has a geom called ``name``."""
+    try:
+        model.geom(name)
+    except KeyError:
+        return False
+    return True
 
 
 class _OffscreenCamera:

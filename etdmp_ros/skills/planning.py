@@ -16,6 +16,10 @@ ET-DMP core and map the result back.
   ``min_distance``), an obstacle on the goal (closer than ``goal_clearance``), a goal or a path
   point outside the :class:`Workspace`, and whatever the core refuses (``GeneralizationError``:
   for the detour, also a start or goal inside an obstacle and a clearance it cannot keep).
+- Obstacle sizes: each obstacle's radius (m, as perceived; 0 for a point) plus the
+  ``tool_radius`` and ``obstacle_clearance`` settings is the clearance the plan must keep from
+  its centre (:attr:`Plan.obstacle_radii`, in metres; divided by the task plane's scale in a
+  2D skill's units).
 - Timing: samples every ``output_period`` seconds from 0 to ``tau (1 + margin)``, with ``tau`` the
   ``duration`` setting (0: the demonstration's own duration) and ``margin`` the
   ``obstacle_margin`` when the paper's coupling avoids obstacles (its detour arrives later), else
@@ -36,6 +40,7 @@ from etdmp_ros import limits
 from etdmp_ros.dmp import (AVOIDANCES, euclidean_transform, GeneralizationError, METHODS,
                            ObstacleGains)
 from etdmp_ros.geometry.quaternion import unit_and_norm
+from etdmp_ros.robot._scene import PEN_RADIUS
 import numpy as np
 
 #: Tool orientation (x, y, z, w) in base_link that points the tool's z axis down (-z of
@@ -134,7 +139,8 @@ class PlanSettings:
     ``avoidance``: one of the core's AVOIDANCES, or empty for the detour when the obstacles have
     radii and the paper's coupling when they do not.
     ``orientation`` is normalised; ``orientation_mode`` one of PLAN_ORIENTATION_MODES.
-    Construction raises ValueError for bad values.
+    ``tool_radius`` and ``obstacle_clearance`` (m) add to each obstacle's radius: the clearance
+    the plan keeps from its centre. Construction raises ValueError for bad values.
     """
 
     method: str = 'etdmp'
@@ -151,6 +157,8 @@ class PlanSettings:
     orientation: tuple = TOOL_DOWN
     orientation_mode: str = 'demo'
     workspace: Workspace = field(default_factory=Workspace)
+    tool_radius: float = PEN_RADIUS
+    obstacle_clearance: float = 0.008
 
     def __post_init__(self):
         """Validate and normalise."""
@@ -168,7 +176,7 @@ class PlanSettings:
             raise ValueError(f'independent_axis must be 0, 1 or 2, got {self.independent_axis!r}')
         positive = ('output_period',)
         non_negative = ('duration', 'obstacle_k', 'obstacle_margin', 'goal_clearance',
-                        'min_distance')
+                        'min_distance', 'tool_radius', 'obstacle_clearance')
         for name in positive + non_negative:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0.0 or (name in positive and value == 0.0):
@@ -188,7 +196,9 @@ class Plan:
     quaternion per pose (a skill with orientations), base_link; :attr:`orientations` is (n, 4)
     either way. ``start``, ``goal`` and ``obstacles`` (m, 3) as used (projected onto the task
     plane for 2D skills); ``trajectory``: the core's result in the skill's space;
-    ``obstacle_radii`` (m,) metres (zeros for points) and ``avoidance`` as used.
+    ``obstacle_radii`` (m,): the clearance (m) the plan keeps from each obstacle's centre (its
+    radius + the tool's + ``obstacle_clearance``), None when the obstacles were given without
+    radii; ``avoidance`` as used.
     """
 
     t: np.ndarray
@@ -246,21 +256,6 @@ def bounded(points, what):
                             f'{limits.MAX_REQUEST_COORDINATE:g} m (MAX_REQUEST_COORDINATE): no '
                             'place of the workcell')
     return points
-
-
-def _radii(value, count):
-    """Return obstacle radii in metres (count,), zeros for None; PlanningError if bad."""
-    if value is None:
-        return np.zeros(count)
-    try:
-        radii = np.asarray(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise PlanningError(f'obstacle radii must be numbers, got {value!r}') from None
-    if radii.shape != (count,):
-        raise PlanningError(f'{count} obstacles need {count} radii, got {radii.size}')
-    if not np.all(np.isfinite(radii)) or np.any(radii < 0.0):
-        raise PlanningError(f'obstacle radii must be finite and >= 0 m, got {radii.tolist()}')
-    return radii
 
 
 def _avoidance(settings, radii):
@@ -345,6 +340,27 @@ def _fmt(point):
     return '(' + ', '.join(f'{c:.3f}' if abs(c) < 1e6 else f'{c:.3g}' for c in point) + ')'
 
 
+def obstacle_clearances(radii, settings, count):
+    """
+    Return the clearance (count,) a plan keeps from each obstacle's centre (m), or None.
+
+    ``radii``: each obstacle's radius (m; 0 for a point), None when not known; the tool's radius
+    and the safety margin (``settings``) are added. Raises PlanningError for radii that do not
+    match the obstacles or are not finite and >= 0.
+    """
+    if radii is None:
+        return None
+    try:
+        radii = np.asarray(radii, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise PlanningError(f'obstacle radii must be numbers, got {radii!r}') from None
+    if len(radii) != count:
+        raise PlanningError(f'{count} obstacles but {len(radii)} obstacle radii')
+    if not np.all(np.isfinite(radii)) or np.any(radii < 0.0):
+        raise PlanningError(f'obstacle radii must be finite and >= 0 (m), got {radii.tolist()}')
+    return radii + settings.tool_radius + settings.obstacle_clearance
+
+
 def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
               goal_orientation=None, obstacle_radii=None):
     """
@@ -354,16 +370,19 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
     centres); ``obstacle_radii``: None or (m,) metres, the clearance to keep from each centre;
     ``settings``: PlanSettings; ``plane``: the TaskPlane (needed for 2D skills);
     ``goal_orientation``: None or (x, y, z, w) in base_link (see :func:`goal_orientation_of`:
-    all zeros for none). Returns a Plan; raises PlanningError with the reason when the request
-    cannot be served.
+    all zeros for none); ``obstacle_radii``: (m,) each obstacle's radius in metres (0: a point),
+    None for obstacles of unknown size. Returns a Plan; raises PlanningError with the reason
+    when the request cannot be served.
     """
     settings = PlanSettings() if settings is None else settings
     goal_q = goal_orientation_of(skill, goal_orientation, settings)
     start = _points(start, 'start', (3,))
     goal = _points(goal, 'goal', (3,))
     obstacles = _points(obstacles, 'obstacles', None)
-    radii = _radii(obstacle_radii, len(obstacles))
     avoidance = _avoidance(settings, obstacle_radii)
+    clearances = obstacle_clearances(obstacle_radii, settings, len(obstacles))
+    if clearances is None and avoidance == 'detour':   # points of unknown size: the tool's
+        clearances = obstacle_clearances(np.zeros(len(obstacles)), settings, len(obstacles))
     space = _Space(skill, plane)
     start_s, goal_s, obstacles_s = (space.inward(p) for p in (start, goal, obstacles))
     start_b, goal_b, obstacles_b = (space.outward(p) for p in (start_s, goal_s, obstacles_s))
@@ -395,7 +414,8 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
             independent_axis=settings.independent_axis, dt=settings.output_period,
             tau=settings.duration or None,
             margin=settings.obstacle_margin if len(obstacles_s) and avoidance == 'paper' else 0.0,
-            gains=gains, obstacle_radii=radii / space.scale, avoidance=avoidance,
+            gains=gains, avoidance=avoidance,
+            obstacle_radii=None if clearances is None else clearances / space.scale,
             goal_orientation=None if goal_q is None else space.inward_orientations(goal_q))
     except GeneralizationError as err:
         raise PlanningError(str(err)) from None
@@ -411,7 +431,7 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
         raise PlanningError(f"the plan leaves the UR10's reach at t = {traj.t[i]:.2f} s, "
                             f'{_fmt(positions[i])}: {reason}')
     return Plan(traj.t, positions, space.outward_vectors(traj.v), orientation,
-                start_b, goal_b, obstacles_b, settings.method, traj, radii, avoidance)
+                start_b, goal_b, obstacles_b, settings.method, traj, clearances, avoidance)
 
 
 def place_demo(skill, start, goal, plane=None, mode=1, independent_axis=2):
@@ -486,6 +506,10 @@ class FollowedPlan:
         self.velocities = plan.velocities.copy()
         self.goal, self.obstacles = plan.goal.copy(), plan.obstacles.copy()
         self.obstacle_radii = np.array(radii, dtype=float)
+        #: Each obstacle's own radius (m): the clearance less the tool's and the margin.
+        added = settings.tool_radius + settings.obstacle_clearance
+        self.obstacle_sizes = np.zeros(len(plan.obstacles)) if plan.obstacle_radii is None else \
+            np.maximum(0.0, plan.obstacle_radii - added)
         self.orientation = plan.orientation
         self._plan_t, self._plan_orientation = plan.t, plan.orientation
         self.updates = 0
@@ -542,8 +566,10 @@ class FollowedPlan:
         Move the goal to ``goal`` and/or the obstacles to ``obstacles`` from ``t_switch`` on.
 
         ``goal`` (3,) and ``obstacles`` (m, 3) are base_link points (projected onto the task
-        plane for 2D skills), None for unchanged; ``obstacle_radii`` (m,) metres, None for
-        those in force (the same number of obstacles) or, for the paper's points, none. Return
+        plane for 2D skills), None for unchanged; ``obstacle_radii`` (m,) each obstacle's radius
+        in metres (the tool's radius and ``obstacle_clearance`` are added, as in
+        :func:`plan_path`), None for those in force (the same number of obstacles) or, for the
+        paper's points, none. Return
         the index of the first changed pose: the path from there on (``t``, ``positions``,
         ``velocities``) is new; before it, it is as it was. The new path runs until the online
         run is done or ``t_max`` (default: the old end plus the skill's duration). Raises
@@ -556,7 +582,7 @@ class FollowedPlan:
         obstacles_s = None if obstacles is None else space.inward(
             _points(obstacles, 'obstacles', None))
         radii = None if obstacle_radii is None or obstacles_s is None else \
-            _radii(obstacle_radii, len(obstacles_s))
+            obstacle_clearances(obstacle_radii, settings, len(obstacles_s))
         if goal_s is not None:
             goal_b = space.outward(goal_s)
             outside = settings.workspace.violation(goal_b)
@@ -612,5 +638,7 @@ class FollowedPlan:
         if obstacles_s is not None:
             self.obstacles = space.outward(obstacles_s)
             self.obstacle_radii = self._run.obstacle_radii * space.scale
+            if obstacle_radii is not None:
+                self.obstacle_sizes = np.asarray(obstacle_radii, dtype=float).reshape(-1)
         self.updates += 1
         return keep

@@ -364,6 +364,18 @@ def test_a_joint_state_stamp_must_advance_with_the_robots_clock():
     future = watch.implausible(105_008 * ms, 5008 * ms, True)
     assert '+100.000 s off the robot clock' in future, future
     assert '-5.000 s off' in watch.implausible(8 * ms, 5008 * ms, True)
+    # Late (this process not scheduled while /clock went on, its messages taken first): the
+    # stamp advanced, less than the clock. Plausible: it is the robot's, it came late.
+    assert watch.implausible(5008 * ms, 5112 * ms, True) == ''
+    # But one that did not advance while the clock went on is no news from the robot.
+    assert '-0.112 s off' in watch.implausible(5000 * ms, 5112 * ms, True)
+    # Ahead of this process's view of the clock (its /clock messages still queued), but not
+    # ahead of the wall clock since the last one: the clock lags, the stamp is the robot's.
+    assert '+0.104 s off' in watch.implausible(5176 * ms, 5072 * ms, True)
+    assert watch.implausible(5176 * ms, 5072 * ms, True, wall_ns=180 * ms) == ''
+    assert '+0.104 s off' in watch.implausible(5176 * ms, 5072 * ms, True, wall_ns=50 * ms)
+    assert '+100.000 s off' in watch.implausible(105_008 * ms, 5008 * ms, True,
+                                                 wall_ns=1000 * ms)
     # A restarted simulation: its clock went back with its stamps, which is plausible (the
     # controller then drops the path: its time went back).
     assert watch.implausible(8 * ms, 8 * ms, True) == ''

@@ -5,7 +5,8 @@ The client here does what ``ros2 service call /generalize nav_msgs/srv/GetPlan "
 ``ros2 topic pub`` and ``ros2 param set`` do. Plans are checked against the ET-DMP core run in
 this process on the same demonstration (the node must be a thin shell around it) and against the
 acceptance numbers: starts at the start, ends within 1 mm of the goal, lies on the task plane,
-keeps the demo's shape (nRMSE), avoids published obstacles.
+keeps the demo's shape (nRMSE), avoids published obstacles; refuses a plan along which a link
+of the arm would touch a perceived obstacle (its volume on /etdmp/obstacle_volumes), naming it.
 """
 
 import math
@@ -22,9 +23,11 @@ from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.task_plane import TaskPlane
 
 from etdmp_ros.robot import JOINT_NAMES, UR10Model
+from etdmp_ros.robot._arm_check import ArmGeometry
+from etdmp_ros.robot._timing import plan_joints
 
-from etdmp_ros.ros.conversions import (joint_state_msg, path_from_numpy, path_to_numpy,
-                                       pose_array_from_numpy)
+from etdmp_ros.ros.conversions import (cylinder_markers, joint_state_msg, path_from_numpy,
+                                       path_to_numpy, pose_array_from_numpy)
 
 from etdmp_ros.skills.planning import plan_path
 
@@ -95,6 +98,7 @@ class Client:
             'bottle': self.node.create_publisher(PointStamped, '/etdmp/bottle', 10),
             'tool_pose': self.node.create_publisher(PoseStamped, '/etdmp/tool_pose', 10),
             'demonstrations': self.node.create_publisher(Path, '/etdmp/demonstrations', 10),
+            'volumes': self.node.create_publisher(MarkerArray, '/etdmp/obstacle_volumes', 10),
         }
         self.paths, self.markers = [], []
         self.node.create_subscription(Path, '/etdmp/path', self.paths.append, LATCHED)
@@ -395,29 +399,80 @@ def test_a_taught_path_keeps_its_orientations(server, client):
 
 def test_obstacles_published_on_the_topic_are_avoided(server, client):
     _, free, _, _ = client.call(START, GOAL)
-    # Two obstacles on the obstacle-free path, at the height of the scene's cylinders' tops.
+    # Two obstacles on the obstacle-free path, at the height of the scene's cylinders' tops,
+    # without volumes: points, kept clear by the tool's radius and the safety margin.
     on_path = free[[60, 120]] + [0.0, 0.0, SCENE['obstacle']['height']]
     client.publish('obstacles', obstacles_msg(on_path))
     try:
         t, x, _, _ = client.call(START, GOAL)
+        assert client.set_parameters(avoidance='paper')[0].successful
+        t_paper, x_paper, _, _ = client.call(START, GOAL)
     finally:
+        assert client.set_parameters(avoidance='detour')[0].successful
         client.publish('obstacles', obstacles_msg(np.zeros((0, 3))))
     size = np.ptp(PLANE.to_plane(free) * PLANE.scale, axis=0).max()
     assert clearance_2d(free, on_path) < 1e-9
-    # The core's letters clear obstacle points on their path by >= 7 % of their size.
-    assert clearance_2d(x, on_path) > 0.05 * size
+    # The detour: the tool's radius and the margin kept, the timing the obstacle-free plan's.
+    kept = SERVER['tool_radius'] + SERVER['obstacle_clearance']
+    assert kept - 1e-6 <= clearance_2d(x, on_path) < kept + 0.02 * size
+    assert t[-1] == pytest.approx(free_duration := 2.0) and len(t) == len(free)
     np.testing.assert_allclose(PLANE.distance(x), 0.0, atol=1e-9)
     assert np.linalg.norm(x[-1] - GOAL) < 1e-3
-    assert t[-1] == pytest.approx(3.0)      # obstacle_margin 0.5: a detour takes 1.5 tau
+    np.testing.assert_allclose(
+        x, core_plan('G', START, GOAL, on_path, obstacle_radii=np.full(2, kept / PLANE.scale))[1],
+        atol=1e-9)
+    # The paper's coupling on demand: its letters clear points by >= 5 % of their size, 1.5 tau.
+    assert clearance_2d(x_paper, on_path) > 0.05 * size
+    assert t_paper[-1] == pytest.approx(1.5 * free_duration)
     # obstacle_k is in 1/m (0: k_relative / |start - goal|); the core works in demo units.
     gains = ObstacleGains(gamma=SERVER['obstacle_gamma'], beta=SERVER['obstacle_beta'],
                           gamma2=SERVER['obstacle_gamma2'],
                           k=SERVER['obstacle_k'] * PLANE.scale or None,
                           k_relative=SERVER['obstacle_k_relative'])
-    np.testing.assert_allclose(x, core_plan('G', START, GOAL, on_path, gains=gains)[1],
+    np.testing.assert_allclose(x_paper, core_plan('G', START, GOAL, on_path, gains=gains)[1],
                                atol=1e-9)
     # The empty PoseArray cleared them: back to the obstacle-free plan.
     np.testing.assert_allclose(client.call(START, GOAL)[1], free, atol=1e-12)
+
+
+def test_a_plan_whose_arm_would_touch_an_obstacle_is_refused_naming_the_link(server, client):
+    # A tall obstacle (a 40 cm bottle, radius 3 cm, as perception reports it: /etdmp/obstacles
+    # and /etdmp/obstacle_volumes) where the first wrist passes half-way through the G: the
+    # pen writes 0.1 m and more beside it, but the wrist would sweep through it.
+    names = sorted(JOINT_NAMES)
+    client.publish('joint_states', joint_state_msg(
+        [Q_INIT[JOINT_NAMES.index(name)] for name in names], names=names))
+    t, free, q, _ = client.call(START, GOAL)
+    model = UR10Model(tool_offset=SCENE['tool_offset'])
+    idx, joints, _ = plan_joints(model, free, quat.to_matrix(quat.normalized(q)), t, Q_INIT,
+                                 32)
+    half = len(idx) // 2
+    wrist = ArmGeometry(model).joint_frames(joints[half])[0, 3, :3, 3]
+    assert np.min(np.linalg.norm(free[:, :2] - wrist[:2], axis=1)) > 0.1
+    top = np.array([[*wrist[:2], 0.4]])
+    client.publish('volumes', cylinder_markers(top, [0.03], 0))
+    client.publish('obstacles', obstacles_msg(top))
+    try:
+        assert len(client.call(START, GOAL)[1]) == 0
+        line = wait_for_log(server, 'the plan would bring the ', 'closer than arm_clearance')
+        links = ('forearm_link', 'wrist_1_link', 'wrist_2_link')
+        assert any(f'the {link} ' in line for link in links), line
+        assert '(radius 30 mm)' in line, line
+        print(line)
+        # The same obstacle as short as the scene's (8 cm) stays below the wrist: planned.
+        low = np.array([[*wrist[:2], 0.08]])
+        client.publish('volumes', cylinder_markers(low, [0.03], 0))
+        client.publish('obstacles', obstacles_msg(low))
+        assert len(client.call(START, GOAL)[1]) > 100
+        # check_arm false: the plan is not checked.
+        client.publish('volumes', cylinder_markers(top, [0.03], 0))
+        client.publish('obstacles', obstacles_msg(top))
+        assert client.set_parameters(check_arm=False)[0].successful
+        assert len(client.call(START, GOAL)[1]) > 100
+    finally:
+        assert client.set_parameters(check_arm=True)[0].successful
+        client.publish('obstacles', obstacles_msg(np.zeros((0, 3))))
+        client.publish('volumes', cylinder_markers(np.zeros((0, 3)), [], 0))
 
 
 def test_static_obstacles_and_the_maximum_age(client):

@@ -2,17 +2,20 @@
 perception as a user runs it: the installed executable in its own process, talked to with rclpy.
 
 With the installed ur10_sim publishing the camera: the perceived goal and obstacles match the
-simulation's ground truth of the same stamp within 5 mm, follow the goal when it is moved with
-``ros2 param set /ur10_sim goal_position``, and stop (goal) or empty (obstacles) when the objects
-leave the view. Alone, fed by this test: frames with wrong encodings or sizes are skipped with a
-warning and the node keeps working.
+simulation's ground truth of the same stamp within 5 mm, the obstacles' measured radii (on
+/etdmp/obstacle_volumes, beside /etdmp/obstacles with the same stamp) the radii the simulation
+was given (``ros2 param set /ur10_sim obstacle_radii``) within 1 mm, follow the goal when it is
+moved with ``ros2 param set /ur10_sim goal_position``, and stop (goal) or empty (obstacles)
+when the objects leave the view. Alone, fed by this test: frames with wrong encodings or sizes
+are skipped with a warning and the node keeps working.
 """
 
 import time
 
 from conftest import NodeProcess
-from etdmp_ros.ros.conversions import (camera_info_msg, image_msg, ns_to_stamp, point_to_numpy,
-                                       pose_array_to_numpy, stamp_to_ns)
+from etdmp_ros.ros.conversions import (camera_info_msg, cylinders_from_markers, image_msg,
+                                       ns_to_stamp, point_to_numpy, pose_array_to_numpy,
+                                       stamp_to_ns)
 from etdmp_ros.ros.system import scene_config
 from etdmp_ros.sim import UR10Sim
 from geometry_msgs.msg import PointStamped, PoseArray
@@ -23,8 +26,10 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
+from visualization_msgs.msg import Marker, MarkerArray
 
 TOLERANCE = 0.005
+RADIUS_TOLERANCE = 0.001
 TIMEOUT = 20.0
 COLOR = '/camera/camera/color/image_raw'
 DEPTH = '/camera/camera/aligned_depth_to_color/image_raw'
@@ -40,7 +45,7 @@ class Client:
         self.node = rclpy.create_node('perception_test_client', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self.goals, self.obstacles, self.images = [], [], []
+        self.goals, self.obstacles, self.images, self.volumes = [], [], [], {}
         self.truth_goal, self.truth_obstacles = {}, {}
         sub = self.node.create_subscription
         sub(PointStamped, '/etdmp/goal',
@@ -50,6 +55,8 @@ class Client:
             lambda m: self.obstacles.append((stamp_to_ns(m.header.stamp),
                                              pose_array_to_numpy(m))), 10)
         sub(Image, '/etdmp/detections/image', self.images.append, 1)
+        sub(MarkerArray, '/etdmp/obstacle_volumes',
+            lambda m: self.volumes.__setitem__(stamp_to_ns(m.markers[0].header.stamp), m), 10)
         sub(PointStamped, '/ur10_sim/ground_truth/goal',
             lambda m: self.truth_goal.__setitem__(stamp_to_ns(m.header.stamp),
                                                   point_to_numpy(m.point)), 10)
@@ -222,9 +229,44 @@ def test_perception_follows_the_simulation(colcon_install, ros_env, tmp_path, cl
                           np.all(np.linalg.norm(target[:, None] - client.obstacles[-1][1][None],
                                                 axis=2).min(axis=1) < TOLERANCE),
                           TIMEOUT, 'three moved obstacles', *nodes)
+        # Their sizes (ros2 param set /ur10_sim obstacle_radii ...): each measured within 1 mm,
+        # on /etdmp/obstacle_volumes with the PoseArray's stamp, as cylinders at its points.
+        radii = np.array([0.015, 0.04, 0.06])
+        client.set_sim('obstacle_radii', radii)
+
+        def sized():
+            """Return (stamp, |radius errors|) of the volumes of the latest PoseArray."""
+            stamp, points = client.obstacles[-1]
+            if stamp not in client.volumes or len(points) != 3:
+                return None
+            msg = client.volumes[stamp]
+            assert msg.markers[0].action == Marker.DELETEALL
+            assert {m.header.frame_id for m in msg.markers} == {'base_link'}
+            tops, measured = cylinders_from_markers(msg)
+            np.testing.assert_allclose(tops, points, atol=1e-9)
+            truth = radii[np.linalg.norm(target[:, None] - tops[None], axis=2).argmin(axis=0)]
+            return stamp, np.abs(measured - truth)
+        client.spin_until(lambda: (sized() is not None and sized()[1].max() < 0.01), TIMEOUT,
+                          'obstacles of their new sizes', *nodes)
+        changed = sized()[0]
+        client.spin_for(1.0)
+        errors = []
+        for stamp, points in client.obstacles:
+            if stamp < changed or stamp not in client.volumes:
+                continue
+            tops, measured = cylinders_from_markers(client.volumes[stamp])
+            np.testing.assert_allclose(tops, points, atol=1e-9)
+            truth = radii[np.linalg.norm(target[:, None] - tops[None], axis=2).argmin(axis=0)]
+            errors += np.abs(measured - truth).tolist()
+        print(f'radii measured through the node: {len(errors)}, max error '
+              f'{max(errors) * 1e3:.2f} mm')
+        assert len(errors) >= 9 and max(errors) < RADIUS_TOLERANCE, errors
         client.set_sim('obstacle_positions', [])
         client.spin_until(lambda: client.obstacles and len(client.obstacles[-1][1]) == 0,
                           TIMEOUT, 'empty obstacles', *nodes)
+        last = client.obstacles[-1][0]
+        client.spin_until(lambda: last in client.volumes, TIMEOUT, 'empty volumes', *nodes)
+        assert len(cylinders_from_markers(client.volumes[last])[0]) == 0
 
         # Goal out of view (below the table top): no goal published, a warning instead.
         client.set_sim('goal_position', [0.7, 0.2, -0.3])

@@ -34,8 +34,6 @@ STATUS = '/etdmp/controller/status'
 #: numba kernels compile, can be lost: see test_ros2_run_starts_every_node).
 READY = {'ur10_sim': 'UR10 workcell ready', 'perception': 'perception ready',
          'dmp_server': 'serving /generalize', 'controller': 'following '}
-#: Tau of the letter (s), as make demo writes it (scenario.py).
-DURATION = 4.0
 #: A plan's start and goal against the requested (or tool / perceived) points (m).
 PLAN_TOLERANCE = 1e-3
 #: The true tool tip against the plan while it is tracked (m): tracking error is ~0.1 mm.
@@ -222,10 +220,8 @@ def test_first_readme_example_writes_the_letter(launched):
         wait_for(lambda: subscriptions(ros2, COMMANDS) >= 3, 60, 'ros2 topic hz subscribed',
                  [hz])
         wait_for(lambda: 'idle' in echoes['status'].log(), 30, 'the idle controller')
-        # In the W's own 2 s (duration 0, the default) the elbow cannot follow: the controller
-        # stops it, "unreachable: tracking error 51 mm exceeds max_tracking_error 50 mm". The
-        # demo writes letters in 4 s; so does this test.
-        param(ros2, 'set', '/dmp_server', 'duration', f'{DURATION}')
+        # In the W's own 2 s (duration 0, the default), as a user runs it: issue 25's "tracking
+        # error 51 mm" stop was the controller missing steps on a loaded machine, not the W.
         result = ros2.run(examples[0], timeout=60)
         plan = ros2_cli.plan_positions(result.stdout)
         assert len(plan) > 100, result.stdout[-2000:]

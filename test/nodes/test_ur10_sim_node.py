@@ -18,7 +18,8 @@ from etdmp_ros.geometry.camera import CameraIntrinsics
 from etdmp_ros.robot import JOINT_NAMES, UR10Model
 from etdmp_ros.ros.background import BackgroundNode
 from etdmp_ros.ros.config_files import read_parameter_file
-from etdmp_ros.ros.conversions import image_from_msg, intrinsics_from_camera_info, stamp_to_ns
+from etdmp_ros.ros.conversions import (contacts_from_markers, image_from_msg,
+                                       intrinsics_from_camera_info, stamp_to_ns)
 from etdmp_ros.ros.paths import config_path
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
@@ -27,6 +28,7 @@ from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, Paramet
 from rcl_interfaces.srv import SetParameters
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import Marker, MarkerArray
 
 STARTUP = 40.0
 TOPICS = {
@@ -38,6 +40,7 @@ TOPICS = {
     '/ur10_sim/ground_truth/obstacles': PoseArray,
     '/ur10_sim/ground_truth/bottle': PointStamped,
     '/ur10_sim/ground_truth/tool_tip': PointStamped,
+    '/ur10_sim/ground_truth/contacts': MarkerArray,
 }
 
 
@@ -337,6 +340,47 @@ def test_commands_watchdog_and_runtime_parameters(launch):
     for bad in ([0.7, -0.28, 0.0], [0.7, float('nan')], 'home'):
         result = client.set_parameter('bottle.position', bad)
         assert not result.successful and 'bottle.position' in result.reason
+
+
+def test_contacts_are_published_while_the_arm_touches_an_obstacle(launch):
+    # An obstacle put where the pen is (ros2 param set): the simulation publishes the contacts
+    # at every tick while they last, logs the new pair, and says once when they are gone. The
+    # arm is not pushed (contacts are seen, not felt).
+    sim, client = launch({'camera_rate': 0.0})
+    topic = '/ur10_sim/ground_truth/contacts'
+    tip = client.received('/ur10_sim/ground_truth/tool_tip')[-1].point
+    _, q_before, _ = client.joint_state()
+    since = time.monotonic()
+    assert client.set_parameter('obstacle_radii', [0.02]).successful
+    assert client.set_parameter('obstacle_positions', [tip.x, tip.y, tip.z + 0.03]).successful
+
+    def touching(since):
+        return [m for m in client.received(topic, since) if contacts_from_markers(m)]
+    client.wait_for(lambda: len(touching(since)) >= 50, 10.0, 'contacts', sim)
+    msg = touching(since)[-1]
+    found = {(part, item) for part, item, _ in contacts_from_markers(msg)}
+    assert found == {('tool', 'obstacle_0'), ('tool_tip', 'obstacle_0')}, found
+    assert msg.markers[0].action == Marker.DELETEALL
+    assert {m.header.frame_id for m in msg.markers} == {'base_link'}
+    stamps = [stamp_to_ns(m.markers[0].header.stamp) for m in touching(since)]
+    assert np.all(np.diff(stamps) == 8_000_000), 'one message a tick (125 Hz) while touching'
+    client.wait_for(lambda: 'contact: tool touches obstacle_0' in sim.log(), 5.0,
+                    'the contact logged', sim)
+    _, q_after, _ = client.joint_state()
+    np.testing.assert_allclose(q_after, q_before, atol=1e-6)          # not pushed away
+    # Smaller, beside the pen: no contact; one empty message says so, then none.
+    moved = time.monotonic()
+    assert client.set_parameter('obstacle_radii', [0.01]).successful
+    assert client.set_parameter('obstacle_positions',
+                                [tip.x + 0.05, tip.y, tip.z + 0.03]).successful
+    client.wait_for(lambda: any(not contacts_from_markers(m)
+                                for m in client.received(topic, moved)), 5.0, 'no contact', sim)
+    time.sleep(0.3)
+    after = client.received(topic, moved)
+    assert len(after) - len([m for m in after if contacts_from_markers(m)]) == 1
+    for bad in ([-0.01], [0.02] * 9, [float('nan')]):
+        result = client.set_parameter('obstacle_radii', bad)
+        assert not result.successful and 'radii' in result.reason, bad
 
 
 def test_teaching_mode_leads_the_tool_and_ignores_commands(launch, tmp_path):

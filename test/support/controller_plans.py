@@ -2,7 +2,8 @@
 Reference plans and plants shared by the controller tests and benchmark (not a test module).
 
 - :func:`g_plan`: the ET-DMP plan of letter G on the task plane of config/scene.yaml, 0.02 m per
-  demo unit, over the demonstration's nominal duration (2 s), pen pointing down.
+  demo unit, over the demonstration's nominal duration (2 s), pen pointing down
+  (:func:`letter_plan`: another letter so).
 - :func:`stir_plan`: the 3D stirring skill generalized into the bottle of the scene.
 - :func:`run_kinematic`: a pure kinematic plant ``q += qd_cmd * T`` whose commands act one
   control period late (what a ros2_control velocity interface does).
@@ -39,7 +40,12 @@ def g_plan(dt=0.004, goal_uv=(0.0, 0.0), rotate_deg=90.0):
     The start is the demonstration's own start offset rotated by ``rotate_deg`` about the goal,
     so ET-DMP draws a rotated G (its point); duration: the demonstration's 2 s.
     """
-    demo = builtin_demo('G')
+    return letter_plan('G', dt, goal_uv, rotate_deg)
+
+
+def letter_plan(name, dt=0.004, goal_uv=(0.0, 0.0), rotate_deg=90.0):
+    """Return (PoseTrajectory, t, positions) of a built-in 2D skill as :func:`g_plan` does G."""
+    demo = builtin_demo(name)
     skill = learn(demo)
     a = np.radians(rotate_deg)
     rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])

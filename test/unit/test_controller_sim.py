@@ -9,14 +9,15 @@ joints (``UR10Sim.tool_tip_position`` is the site before the last physics step, 
 reference, which must itself be the plan at nominal speed.
 """
 
+from etdmp_ros.robot import _controller
 from etdmp_ros.robot import ControllerConfig, PoseTrajectory, TrajectoryController, UR10Model
 from etdmp_ros.ros.system import scene_config
 from etdmp_ros.sim import UR10Sim
 import numpy as np
 import pinocchio as pin
 import pytest
-from support.controller_plans import (g_plan, path_time_offset, Q_INITIAL, stir_plan,
-                                      TOOL_OFFSET, turning_plan)
+from support.controller_plans import (g_plan, letter_plan, path_time_offset, Q_INITIAL,
+                                      stir_plan, TOOL_OFFSET, turning_plan)
 
 
 @pytest.fixture(scope='module')
@@ -30,14 +31,26 @@ def sim():
         yield s
 
 
-def drive(sim, controller, q0, duration, ur10):
-    """Run the closed loop; return a dict of arrays (one row per control period)."""
+def drive(sim, controller, q0, duration, ur10, stall=None):
+    """
+    Run the closed loop; return a dict of arrays (one row per control period).
+
+    ``stall``: (s after tracking began, s) during which the controller does not step (its
+    process not scheduled): the simulation goes on with the last command (and its watchdog).
+    """
     sim.reset(q0)
     T = controller.period
     rows = {'t': [], 'q': [], 'qd': [], 'status': [], 'tool': [], 'ref': [], 'reason': []}
+    tracking = None
     for _ in range(int(round(duration / T))):
         q, t = sim.q, sim.time
+        if stall is not None and tracking is not None and \
+                tracking + stall[0] <= t < tracking + stall[0] + stall[1]:
+            sim.advance(T)
+            continue
         command = controller.step(q, t)
+        if command.status == 'tracking' and tracking is None:
+            tracking = t
         sim.set_velocity_command(command.qd)
         rows['t'].append(t)
         rows['q'].append(q)
@@ -181,6 +194,43 @@ def test_singularity_halt_in_mujoco(sim, ur10):
     assert np.max(np.abs(run['q'][:, 4])) < 0.9 and run['q'][-1, 4] < -0.05
     sim.advance(0.5)                                  # stays put after the halt
     np.testing.assert_allclose(sim.q, run['q'][-1], atol=2e-3)
+
+
+@pytest.mark.parametrize('resync', [True, False], ids=['resync', 'no-resync'])
+def test_a_stalled_controller_goes_on_where_the_arm_is(sim, ur10, monkeypatch, resync):
+    # Issue 25, "an unexplained stop": the letter W written in its own 2 s (0.45 m/s at its
+    # fastest), the controller not stepping for 0.25 s (its process not scheduled; joint states
+    # held back, as the reliable subscription did). The simulation goes on with the last
+    # command until its 0.1 s watchdog brakes. The path clock ran on the measurements' time, so
+    # the reference is 0.25 s ahead of an arm that coasted: without re-synchronising it the
+    # arm is stopped, "tracking error 94 mm exceeds max_tracking_error 50 mm"; with it, the path
+    # goes on from the pose nearest to the tool and the W is written to its end.
+    path = letter_plan('W', dt=0.01)[0]
+    if not resync:
+        monkeypatch.setattr(_controller, 'MISSED_STEPS', np.inf)
+    monkeypatch.setattr(sim, 'watchdog_timeout', 0.1)
+    controller = TrajectoryController(ur10, ControllerConfig(rate=125.0, actuation_delay=0.0))
+    assert controller.check(path, Q_INITIAL) == ''
+    controller.follow(path)
+    run = drive(sim, controller, Q_INITIAL, 10.0, ur10, stall=(1.0, 0.25))
+    tracked = run['status'] == 'tracking'
+    error = np.linalg.norm(run['ref'][tracked] - run['tool'][tracked], axis=1)
+    print(f'W stalled 0.25 s, resync {resync}: status {run["status"][-1]} '
+          f'{run["reason"][-1]!r}, max error while tracked {error.max() * 1e3:.1f} mm')
+    assert_within_limits(controller, run)
+    if not resync:
+        assert run['status'][-1] == 'unreachable'
+        assert 'exceeds max_tracking_error' in run['reason'][-1]
+        return
+    assert controller.resyncs == 1
+    assert controller.last_gap[1] == pytest.approx(0.256, abs=0.005)   # 0.25 s, whole periods
+    assert run['status'][-1] == 'idle' and not np.any(run['qd'][-1])
+    assert 'holding' in run['status']
+    assert error.max() < 0.03     # coasting 0.1 s straight on where the W turns
+    np.testing.assert_allclose(run['tool'][-1], path.positions[-1], atol=0.1e-3)
+    # Away from the stall the W is tracked as closely as without it.
+    after = run['t'][tracked] > run['t'][tracked][0] + 1.0 + 0.25 + 0.3
+    assert np.max(error[after]) < 0.5e-3
 
 
 def _shifted_remainder(path, t, positions, t_from, t_shift, shift):

@@ -2,9 +2,10 @@
 
 import math
 
-from etdmp_ros.demo.metrics import (compute_metrics, cylinder_gap, executed_plan,
-                                    fit_tracking_start, FOLLOW_CONFIRMATIONS, goal_seen_after_move,
-                                    Run, switch_index, switch_speeds, system_figures)
+from etdmp_ros.demo.metrics import (compute_metrics, contact_figures, cylinder_gap,
+                                    executed_plan, fit_tracking_start, FOLLOW_CONFIRMATIONS,
+                                    goal_seen_after_move, Run, switch_index, switch_speeds,
+                                    system_figures)
 from etdmp_ros.demo.scenario import Scenario
 from etdmp_ros.geometry.task_plane import quadrant
 from etdmp_ros.nodes import dmp_server
@@ -20,6 +21,27 @@ def test_cylinder_gap_is_the_distance_to_the_cylinder_surface():
     np.testing.assert_allclose(gap, [0.075, 0.1, -0.025, math.hypot(0.075, 0.1), -0.001],
                                atol=1e-12)
     assert cylinder_gap(points, np.zeros((0, 3)), 0.025)[0] == math.inf
+
+
+def test_cylinder_gap_takes_a_radius_per_obstacle():
+    tops = [[1.0, 0.0, 0.08], [0.5, 0.0, 0.08]]
+    gap = cylinder_gap([[1.1, 0.0, 0.0], [0.6, 0.0, 0.0]], tops, [0.025, 0.06])
+    np.testing.assert_allclose(gap, [0.075, 0.04], atol=1e-12)   # each to its nearest
+
+
+def test_contacts_are_counted_from_the_ground_truth():
+    # The simulation publishes its contacts at every tick while there are any, and once empty.
+    rec = {'contacts': [(0, []), (8, [('wrist_2_link', 'obstacle_1', 0.003)]),
+                        (16, [('wrist_2_link', 'obstacle_1', 0.004), ('tool', 'bottle', 0.001)]),
+                        (24, [])]}
+    figures = contact_figures(rec)
+    assert figures == {'contacts': 2, 'contact_pairs': ['tool/bottle', 'wrist_2_link/obstacle_1'],
+                       'contact_max_depth_mm': pytest.approx(4.0)}
+    assert contact_figures({'contacts': [(0, [])]}) == {
+        'contacts': 0, 'contact_pairs': [], 'contact_max_depth_mm': 0.0}
+    # Not recorded at all: unknown, not zero.
+    assert contact_figures({'contacts': []})['contacts'] is None
+    assert contact_figures({})['contacts'] is None
 
 
 def test_tracking_start_is_found_from_the_reference():

@@ -6,7 +6,7 @@ from etdmp_ros.dmp import (builtin_demo, Demonstration, learn, nrmse, ObstacleGa
                            unit_quaternions)
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.task_plane import TaskPlane
-from etdmp_ros.robot import UR10Model
+from etdmp_ros.robot import PEN_RADIUS, UR10Model
 from etdmp_ros.skills.planning import (FollowedPlan, place_demo, plan_path, PlanningError,
                                        PlanSettings, TOOL_DOWN, Workspace)
 import numpy as np
@@ -127,8 +127,9 @@ def test_obstacle_radii_are_metres_kept_clear_and_followed(g_skill):
     free = plan_path(g_skill, START, GOAL, plane=PLANE)
     tops = free.positions[[60, 120]] + [0.0, 0.0, 0.08]         # cylinder tops on the path
     centres = tops * [1, 1, 0]
-    radii = np.array([0.004, 0.006])                            # metres: pen + margin included
-    plan = plan_path(g_skill, START, GOAL, tops, plane=PLANE, obstacle_radii=radii)
+    radii = np.array([0.004, 0.006])                            # metres
+    exact = PlanSettings(tool_radius=0.0, obstacle_clearance=0.0)     # the radii are clearances
+    plan = plan_path(g_skill, START, GOAL, tops, exact, PLANE, obstacle_radii=radii)
     assert plan.avoidance == 'detour' and len(plan.t) == len(free.t)    # no obstacle_margin
     gaps = np.linalg.norm(plan.positions[:, None] - centres[None], axis=2).min(axis=0) - radii
     assert np.all(gaps >= 0.0) and np.all(gaps < 0.01 * np.ptp(free.positions, axis=0).max())
@@ -141,10 +142,11 @@ def test_obstacle_radii_are_metres_kept_clear_and_followed(g_skill):
     np.testing.assert_allclose(plan.positions, PLANE.from_plane(core.x), atol=1e-12)
     # The baseline on demand: the paper's points, its timing.
     paper = plan_path(g_skill, START, GOAL, tops, plane=PLANE, obstacle_radii=radii,
-                      settings=PlanSettings(avoidance='paper'))
+                      settings=PlanSettings(avoidance='paper', tool_radius=0.0,
+                                            obstacle_clearance=0.0))
     assert paper.t[-1] == pytest.approx(1.5 * g_skill.tau)
     # An obstacle moves onto the remaining path while the plan runs: kept clear, continuous.
-    followed = FollowedPlan(g_skill, plan, plane=PLANE)
+    followed = FollowedPlan(g_skill, plan, exact, PLANE)
     moved = tops.copy()
     moved[1] += [0.01, -0.01, 0.0]
     k = followed.update(0.5, obstacles=moved)
@@ -157,7 +159,7 @@ def test_obstacle_radii_are_metres_kept_clear_and_followed(g_skill):
     with pytest.raises(PlanningError, match='contains the plan'):
         followed.update(followed.t[k + 5], obstacles=[followed.positions[k + 6]],
                         obstacle_radii=[0.01])
-    with pytest.raises(PlanningError, match='2 obstacles need 2 radii'):
+    with pytest.raises(PlanningError, match='2 obstacles but 1 obstacle radii'):
         plan_path(g_skill, START, GOAL, tops, plane=PLANE, obstacle_radii=[0.01])
     with pytest.raises(PlanningError, match='finite and >= 0'):
         plan_path(g_skill, START, GOAL, tops, plane=PLANE, obstacle_radii=[0.01, -1.0])
@@ -166,6 +168,25 @@ def test_obstacle_radii_are_metres_kept_clear_and_followed(g_skill):
                   obstacle_radii=[0.04])
     with pytest.raises(ValueError, match='avoidance must be'):
         PlanSettings(avoidance='magic')
+
+
+def test_obstacle_radii_become_the_clearance_the_plan_keeps(g_skill):
+    # Issue 25: each obstacle's radius (as perceived) + the tool's + the safety margin, in
+    # metres, on the plan (what the core is given, in the skill's units).
+    obstacles = np.array([[0.78, 0.16, 0.08], [0.76, 0.2, 0.08]])
+    plain = plan_path(g_skill, START, GOAL, obstacles, plane=PLANE)
+    assert plain.obstacle_radii is None
+    settings = PlanSettings(tool_radius=0.01, obstacle_clearance=0.004)
+    sized = plan_path(g_skill, START, GOAL, obstacles, settings, PLANE,
+                      obstacle_radii=[0.025, 0.0])
+    np.testing.assert_allclose(sized.obstacle_radii, [0.039, 0.014])
+    assert PlanSettings().tool_radius == PEN_RADIUS    # the simulation's pen, by default
+    for radii, message in (([0.025], '2 obstacles but 1 obstacle radii'),
+                           ([0.025, -0.01], 'finite and >= 0'),
+                           ([0.025, math.nan], 'finite and >= 0'),
+                           ('big', 'must be numbers')):
+        with pytest.raises(PlanningError, match=message):
+            plan_path(g_skill, START, GOAL, obstacles, plane=PLANE, obstacle_radii=radii)
 
 
 @pytest.mark.parametrize('start, goal, obstacles, message', [
@@ -232,6 +253,8 @@ def test_workspace_criterion_matches_the_ur10_model():
     ({'orientation': (0, 0, 0, 0)}, 'non-zero quaternion'),
     ({'orientation': (0, 0, 1)}, '4 finite numbers'),
     ({'gains': ObstacleGains(gamma=-1.0)}, 'gamma must be finite and >= 0'),
+    ({'tool_radius': -0.001}, 'tool_radius must be >= 0'),
+    ({'obstacle_clearance': math.inf}, 'obstacle_clearance must be >= 0'),
 ])
 def test_settings_refuse_bad_values(kwargs, message):
     with pytest.raises(ValueError, match=message):

@@ -2,7 +2,7 @@
 The MuJoCo workcell without ROS.
 
 Kinematics against Pinocchio, velocity tracking, watchdog, command validation, scene objects,
-and the camera's geometry (pixels + depth -> base_link).
+contacts (seen, not felt), and the camera's geometry (pixels + depth -> base_link).
 """
 
 import os
@@ -10,6 +10,7 @@ import os
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
 from etdmp_ros.robot import SCENE_PARAMETERS, SceneConfig, UR10Model
+from etdmp_ros.robot._scene import OPTIONAL_SCENE_PARAMETERS
 
 from etdmp_ros.ros import system
 
@@ -219,7 +220,12 @@ def test_the_bottle_moves_with_its_collision_geometry_and_bad_values_are_refused
     np.testing.assert_allclose(sim.bottle_position, moved)
     geom = sim.model.geom('bottle').id
     np.testing.assert_allclose(sim.data.geom_xpos[geom][:2], moved, atol=1e-9)
-    assert sim.model.geom_contype[geom] or sim.model.geom_conaffinity[geom]
+    body = sim.model.geom_bodyid[geom]
+    # The mesh is drawn; the wall's boxes and the floor's disc, on the same body, collide.
+    assert not (sim.model.geom_contype[geom] or sim.model.geom_conaffinity[geom])
+    colliding = [g for g in range(sim.model.ngeom)
+                 if sim.model.geom_bodyid[g] == body and sim.model.geom_conaffinity[g]]
+    assert len(colliding) == 25
 
     def wall_hit(x, y):
         # A ray down onto the wall's top: the bottle's geometry is there, or it is not.
@@ -227,7 +233,7 @@ def test_the_bottle_moves_with_its_collision_geometry_and_bad_values_are_refused
         geomid = np.array([-1], dtype=np.int32)
         mujoco.mj_ray(sim.model, sim.data, point, np.array([0.0, 0.0, -1.0]), None, 1, -1,
                       geomid)
-        return int(geomid[0]) == geom
+        return int(geomid[0]) >= 0 and sim.model.geom_bodyid[geomid[0]] == body
 
     rim = sim.scene.bottle_radius - 0.002
     assert wall_hit(moved[0] + rim, moved[1])
@@ -241,6 +247,113 @@ def test_the_bottle_moves_with_its_collision_geometry_and_bad_values_are_refused
 
 
 # ------------------------------------------------------------------------------------- camera
+def _pose_with_tip(sim, target):
+    """Return joints putting the tool tip at ``target`` (base_link), pointing down."""
+    q0 = sim.scene.initial_joint_positions
+    rotation = sim.ur10.frame_pose(q0)[1]
+    q, error = sim.ur10.solve_pose(np.asarray(target, dtype=float), rotation, q0)
+    assert np.linalg.norm(error) < 1e-6
+    return q
+
+
+def _touching(sim):
+    """Return {(part, object): depth mm} of the simulation's contacts now."""
+    return {(c.part, c.item): round(c.depth * 1e3, 1) for c in sim.contacts}
+
+
+def test_contacts_are_seen_not_felt(sim):
+    # The robot in the workcell: nothing touches at the scene's start; a link through an
+    # obstacle is a contact, named by link and object, with its depth; the dynamics never see
+    # it (the arm moves through as it would without).
+    sim.reset()
+    assert sim.contacts == ()
+    tip = sim.tool_tip_position
+    q_start = sim.q
+    sim.set_obstacles([[tip[0], tip[1], 0.08]], [0.02])    # under the pen, 8 cm tall
+    assert sim.contacts == ()                           # ... until the next step sees it
+    assert _touching(sim) == {} and sim.detect_contacts() != ()
+    sim.set_joint_positions(q_start)
+    touching = _touching(sim)
+    assert set(touching) == {('tool_tip', 'obstacle_0')}, touching
+    assert touching[('tool_tip', 'obstacle_0')] == pytest.approx(3.3, abs=0.1)
+    # A link: an obstacle (8 cm tall, its top at 0.3 m) under the first wrist joint, 0.33 m
+    # up, whose housing belongs to the forearm's mesh.
+    wrist = sim.data.xpos[sim.model.body('wrist_1_link').id]
+    sim.set_obstacles([[wrist[0], wrist[1], 0.30]], [0.02])
+    sim.set_joint_positions(q_start)
+    assert set(_touching(sim)) == {('forearm_link', 'obstacle_0')}, _touching(sim)
+    # Felt? No: the same velocity command moves the arm the same with and without it.
+    sim.reset(q_start)
+    sim.set_obstacles([[wrist[0], wrist[1], 0.30]], [0.02])
+    with UR10Sim(sim.scene) as free:
+        free.set_obstacles([])
+        for s in (sim, free):
+            s.set_velocity_command([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])
+            s.advance(0.2)
+        np.testing.assert_allclose(sim.q, free.q, atol=1e-12)
+    assert sim.contacts and not free.contacts
+    sim.reset()
+
+
+def test_the_pen_writes_on_the_table_without_contact_but_presses_through_with_one(sim):
+    sim.reset()
+    sim.set_obstacles([])
+    at = [0.75, 0.15, 0.0]                                  # on the whiteboard, z = 0
+    sim.set_joint_positions(_pose_with_tip(sim, at))
+    assert _touching(sim) == {}
+    sim.set_joint_positions(_pose_with_tip(sim, [0.75, 0.15, -0.0015]))   # 1.5 mm in: writing
+    assert _touching(sim) == {}
+    sim.set_joint_positions(_pose_with_tip(sim, [0.75, 0.15, -0.004]))    # pressed in
+    assert _touching(sim) == {('tool_tip', 'table'): 4.0}
+    sim.set_joint_positions(_pose_with_tip(sim, [0.75, 0.15, -0.03]))     # the pen's body too
+    assert set(_touching(sim)) >= {('tool_tip', 'table'), ('tool', 'whiteboard')}
+    sim.reset()
+
+
+def test_the_stirrer_in_the_open_bottle_touches_only_its_wall_or_floor(sim):
+    # The bottle is open: a stirrer in it touches nothing (MuJoCo's convex hull of the mesh
+    # would fill it); against its wall or on its floor it does.
+    sim.reset()
+    mouth = sim.bottle_mouth
+    radius = sim.scene.bottle_radius
+    inside = mouth + [0.0, 0.0, -0.15]                      # 5 cm above the floor (1 cm thick)
+    sim.set_joint_positions(_pose_with_tip(sim, inside))
+    assert _touching(sim) == {}
+    near_wall = inside + [radius - 0.004 - 0.009 - 0.001, 0.0, 0.0]   # 1 mm from the wall
+    sim.set_joint_positions(_pose_with_tip(sim, near_wall))
+    assert _touching(sim) == {}
+    sim.set_joint_positions(_pose_with_tip(sim, near_wall + [0.003, 0.0, 0.0]))
+    assert set(_touching(sim)) == {('tool', 'bottle')}
+    # 2 mm into the floor: the 16 cm stirrer is too short for the 20 cm bottle, so the wrist
+    # hits its mouth too.
+    sim.set_joint_positions(_pose_with_tip(sim, [*mouth[:2], 0.008]))
+    touching = _touching(sim)
+    assert touching[('tool_tip', 'bottle')] == 2.0
+    assert {'wrist_2_link', 'wrist_3_link'} <= {part for part, _ in touching}, touching
+    sim.reset()
+
+
+def test_obstacle_radii_size_the_cylinders_the_camera_sees_and_the_arm_touches(sim):
+    sim.reset()
+    tip = sim.tool_tip_position                             # 77 mm above the table
+    beside = [tip[0] + 0.05, tip[1], 0.10]                  # axis 50 mm from the pen's
+    sim.set_obstacles([beside, [0.5, -0.2, 0.08]], [0.03])
+    np.testing.assert_allclose(sim.obstacle_radii, [0.03, sim.scene.obstacle_radius])
+    assert sim.detect_contacts() == ()
+    sim.set_obstacle_radii([0.045])                         # 45 mm reaches the pen (9 mm)
+    np.testing.assert_allclose(sim.obstacle_radii, [0.045, sim.scene.obstacle_radius])
+    sim.set_joint_positions(sim.q)
+    assert set(_touching(sim)) == {('tool', 'obstacle_0')}
+    state = sim.camera_state()
+    np.testing.assert_allclose(state.obstacle_radii[:2], [0.045, sim.scene.obstacle_radius])
+    for bad in ([0.0], [-0.01], [float('nan')], 'big'):
+        with pytest.raises(ValueError):
+            sim.set_obstacle_radii(bad)
+    np.testing.assert_allclose(sim.obstacle_radii, [0.045, sim.scene.obstacle_radius])
+    sim.set_obstacles(sim.scene.obstacle_positions, [])
+    sim.reset()
+
+
 def test_intrinsics_are_a_d435_colour_camera(sim):
     k = sim.intrinsics
     assert (k.width, k.height) == (640, 480)
@@ -370,7 +483,7 @@ def test_quaternion_conversions_round_trip():
 # ------------------------------------------------------------------------------------- scene
 def test_scene_file_has_every_parameter_and_camera_pose_is_shared():
     params = read_parameter_file(_scene_path())
-    assert set(SCENE_PARAMETERS) <= set(params)
+    assert set(SCENE_PARAMETERS) - set(OPTIONAL_SCENE_PARAMETERS) <= set(params)
     scene = system.scene_config()
     assert np.allclose(scene.camera_pose.position, params['camera.position'])
 
@@ -379,6 +492,7 @@ def test_scene_parameters_are_validated():
     params = read_parameter_file(_scene_path())
     SceneConfig.from_parameters(params)
     for name, bad in (('goal_position', [0.1, 0.2]), ('obstacle_positions', [0.1, 0.2]),
+                      ('obstacle_radii', [0.02, -0.01]), ('obstacle_radii', [float('inf')]),
                       ('camera.orientation', [0, 0, 0, 0]), ('bottle.radius', -0.1),
                       ('table.color', [2.0, 0, 0]), ('tool_offset', [0, 0, float('nan')])):
         with pytest.raises(ValueError, match=name.split('.')[0]):

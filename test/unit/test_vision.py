@@ -2,11 +2,13 @@
 The ROS-free vision (etdmp_ros.robot.Detector) on frames rendered by the simulation in-process.
 
 Ground truth is the simulation's: the centre of the goal marker's and of each obstacle's top
-face (UR10Sim.goal_position / obstacle_positions). The detector is the one the perception node
-builds, from config/scene.yaml and config/perception.yaml. Placements are random (fixed seed)
-and kept only when every object is fully in view: an oracle compares the rendered depth with
-the known geometry at points of each object's top face and camera-facing side, and projected
-objects do not overlap in the image (overlaps and occlusions have their own tests).
+face (UR10Sim.goal_position / obstacle_positions) and each obstacle's radius
+(UR10Sim.obstacle_radii, set per test with ``set_obstacle_radii``). The detector is the one the
+perception node builds, from config/scene.yaml and config/perception.yaml. Placements are
+random (fixed seed) and kept only when every object is fully in view: an oracle compares the
+rendered depth with the known geometry at points of each object's top face and camera-facing
+side, and projected objects do not overlap in the image (overlaps and occlusions have their own
+tests).
 """
 
 import dataclasses
@@ -26,6 +28,7 @@ import numpy as np
 import pytest
 
 TOLERANCE = 0.005                                  # m: the issue's acceptance bound
+RADIUS_TOLERANCE = 0.001                           # m: a measured radius against the truth
 # Arm turned away from the table (shoulder pan 180 deg): nothing but the scene's bottle can
 # hide an object; the occlusion tests use the scene's initial arm pose, which stands above the
 # whiteboard.
@@ -45,6 +48,13 @@ def sim():
     """Return one simulation for the module (building it and its GL context takes ~1 s)."""
     with UR10Sim(scene_config()) as simulation:
         yield simulation
+
+
+@pytest.fixture
+def sized(sim):
+    """Return the module's simulation, its obstacles given the scene's radius again after."""
+    yield sim
+    sim.set_obstacle_radii([])
 
 
 @pytest.fixture(scope='module')
@@ -163,8 +173,93 @@ def test_random_placements_within_5mm(sim, detector):
     assert len(obstacle_errors) >= 24
     assert goal_errors.max() < TOLERANCE, goal_errors
     assert obstacle_errors.max() < TOLERANCE, obstacle_errors
-    # Typical errors are a fraction of a millimetre (outline pixels lie inside the true rim).
+    # Typical errors are a fraction of a millimetre.
     assert np.median(goal_errors) < 0.0015 and np.median(obstacle_errors) < 0.0015
+
+
+@pytest.mark.parametrize('radii', [(0.012, 0.025, 0.04), (0.06, 0.08), (0.02, 0.05, 0.03)])
+def test_obstacle_radii_are_measured_within_1_mm(sized, detector, radii):
+    """Obstacles of 12 to 80 mm radius: each one's radius from its rim, within 1 mm."""
+    sim = sized
+    sim.set_obstacle_radii(radii)
+    rng = np.random.default_rng(int(radii[0] * 1000))
+    radius_errors, centre_errors = [], []
+    made = tries = 0
+    while made < 6:
+        tries += 1
+        assert tries < 400, 'cannot find placements in view'
+        tops = np.array([[rng.uniform(*AREA_X), rng.uniform(*AREA_Y), 0.08] for _ in radii])
+        boxes = [image_box(sim, t, r, 0.08) for t, r in zip(tops, radii)]
+        if not boxes_apart(boxes) or min(np.linalg.norm(t[:2] - (0.7, -0.3)) for t in tops) \
+                < 0.15:                          # the scene's bottle stands there
+            continue
+        rgb, depth = place(sim, (2.0, 2.0, -1.0), tops)
+        if any(visible_fraction(sim, depth, t, r, 0.08) < 1.0 for t, r in zip(tops, radii)):
+            continue
+        made += 1
+        found = detector.detect(rgb, depth, sim.intrinsics)
+        assert len(found.obstacles) == len(radii), found.rejected
+        for det in found.obstacles:
+            i = int(np.argmin(np.linalg.norm(tops - det.position, axis=1)))
+            assert det.radius_measured
+            radius_errors.append(det.radius - radii[i])
+            centre_errors.append(np.linalg.norm(det.position - tops[i]))
+        np.testing.assert_allclose(found.obstacle_radii(),
+                                   [d.radius for d in found.obstacles])
+    radius_errors, centre_errors = np.abs(radius_errors), np.array(centre_errors)
+    print(f'radii {radii}: radius error median {np.median(radius_errors) * 1e3:.2f} mm, max '
+          f'{radius_errors.max() * 1e3:.2f} mm; centre median {np.median(centre_errors) * 1e3:.2f}'
+          f' mm, max {centre_errors.max() * 1e3:.2f} mm')
+    assert radius_errors.max() < RADIUS_TOLERANCE, radius_errors
+    assert np.median(radius_errors) < 0.5e-3
+    assert centre_errors.max() < 0.002 and np.median(centre_errors) < 0.001
+
+
+def test_radii_of_obstacles_partly_hidden_by_the_arm(sized, detector):
+    """
+    An obstacle behind the arm: radius measured within 1 mm from half its rim or more.
+
+    Swept over the places where the arm (start pose) hides 15 to 90 % of it, radius 25 and
+    40 mm: a radius is reported as measured only when it is within 1 mm; with less of the rim
+    seen, the scene's obstacle.radius is reported, and said so.
+    """
+    sim = sized
+    q = sim.scene.initial_joint_positions
+    counts = {True: 0, False: 0}
+    for radius in (0.025, 0.04):
+        sim.set_obstacle_radii([radius])
+        for x in np.arange(0.30, 0.62, 0.04):
+            for y in np.arange(-0.05, 0.40, 0.04):
+                top = np.array([x, y, 0.08])
+                rgb, depth = place(sim, (2.0, 2.0, -1.0), [top], q)
+                if not 0.15 <= visible_fraction(sim, depth, top, radius, 0.08) <= 0.9:
+                    continue
+                for det in detector.detect(rgb, depth, sim.intrinsics).obstacles:
+                    counts[det.radius_measured] += 1
+                    if det.radius_measured:
+                        assert abs(det.radius - radius) < RADIUS_TOLERANCE, (top, det.radius)
+                    else:
+                        assert det.radius == detector.obstacle.radius
+    print(f'partly hidden: {counts[True]} radii measured, {counts[False]} not')
+    assert counts[True] >= 10 and counts[False] >= 10, counts
+
+
+def test_an_obstacle_outside_the_radius_range_is_not_reported(sized, detector):
+    """A cylinder of 60 mm radius is no obstacle of radius 5 to 50 mm: refused, saying why."""
+    sim = sized
+    narrow = Detector(detector.goal, dataclasses.replace(detector.obstacle,
+                                                         radius_range=(0.005, 0.05)),
+                      detector.camera_pose, detector.table, detector.settings)
+    sim.set_obstacle_radii([0.06, 0.045])
+    tops = [[0.95, -0.1, 0.08], [0.9, 0.25, 0.08]]
+    rgb, depth = place(sim, (2.0, 2.0, -1.0), tops)
+    found = narrow.detect(rgb, depth, sim.intrinsics)
+    assert len(found.obstacles) == 1
+    assert np.linalg.norm(found.obstacles[0].position - tops[1]) < 0.002
+    assert abs(found.obstacles[0].radius - 0.045) < RADIUS_TOLERANCE
+    reasons = [r.reason for r in found.rejected if r.kind == 'obstacle']
+    assert len(reasons) == 1 and re.search(r'its radius measures 59\.\d mm, outside the range '
+                                           r'of an obstacle \(5 to 50 mm\)', reasons[0]), reasons
 
 
 def test_default_scene_with_the_arm_in_view(sim, detector):

@@ -14,5 +14,7 @@ from ._image import (camera_image_from_msg, camera_info_msg, ENCODINGS,  # noqa:
                      image_from_cdr, image_from_msg, image_msg, intrinsics_from_camera_info)
 from ._joint_state import (joint_state_arrays, joint_state_from_cdr,  # noqa: F401
                            joint_state_msg, velocity_command_array, velocity_command_msg)
+from ._markers import (contact_markers, contacts_from_markers,  # noqa: F401
+                       cylinder_markers, cylinders_from_markers)
 from ._path_cdr import path_from_cdr  # noqa: F401
 from ._tf import MovingTransforms, tf_available, tf_message  # noqa: F401
