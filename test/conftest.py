@@ -45,7 +45,7 @@ SUITES = {
               'test_bringup_and_launch', 'test_controller_node', 'test_dmp_server_node',
               'test_install_layout', 'test_namespaces', 'test_perception_node',
               'test_ros2_cli', 'test_ur10_sim_node', 'test_ur10_sim_tf'),
-    'system': ('test_end_to_end', 'test_kinesthetic', 'test_teach_page'),
+    'system': ('test_end_to_end', 'test_kinesthetic', 'test_teach_page', 'test_two_hosts'),
 }
 _SUITE_OF = {module: suite for suite, modules in SUITES.items() for module in modules}
 
