@@ -423,9 +423,9 @@ def link_down_mid_letter(hosts, seconds=0.5, at=0.4, timeout=30.0):
         down, up = hosts.cut(seconds)
         progress(f'the link was down for {up - down:.3f} s at {at:.0%} of the letter')
 
-        def settled():
+        def settled():      # not moving any more, whatever the reason
             words = [text.split(':')[0] for _, text in recorder.state(n_status)]
-            return bool(words) and words[-1] in ('idle', 'stale-input')
+            return bool(words) and words[-1] in ('idle', *demo.STATUS_FAILURES)
         _wait(settled, timeout, 'the controller to stop tracking', nodes)
         # The recorder's simulated time (the pen tip's stamps, from the robot's side) runs
         # again: the demo's plans are timed by it.
@@ -631,6 +631,8 @@ def main(argv=None):
     p = sub.add_parser('call', help='time /generalize calls')
     p.add_argument('--calls', type=int, default=20)
     args = parser.parse_args(argv)
+    if args.what == 'run' and args.cut and not args.names:
+        parser.error('--cut needs two hosts (--names)')
     os.environ.setdefault('MUJOCO_GL', 'egl')
     if args.what == 'observe':
         return observe(args.path) or 0
