@@ -107,13 +107,14 @@ def test_link_down_brakes_the_arm_within_the_watchdog(link_down):
     link = link_down['link']
     assert link['observed'] and CUT <= link['link_down_s'] < CUT + 0.2, link
     assert link['speed_at_cut'] > 0.05, link              # the pen was writing
-    assert link['last_command_after_s'] <= 1.0 / RATE, link
-    # Robot time, from the last joint state before the cut (the cut came within one control
-    # period after it): the zero command in force at the watchdog's timeout...
-    assert link['braked_after_s'] <= WATCHDOG + 1.0 / RATE, link
+    # Robot time, from the last command that reached the simulation (its log): the zero
+    # command in force at the watchdog's timeout, to a physics step (2 ms) ...
     assert link['watchdog_braked'], link
-    # ... the arm at rest while the link was down (joint speeds below 1e-3 rad/s).
-    assert link['zero_velocity_after_s'] is not None and link['stayed_stopped'], link
+    assert WATCHDOG < link['braked_after_last_command_s'] <= WATCHDOG + 0.002 + 1e-6, link
+    # ... the arm at rest soon after (every joint below 1e-3 rad/s: the speed servos take
+    # milliseconds), and so while the link was down.
+    assert link['zero_velocity_after_last_command_s'] < WATCHDOG + 0.05, link
+    assert link['stayed_stopped'], link
     assert link['robot_time_down_s'] >= CUT - 0.1, link   # the simulation ran on meanwhile
 
 

@@ -36,6 +36,7 @@ import itertools
 import json
 import os
 from pathlib import Path
+import re
 import shutil
 import signal
 import subprocess
@@ -321,13 +322,40 @@ def stop_figures(observed, down, up):
     braked = next((stamp for stamp, speed in during
                    if at_cut and speed is not None and speed < 0.5 * at_cut), None)
     after = [speed for stamp, speed in during if stopped is not None and stamp >= stopped]
-    return {'observed': True,
+    return {'observed': True, 'cut_stamp_ns': cut,
             'speed_at_cut': at_cut,
             'last_command_after_s': None if last is None else (last - cut) * 1e-9,
             'braked_after_s': None if braked is None else (braked - cut) * 1e-9,
             'zero_velocity_after_s': None if stopped is None else (stopped - cut) * 1e-9,
             'stayed_stopped': bool(after) and max(after) < STOPPED,
             'robot_time_down_s': (during[-1][0] - cut) * 1e-9 if during else 0.0}
+
+
+#: ur10_sim's warning when its command watchdog brakes (etdmp_ros.nodes.ur10_sim).
+_BRAKED = re.compile(r'no velocity command for [\d.]+ s: braking to zero until the next one '
+                     r'\(the last at t = ([\d.]+) s, braked at t = ([\d.]+) s\)')
+
+
+def watchdog_figures(sim_log, observed, cut_ns):
+    """
+    Return when the simulation braked after the cut, in its own time (its log's figures).
+
+    The first brake of ``sim_log`` at or after the cut (``cut_ns``, stamp): ``last_command_s``,
+    ``braked_after_last_command_s`` (the watchdog: its timeout, to a physics step) and
+    ``zero_velocity_after_last_command_s`` (every joint speed in ``observed`` below
+    :data:`STOPPED`, from the joint states' stamps). Empty if it did not brake.
+    """
+    for last, braked in _BRAKED.findall(sim_log):
+        last, braked = float(last), float(braked)
+        if braked * 1e9 >= cut_ns:
+            break
+    else:
+        return {}
+    rest = next((stamp for _, stamp, speed in observed['states']
+                 if stamp >= braked * 1e9 and speed is not None and speed < STOPPED), None)
+    return {'last_command_s': last, 'braked_after_last_command_s': braked - last,
+            'zero_velocity_after_last_command_s': None if rest is None
+            else rest * 1e-9 - last}
 
 
 def first_command_after(observed, wall):
@@ -419,7 +447,7 @@ def link_down_mid_letter(hosts, seconds=0.5, at=0.4, timeout=30.0):
         _wait(lambda: tracking_since() is not None, timeout, 'tracking', nodes)
         cut_ns = tracking_since() + int(at * tau * 1e9)
         _wait(lambda: recorder.sim_ns >= cut_ns, timeout, f'{at:g} of the letter', nodes)
-        n_status = len(recorder.state())
+        n_status, sim_log = len(recorder.state()), len(nodes.log('ur10_sim'))
         down, up = hosts.cut(seconds)
         progress(f'the link was down for {up - down:.3f} s at {at:.0%} of the letter')
 
@@ -449,7 +477,7 @@ def link_down_mid_letter(hosts, seconds=0.5, at=0.4, timeout=30.0):
                 'link_down_s': up - down, 'planned_again_after_s': planned - up,
                 'taught_plan_poses': len(plan_t),
                 'down': down, 'up': up, 'requested_again': time.monotonic(),
-                'watchdog_braked': 'braking to zero' in nodes.log('ur10_sim'),
+                'watchdog_braked': 'braking to zero' in nodes.log('ur10_sim')[sim_log:],
                 'node_pids': {n: p.pid for n, p in nodes.processes.items()}}
     return before_plans
 
@@ -596,6 +624,11 @@ def run(args):
         observed = json.loads(observed_path.read_text())
         link = dict(m['before_plans'])
         link.update(stop_figures(observed, link['down'], link['up']))
+        if link.get('cut_stamp_ns') is not None:
+            # The observer hears the joint states a little late on a busy machine, so its
+            # cut is a little early: the simulation's own times are exact.
+            link.update(watchdog_figures((out / 'logs' / 'ur10_sim.log').read_text(), observed,
+                                         link['cut_stamp_ns'] - int(0.05e9)))
         moving = first_command_after(observed, link['requested_again'])
         link['moving_again_after_s'] = None if moving is None else moving - link['up']
         result['link'] = link
