@@ -12,8 +12,11 @@ The middleware is limited to UDP, as between two real machines: the package's Fa
 without its shared-memory transport (:func:`udp_only_profile`; the UDP transport as the package
 configures it). The namespaces share ``/dev/shm``, and on one machine nothing else would keep
 the two sides from meeting there (docs/two_hosts.md). Discovery is docs/two_hosts.md's recipe for
-a network without multicast: ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (the nodes of one host
-find each other on its loopback) and ``ROS_STATIC_PEERS`` naming the other host's address.
+a network that does not carry multicast: ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET`` (the default;
+multicast is routed to each namespace's loopback only, so the nodes of one host find each other
+by it) and ``ROS_STATIC_PEERS`` naming the other host's address. Not ``LOCALHOST``: with it,
+rmw_fastrtps (Jazzy) adds a shared-memory and a UDP transport of its own to every participant,
+whatever the profile says.
 
 The demo runs as a user runs it on the workstation, in a process of its own there (``python
 test/two_hosts.py run ...``, :func:`run`): the demo's machinery (:func:`etdmp_ros.demo.run_demo`,
@@ -140,7 +143,10 @@ class TwoHosts:
         for name in (robot, work):
             _ip('netns', 'add', name)
             self._made.append(name)
-            _ip('-n', name, 'link', 'set', 'lo', 'up')
+            # Multicast stays on the host (a network that does not carry it): the nodes of
+            # one host find each other by it, the other host only as a static peer.
+            _ip('-n', name, 'link', 'set', 'lo', 'up', 'multicast', 'on')
+            _ip('-n', name, 'route', 'add', '224.0.0.0/4', 'dev', 'lo')
         _ip('-n', robot, 'link', 'add', INTERFACES[ROBOT], 'type', 'veth', 'peer', 'name',
             INTERFACES[WORKSTATION], 'netns', work)
         for host in HOST_NAMES:
@@ -175,7 +181,7 @@ class TwoHosts:
     def environment(self, host):
         """Return the variables of a process on ``host``: discovery and the Fast DDS profile."""
         other = WORKSTATION if host == ROBOT else ROBOT
-        return {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        return {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET',
                 'ROS_STATIC_PEERS': ADDRESSES[other],
                 'FASTRTPS_DEFAULT_PROFILES_FILE': str(self.profile)}
 
