@@ -193,7 +193,8 @@ class InputWatch:
         if previous is None or (stamp_ns - previous) * 1e-9 <= self.timeout:
             return ''
         clock = 'simulated' if simulated else 'wall-clock'
-        return f'none for {(stamp_ns - previous) * 1e-9:.3f} s of {clock} time'
+        return (f'none for {(stamp_ns - previous) * 1e-9:.3f} s of {clock} time: those '
+                'between the last two never came')
 
     def lost(self, robot_ns, wall_ns, simulated):
         """Return why the joint states count as lost at these times ('' if they do not)."""

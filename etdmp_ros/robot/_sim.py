@@ -412,7 +412,7 @@ class UR10Sim:
 
     @property
     def command_time(self):
-        """Simulated time (s) of the last accepted velocity command (-inf: none yet)."""
+        """Return the simulated time (s) of the last accepted velocity command (-inf: none)."""
         return self._command_time
 
     def _check_watchdog(self):
