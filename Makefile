@@ -14,7 +14,7 @@ LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 ROS_TOOLS   ?= ../shared/ros
 ROS_STAMP   := $(VENV)/.ros-tools
 
-.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs docs-site config bench clean distclean help
+.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs docs-site config bench bench-two-hosts clean distclean help
 .DEFAULT_GOAL := help
 
 help:
@@ -30,6 +30,7 @@ help:
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
 	@echo "                one of them: make bench-core|bench-obstacles|bench-obstacle_volumes|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
+	@echo "make bench-two-hosts  the system across two network namespaces (root): rates, latency, link cut"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
 	@echo "make browser    headless Chromium + chromedriver for the teaching page's test (apt, as root; make test does it)"
@@ -152,6 +153,11 @@ bench-kinesthetic: $(STAMP)
 # The closed loop as `make demo` runs it, idle and next to a busy core (needs no peer library).
 bench-system: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_system.py $(BENCH_ARGS)
+
+# Two hosts on one machine (network namespaces, as root; docs/two_hosts.md): G across a UDP link
+# against one host, and the link cut mid-letter (needs no peer library; not in `make bench`).
+bench-two-hosts: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_two_hosts.py $(BENCH_ARGS)
 
 # make bench-core, bench-obstacles, bench-sim, bench-dmp_server, bench-controller, bench-perception
 bench-%: $(BENCH_STAMP)

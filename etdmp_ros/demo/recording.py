@@ -68,6 +68,8 @@ NOT_RECORDED = {
     '/etdmp/detections/image': 'a view of the recorded camera images that perception draws '
                                'only while someone subscribes (recording it costs the drawing)',
 }
+#: Why the images are not in a recording made without them (``Recorder(images=False)``).
+IMAGES_LEFT_OUT = 'camera images left out of this recording (no pictures)'
 #: The streams :func:`read_streams` returns for the metrics.
 MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC, PATH_TOPIC,
                    GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC, ROSOUT_TOPIC, JOINTS_TOPIC,
@@ -106,11 +108,18 @@ class Recorder(BackgroundNode):
     ``keep_frames_after`` is kept at half size in ``frames``.
     """
 
-    def __init__(self, domain_id, animation=True):
-        """Create the node, subscriptions and clients; start spinning."""
+    def __init__(self, domain_id, animation=True, images=True):
+        """
+        Create the node, subscriptions and clients; start spinning.
+
+        ``images`` False: the camera images are neither recorded nor kept (no pictures): a
+        recorder on another computer than the camera then does not double the images' traffic
+        (docs/two_hosts.md).
+        """
         super().__init__('etdmp_demo', domain_id)
         self.lock = threading.Lock()
         self.animation = animation
+        self.images = images
         self.sim_ns = 0
         self.streams = {}             # topic -> Stream
         self.unrecorded = {}          # topic -> why not
@@ -157,6 +166,8 @@ class Recorder(BackgroundNode):
                 ('/camera/camera/color/camera_info', CameraInfo, 10, self._on_camera_info),
                 (COLOR_TOPIC, Image, IMAGES, self._on_color),
                 (DEPTH_TOPIC, Image, IMAGES, self._on_depth)):
+            if msg_type is Image and not self.images:
+                continue
             self._record(topic, msg_type, qos, handler)
 
     def _record(self, topic, msg_type, qos, handler=None):
@@ -184,6 +195,9 @@ class Recorder(BackgroundNode):
                 continue            # known, hidden, or a service's event topic
             if topic in NOT_RECORDED:
                 self.unrecorded[topic] = NOT_RECORDED[topic]
+                continue
+            if not self.images and types[0] == IMAGE_TYPE:
+                self.unrecorded[topic] = IMAGES_LEFT_OUT
                 continue
             publishers = [p for p in self.node.get_publishers_info_by_topic(topic)
                           if (p.node_name, p.node_namespace) != me]

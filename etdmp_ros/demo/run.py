@@ -82,6 +82,8 @@ class Options:
     method: str = 'etdmp'
     out: Path = Path('out/demo')
     animation: bool = True
+    #: False: no camera images are recorded and no pictures drawn (only plot.png).
+    pictures: bool = True
     layout: str = 'skill'
     timeout: float = 60.0
     #: Folder of the parameter files (None: the package's config folder).
@@ -96,6 +98,10 @@ class Options:
     move_goal: bool = False
     #: A taught stir (.mcap of /joint_states) instead of the built-in one (scenario.Scenario).
     demo_file: Path = None
+    #: ``before_plans(recorder, nodes, scenario, progress)``: called once the system is up,
+    #: before the demo's plans (e.g. a fault during an earlier motion: test/two_hosts.py);
+    #: what it returns is ``metrics['before_plans']``.
+    before_plans: object = None
 
 
 @dataclass
@@ -118,6 +124,8 @@ class _Live:
     failure: str = None
     #: (sim ns, marker before, marker after) of the goal move (``--move-goal``).
     goal_move: tuple = None
+    #: What :attr:`Options.before_plans` returned.
+    before_plans: object = None
 
 
 class _Progress:
@@ -279,6 +287,8 @@ def _follow_the_controller(recorder, nodes, live, timeout, progress, move=None, 
 
 
 def _last_frame(recorder, live):
+    if not recorder.images:
+        return
     recorder.request_snapshot('end', live.end_ns + int(0.2e9))
     deadline = time.monotonic() + 5.0
     while 'end' not in recorder.snapshots and time.monotonic() < deadline:
@@ -292,6 +302,8 @@ def _drive(options, scenario, recorder, nodes, live, progress):
     other = 'dmp' if options.method == 'etdmp' else 'etdmp'
     move = scenario.goal_move if options.move_goal else None   # ScenarioError if it cannot
     _wait_for_the_system(recorder, nodes, scenario, live, progress)
+    if options.before_plans is not None:
+        live.before_plans = options.before_plans(recorder, nodes, scenario, progress)
     _plan_for_comparison(recorder, nodes, scenario, other, live, progress)
     _plan_and_execute(recorder, nodes, scenario, options.method, live, progress)
     tau = float(scenario.server['duration']) or float(scenario.demo.duration)
@@ -327,6 +339,8 @@ def _add_system_figures(metrics, live, codes, monitor, rec, nodes):
     metrics['node_exit_codes'] = codes
     metrics['perceived_goal_stamp_age_s'] = live.goal_stamp_lag
     metrics['controller_failure'] = live.failure
+    if live.before_plans is not None:
+        metrics['before_plans'] = live.before_plans
     metrics['system'] = system_figures(monitor, rec, live.call_ns, live.end_ns, nodes)
     # The controller's own tracking error (reference minus its forward kinematics), from the
     # summary it logs at the end of the path.
@@ -353,13 +367,14 @@ def _keep_recording_of_failed_run(path, recorder, progress):
 
 
 def _write_outputs(out, run, metrics, extra, recorder, rec, options):
-    """Write the pictures and the recording; return the paths written (metrics.json apart)."""
+    """Write the plot, the pictures, the recording; return the paths written (not metrics.json)."""
     intrinsics = recorder.camera_info or CameraIntrinsics.from_fovy(640, 480, 42.5)
     written = [out / 'plot.png']
     plot_run(written[0], run, metrics, extra)
-    snapshots = {name: recorder.snapshot(name) for name in ('start', 'middle', 'end')}
-    written += write_pictures(out, run, rec, snapshots, recorder.frames, intrinsics,
-                              options.animation, t0=extra['t0'])
+    if options.pictures:
+        snapshots = {name: recorder.snapshot(name) for name in ('start', 'middle', 'end')}
+        written += write_pictures(out, run, rec, snapshots, recorder.frames, intrinsics,
+                                  options.animation, t0=extra['t0'])
     save_recording(out / 'recording.npz', rec, run.plan, run.other, extra['t0'],
                    extra['executed'] if run.goal_move is not None else None)
     return written
@@ -389,7 +404,8 @@ def _run_demo(options, env):
                         perceived_bottle=options.move_goal and options.skill == 'stir')
     progress(f'starting ur10_sim, perception, dmp_server and controller (ROS_DOMAIN_ID '
              f'{env["ROS_DOMAIN_ID"]}, localhost only; logs in {out / "logs"})')
-    recorder = Recorder(env['ROS_DOMAIN_ID'], animation=options.animation)
+    recorder = Recorder(env['ROS_DOMAIN_ID'], animation=options.animation and options.pictures,
+                        images=options.pictures)
     nodes = SystemProcesses(scenario.param_files, out / 'logs', env, options.command)
     monitor = CpuMonitor({**{n: p.pid for n, p in nodes.processes.items()},
                           'demo': os.getpid()},
@@ -526,6 +542,9 @@ def parse_args(argv=None):
     parser.add_argument('--out', default='out/demo', type=Path, help='output folder')
     parser.add_argument('--no-animation', dest='animation', action='store_false',
                         help='skip animation.gif (the camera PNGs are still written)')
+    parser.add_argument('--no-pictures', dest='pictures', action='store_false',
+                        help='record no camera images and draw no camera pictures (plot.png '
+                             'only)')
     parser.add_argument('--layout', default='skill', choices=('skill', 'scene'),
                         help="goal and obstacles: the skill's own layout (default) or "
                              "config/scene.yaml's as they are (G's layout)")
@@ -556,8 +575,8 @@ def main(argv=None):
     for name in DISCOVERY_VARIABLES:
         os.environ.pop(name, None)
     options = Options(skill=args.skill, method=args.method, out=args.out,
-                      animation=args.animation, layout=args.layout, timeout=args.timeout,
-                      move_goal=args.move_goal, demo_file=args.demo_file,
+                      animation=args.animation, pictures=args.pictures, layout=args.layout,
+                      timeout=args.timeout, move_goal=args.move_goal, demo_file=args.demo_file,
                       parameters=({} if args.duration is None else
                                   {'dmp_server': {'duration': args.duration}}))
     try:

@@ -9,8 +9,13 @@ overrides (``use_sim_time`` for dmp_server and the controller, which follow /clo
 arguments given here (e.g. ``--ros-args --params-file my.yaml``). One executor spins them
 (the simulation steps in its own threads); on Ctrl-C the controller sends zero velocity before
 anything shuts down (``_spin.run``).
+
+``ros2 run etdmp_ros bringup --host robot`` (or ``workstation``) runs the part of the system one
+computer of a lab runs (docs/two_hosts.md), ``--nodes ur10_sim,controller`` any part, as the
+launch file's ``host:=`` and ``nodes:=`` (:func:`etdmp_ros.system.select_nodes`).
 """
 
+import argparse
 import importlib
 import sys
 import tempfile
@@ -42,6 +47,22 @@ def node_class(spec):
     return getattr(importlib.import_module(module), name)
 
 
+def split_arguments(argv):
+    """
+    Return (chosen node names, argv without ``--host`` / ``--nodes``): see the module docstring.
+
+    Only the arguments before ``--ros-args`` are this program's; ValueError for a bad choice.
+    """
+    argv = list(argv)
+    end = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
+    parser = argparse.ArgumentParser(prog='bringup', add_help=False)
+    parser.add_argument('--host', default='all')
+    parser.add_argument('--nodes', default='')
+    known, rest = parser.parse_known_args(argv[1:end])
+    return (system.select_nodes(known.host, known.nodes),
+            argv[:1] + rest + argv[end:])
+
+
 def ros_arguments(user_args, directory):
     """Return the rclpy arguments: the system's parameter files first, the user's last."""
     files = parameter_files() + [overrides_file(directory)]
@@ -58,18 +79,26 @@ def ros_arguments(user_args, directory):
 
 
 def main(args=None):
-    """Run the four nodes in one process until Ctrl-C (or SIGTERM)."""
+    """Run the four nodes (or the chosen ones) in one process until Ctrl-C (or SIGTERM)."""
     from etdmp_ros.ros.spin import run
     from etdmp_ros.nodes.dmp_server import InvalidConfiguration
 
+    try:
+        chosen, args = split_arguments(sys.argv if args is None else args)
+    except ValueError as err:
+        print(f'bringup: {err}', file=sys.stderr)
+        return 2
+
     def make(nodes):
         for spec in system.NODES:   # the simulation first: its thread starts at once
+            if spec.name not in chosen:
+                continue
             nodes.append(node_class(spec)())
             if hasattr(nodes[-1], 'start'):
                 nodes[-1].start()
 
     with tempfile.TemporaryDirectory(prefix='etdmp_bringup_') as directory:
-        argv = ros_arguments(sys.argv if args is None else args, directory)
+        argv = ros_arguments(args, directory)
         return run(make, 'bringup', argv, startup_errors=(InvalidConfiguration,))
 
 

@@ -19,6 +19,8 @@ second (in step with the robot, as a ros2_control controller is), on the joint s
 for ``joint_state_timeout`` of the robot's time (:class:`InputWatch`): the node's clock, under
 ``use_sim_time`` the simulation's, so a simulation that stalls stops that time too and is not
 mistaken for lost input; one silent for ``simulation_stall_timeout`` of wall time is gone.
+Joint states whose stamps jump by more than ``joint_state_timeout`` from one to the next were
+lost in between (a network link that was down, its /clock gone with them): the same stop.
 Idle, halted or refused, the controller keeps sending explicit zeros, because the real
 ``forward_velocity_controller`` applies the last command forever. Path: pose ``k`` is
 timed at its stamp minus the first pose's stamp (the header stamp is ignored); a path whose
@@ -153,12 +155,13 @@ class InputWatch:
         self._robot = None      # robot time (ns) of the latest receipt
         self._wall = None       # steady time (ns) of the latest receipt
         self._stamp = None      # stamp (ns) of the latest joint state accepted
+        self._arrived = None    # stamp (ns) of the latest plausible joint state to arrive
         self._simulated = False
 
     def received(self, robot_ns, wall_ns, simulated, stamp_ns=None):
         """Note a joint state (stamped ``stamp_ns``) received at these robot and steady times."""
         if simulated != self._simulated:
-            self._stamp = None
+            self._stamp = self._arrived = None
         self._robot, self._wall, self._simulated = robot_ns, wall_ns, simulated
         if stamp_ns is not None:
             self._stamp = stamp_ns
@@ -198,6 +201,22 @@ class InputWatch:
         return (f'its stamp is {skew:+.3f} s off the robot clock (advanced '
                 f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '
                 f'clock advanced {(robot_ns - self._robot) * 1e-9:.3f} s), not from the robot')
+
+    def gap(self, stamp_ns, simulated):
+        """
+        Return why the joint states before this one (stamped ``stamp_ns``) were lost, or ''.
+
+        The robot's time advanced more than ``timeout`` between two joint states that arrived
+        one after the other: the ones between never came (a network link that was down), even
+        if nothing noticed meanwhile, the robot's /clock having stopped reaching this node with
+        them. Joint states that only queued behind a busy process all arrive, a period apart.
+        """
+        previous, self._arrived = self._arrived, stamp_ns
+        if previous is None or (stamp_ns - previous) * 1e-9 <= self.timeout:
+            return ''
+        clock = 'simulated' if simulated else 'wall-clock'
+        return (f'none for {(stamp_ns - previous) * 1e-9:.3f} s of {clock} time: those '
+                'between the last two never came')
 
     def lost(self, robot_ns, wall_ns, simulated):
         """Return why the joint states count as lost at these times ('' if they do not)."""
@@ -366,7 +385,13 @@ class ControllerNode(Node):
                 newest = self._read_joint_state(taken[0], times) or newest
         if newest is None:
             return False
-        stamp, q = newest
+        stamp, q, gap = newest
+        if gap and not self._stale:
+            # Joint states were lost, noticed only now: stop as the watchdog would have.
+            self.watch.received(*times, stamp_ns=stamp)
+            self._q = q
+            self._input_lost(gap)
+            return True
         t = stamp * 1e-9
         if self.controller.status == 'tracking' and self._last_receipt is not None:
             self._tracked.joint_state(receipt - self._last_receipt, t)
@@ -397,7 +422,12 @@ class ControllerNode(Node):
         return True
 
     def _read_joint_state(self, data, times):
-        """Return (stamp ns, q) of serialized joint state bytes, or None if they are not usable."""
+        """
+        Return (stamp ns, q, gap) of serialized joint state bytes, None if they are not usable.
+
+        ``gap``: why the joint states before it count as lost ('' if they do not,
+        :meth:`InputWatch.gap`).
+        """
         try:
             stamp, q, _ = joint_state_from_cdr(data)
         except ValueError as exc:
@@ -409,7 +439,7 @@ class ControllerNode(Node):
         if implausible:
             self._ignore(implausible)
             return None
-        return stamp, q
+        return stamp, q, self.watch.gap(stamp, times[2])
 
     def _ignore(self, reason):
         """Count a joint state ignored; say why at most every IGNORED_LOG_PERIOD seconds."""
@@ -448,14 +478,18 @@ class ControllerNode(Node):
             if lost and self._use_joint_states(None, times, time.monotonic()):
                 return
             if lost:
-                if not self._stale:
-                    self._stale = True
-                    reason = f'joint states on {JOINT_STATES_TOPIC} are stale ({lost})'
-                    self.controller.input_lost(reason)
-                    if self._last_receipt is not None:
-                        self.get_logger().error(f'{reason}: zero velocity command')
-                self._publish_command(np.zeros(6))
-                self._publish_status()
+                self._input_lost(lost)
+
+    def _input_lost(self, lost):
+        """Zero velocity, the path dropped, status stale-input saying why (``lost``)."""
+        if not self._stale:
+            self._stale = True
+            reason = f'joint states on {JOINT_STATES_TOPIC} are stale ({lost})'
+            self.controller.input_lost(reason)
+            if self._last_receipt is not None:
+                self.get_logger().error(f'{reason}: zero velocity command')
+        self._publish_command(np.zeros(6))
+        self._publish_status()
 
     def _publish_command(self, qd):
         self._command_pub.publish(velocity_command_msg(qd))

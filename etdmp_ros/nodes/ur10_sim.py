@@ -422,7 +422,9 @@ class UR10SimNode(Node):
         c1 = time.process_time()
         if sim.watchdog_active and not self._watchdog_was_active and self._commands_seen:
             self.get_logger().warning(f'no velocity command for {sim.watchdog_timeout:g} s: '
-                                      'braking to zero until the next one')
+                                      'braking to zero until the next one (the last at t = '
+                                      f'{sim.command_time:.3f} s, braked at t = '
+                                      f'{sim.braked_at:.3f} s)')
         self._watchdog_was_active = sim.watchdog_active
         stamp = ns_to_stamp(round(sim.time * 1e9))
         self._answered.clear()      # the next command answers these joint states

@@ -793,6 +793,35 @@ TEACH_NODE = NodeSpec('teach', 'the teaching page: draw a movement in a browser,
 #: Every node of the package: the system's, then the teaching page's.
 ALL_NODES = NODES + (TEACH_NODE,)
 SCENE_FILE = 'scene.yaml'
+#: Where the nodes run in a lab of two computers (docs/two_hosts.md): the robot's PC beside the
+#: arm runs the UR driver (here ur10_sim) and the controller, which closes the 125 Hz loop with
+#: it (a real UR's velocity interface holds its last command: that loop must not cross a link
+#: that can fail); the workstation runs the camera processing and the skills. The launch file's
+#: ``host:=robot|workstation``, bringup's ``--host``; ``all`` (the default) is every node.
+HOSTS = {'robot': ('ur10_sim', 'controller'), 'workstation': ('perception', 'dmp_server')}
+HOST_CHOICES = ('all', *HOSTS)
+
+
+def select_nodes(host='all', nodes=''):
+    """
+    Return the names of the nodes to start on this computer, in start order (:data:`NODES`).
+
+    ``host``: ``all`` or a key of :data:`HOSTS`; ``nodes``: node names (a list, or one string
+    separated by commas or spaces) instead of a host's. ValueError, naming the choices, for an
+    unknown host or node, or both given.
+    """
+    if isinstance(nodes, str):
+        nodes = nodes.replace(',', ' ').split()
+    nodes = list(nodes)
+    if host not in HOST_CHOICES:
+        raise ValueError(f'host must be one of {", ".join(HOST_CHOICES)}, got {host!r}')
+    if nodes and host != 'all':
+        raise ValueError(f'give host ({host!r}) or nodes ({",".join(nodes)}), not both')
+    unknown = [n for n in nodes if n not in NODE_NAMES]
+    if unknown:
+        raise ValueError(f'no node {unknown[0]!r} (nodes: {", ".join(NODE_NAMES)})')
+    chosen = set(nodes) if nodes else set(NODE_NAMES if host == 'all' else HOSTS[host])
+    return tuple(n for n in NODE_NAMES if n in chosen)
 
 
 def node(name):
@@ -845,6 +874,9 @@ def wiring_overrides(name):
 
 
 def _check_names():
+    placed = sorted(n for names in HOSTS.values() for n in names)
+    if placed != sorted(NODE_NAMES):
+        raise ValueError(f'HOSTS must place every node once, got {placed}')
     for spec in ALL_NODES:
         names = [p.name for p in spec.all_parameters]
         if len(names) != len(set(names)):

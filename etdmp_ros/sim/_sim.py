@@ -251,6 +251,7 @@ class UR10Sim:
         self._render_data = None
         self._command = np.zeros(6)
         self._command_time = -math.inf
+        self.braked_at = None
         self.watchdog_active = self.watchdog_timeout > 0
         self.reset()
 
@@ -418,6 +419,7 @@ class UR10Sim:
         self.data.qpos[self._qpos_adr] = q
         self._command[:] = 0.0
         self._command_time = -math.inf
+        self.braked_at = None
         self.watchdog_active = self.watchdog_timeout > 0
         self.set_goal(self.scene.goal_position)
         self.set_bottle(self.scene.bottle_position)
@@ -501,10 +503,16 @@ class UR10Sim:
         self.data.ctrl[self._actuator_ids] = qd
         return qd.copy()
 
+    @property
+    def command_time(self):
+        """Return the simulated time (s) of the last accepted velocity command (-inf: none)."""
+        return self._command_time
+
     def _check_watchdog(self):
         if (not self.watchdog_active and self.watchdog_timeout > 0
                 and self.data.time - self._command_time > self.watchdog_timeout):
             self.watchdog_active = True
+            self.braked_at = self.data.time     # simulated s; see command_time
             self.data.ctrl[self._actuator_ids] = 0.0
 
     def step(self, n=1):

@@ -338,7 +338,8 @@ def test_joint_states_queued_behind_the_clock_are_late_not_lost(ros_env):
         while not pub.get_subscription_count():
             assert time.monotonic() < deadline, 'the controller did not match the publisher'
             time.sleep(0.05)
-        pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp(5150 * ms)))
+        for stamp in range(5008, 5151, 8):       # every period's, queued in the subscription
+            pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp(stamp * ms)))
         time.sleep(0.5)                          # delivered to the subscription, not yet taken
         clock.set_ros_time_override(Time(nanoseconds=5160 * ms))   # the clock went on
         node._watchdog()
@@ -348,6 +349,63 @@ def test_joint_states_queued_behind_the_clock_are_late_not_lost(ros_env):
         clock.set_ros_time_override(Time(nanoseconds=5300 * ms))
         node._watchdog()
         assert node._stale
+        source.destroy_node()
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def test_joint_states_that_never_came_are_lost_when_the_next_one_shows_it():
+    # A link down for 0.5 s: the simulation's /clock stopped reaching the controller with its
+    # joint states, so its watchdog saw no time pass; then the clock and a joint state 0.5 s
+    # later arrive together. Nothing was queued: the ones between were lost.
+    ms = 1_000_000
+    watch = InputWatch(timeout=0.1, stall_timeout=1.0)
+    assert watch.gap(5000 * ms, True) == ''                  # the first: nothing to compare
+    for stamp in range(5008, 5200, 8):                       # one a period: nothing lost
+        assert watch.gap(stamp * ms, True) == ''
+    assert watch.gap(5292 * ms, True) == ''                  # 0.1 s: the timeout itself
+    assert 'none for 0.508 s of simulated time' in watch.gap(5800 * ms, True)
+    assert watch.gap(8 * ms, True) == ''                     # a restarted simulation
+    watch.received(0, 0, False)                              # use_sim_time off: afresh
+    assert watch.gap(7 * ms, False) == ''
+    assert 'none for 0.200 s of wall-clock time' in watch.gap(207 * ms, False)
+
+
+def test_a_link_loss_noticed_late_is_stale_input_not_a_tracking_error(ros_env):
+    # What the controller did when a link came back, the /clock first: it took the next joint
+    # state, 0.5 s after the last, and stepped the path 0.5 s on from an arm the simulation's
+    # watchdog had braked: "unreachable: tracking error 109 mm". It is lost input.
+    import rclpy
+    from etdmp_ros.nodes.controller import ControllerNode
+    from rclpy.parameter import Parameter
+    from rclpy.time import Time
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = ControllerNode(context=context, parameter_overrides=[
+            Parameter('use_sim_time', value=True), Parameter('tool_offset', value=TOOL_OFFSET)])
+        source = rclpy.create_node('joint_state_source', context=context)
+        pub = source.create_publisher(JointState, 'joint_states', 10)
+        clock = node.get_clock()
+        clock._set_ros_time_is_active(True)      # as rclpy's TimeSource does on /clock
+        ms = 1_000_000
+        clock.set_ros_time_override(Time(nanoseconds=5000 * ms))
+        node.watch.received(5000 * ms, time.monotonic_ns(), True, stamp_ns=5000 * ms)
+        node.watch.gap(5000 * ms, True)
+        deadline = time.monotonic() + 10.0
+        while not pub.get_subscription_count():
+            assert time.monotonic() < deadline, 'the controller did not match the publisher'
+            time.sleep(0.05)
+        clock.set_ros_time_override(Time(nanoseconds=5500 * ms))   # the link is back
+        pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp(5504 * ms)))
+        time.sleep(0.5)                          # delivered to the subscription, not yet taken
+        node._watchdog()
+        assert node._stale
+        assert node.controller.status == 'stale-input'
+        reason = node.controller.reason
+        assert reason.startswith('joint states on joint_states are stale'), reason
+        assert 'none for 0.504 s of simulated time' in reason, reason
         source.destroy_node()
         node.destroy_node()
     finally:

@@ -120,6 +120,8 @@ def test_watchdog_brakes_when_commands_stop():
         s.advance(0.15)
         assert s.watchdog_active
         assert np.allclose(s.command, 0.0)
+        # Braked at the first physics step past the timeout (ur10_sim logs both times).
+        assert 0.1 < s.braked_at - s.command_time <= 0.1 + s.model.opt.timestep + 1e-9
         assert s.time - stopped_sending < 0.25
         assert np.abs(s.qd).max() < 1e-3
         q_braked = s.q

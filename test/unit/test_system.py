@@ -311,3 +311,68 @@ def test_a_signal_during_start_up_is_not_lost(ros_env):
     except subprocess.TimeoutExpired:
         pytest.fail('the program kept running after a SIGINT during its start-up')
     assert done.returncode == 0, done.stderr
+
+
+# ------------------------------------------------------------- a part of the system (issue 23)
+
+
+def test_hosts_place_every_node_once_the_controller_beside_the_robot():
+    placed = [n for names in system.HOSTS.values() for n in names]
+    assert sorted(placed) == sorted(system.NODE_NAMES)
+    # The 125 Hz loop (joint states in, velocities out) stays on the robot's PC.
+    assert system.HOSTS['robot'] == ('ur10_sim', 'controller')
+    assert system.HOSTS['workstation'] == ('perception', 'dmp_server')
+
+
+def test_select_nodes_by_host_or_by_name_in_start_order():
+    assert system.select_nodes() == system.NODE_NAMES
+    assert system.select_nodes('robot') == ('ur10_sim', 'controller')
+    assert system.select_nodes('workstation') == ('perception', 'dmp_server')
+    assert system.select_nodes(nodes='controller, ur10_sim') == ('ur10_sim', 'controller')
+    assert system.select_nodes(nodes=['dmp_server']) == ('dmp_server',)
+    for kwargs, words in (({'host': 'lab'}, 'all, robot, workstation'),
+                          ({'nodes': 'ur10_sim,camera'}, "'camera'"),
+                          ({'host': 'robot', 'nodes': 'ur10_sim'}, 'not both')):
+        with pytest.raises(ValueError, match=words):
+            system.select_nodes(**kwargs)
+
+
+def _launch(monkeypatch, **arguments):
+    """Return the executables that etdmp.launch.py starts with ``arguments``."""
+    pytest.importorskip('launch', reason='ros2 launch is not installed (make ros-tools)')
+    import importlib.util
+    from launch import LaunchContext
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction
+    spec = importlib.util.spec_from_file_location('etdmp_launch', REPO / 'launch' /
+                                                  'etdmp.launch.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setattr(module, 'get_package_share_directory', lambda package: str(REPO))
+    context = LaunchContext()
+    entities = module.generate_launch_description().entities
+    for action in entities:
+        if isinstance(action, DeclareLaunchArgument):
+            default = action.default_value[0].text if action.default_value else ''
+            context.launch_configurations[action.name] = arguments.get(action.name, default)
+    (nodes,) = [a for a in entities if isinstance(a, OpaqueFunction)]
+    return [n.node_executable for n in nodes.execute(context) if n.condition is None]
+
+
+def test_the_launch_file_starts_the_chosen_part(monkeypatch):
+    assert _launch(monkeypatch) == list(system.NODE_NAMES)
+    assert _launch(monkeypatch, host='robot') == ['ur10_sim', 'controller']
+    assert _launch(monkeypatch, host='workstation') == ['perception', 'dmp_server']
+    assert _launch(monkeypatch, nodes='dmp_server') == ['dmp_server']
+    with pytest.raises(ValueError, match="no node 'sim'"):
+        _launch(monkeypatch, nodes='sim')
+
+
+def test_bringup_takes_the_same_choice():
+    from etdmp_ros.nodes.bringup import split_arguments
+    assert split_arguments(['bringup']) == (system.NODE_NAMES, ['bringup'])
+    assert split_arguments(['bringup', '--host', 'robot', '--ros-args', '-p', 'a:=1']) == (
+        ('ur10_sim', 'controller'), ['bringup', '--ros-args', '-p', 'a:=1'])
+    assert split_arguments(['bringup', '--nodes', 'perception', '--ros-args'])[0] == (
+        'perception',)
+    with pytest.raises(ValueError, match='host must be one of'):
+        split_arguments(['bringup', '--host', 'lab'])
