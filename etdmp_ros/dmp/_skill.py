@@ -5,12 +5,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import _quaternion as quat
 from ._demos import Demonstration
 from ._errors import DemonstrationError, GeneralizationError
 from ._forcing_term import ForcingTerm, phase
 from ._integrate import rollout
 from ._obstacles import ObstacleGains
 from ._orientation import check_goal_orientation, OrientationDMP, turn_quaternions
+from ._retime import come_to_rest
 from ._transform import EPS, EuclideanTransform, transforms
 from .. import limits
 
@@ -124,6 +126,11 @@ class Skill:
 
     def __init__(self, y, t, n_basis, K, D, alpha, formulation, regularization,
                  orientations=None):
+        if orientations is not None:
+            orientations = quat.continuous(orientations)
+        #: The demonstration as learned (``demo``, ``demo_t``): re-timed to start and end at rest
+        #: along its own path (docs/design.md#coming-to-rest); ``retiming`` says what changed.
+        t, y, orientations, self.retiming = come_to_rest(t, y, orientations)
         self.demo, self.demo_t = y, t
         self.K, self.D, self.alpha = K, D, alpha
         self.formulation = formulation
@@ -146,7 +153,9 @@ class Skill:
         if formulation == 'ijspeert':
             target = needed / self.size
         else:  # Hoffmann: tau dv = K(g - x) - D v - K (g - x0) s + K f(s)
-            target = (needed / K + (self.goal - self.start) * s[:, None]) / self.size
+            # Hoffmann's term fades with the gated phase, as the forcing does (_forcing_term).
+            target = (needed / K + (self.goal - self.start) * self.forcing.drive(s)[:, None]) \
+                / self.size
         with np.errstate(all='ignore'):   # an overflow is reported just below, not warned of
             self.forcing.fit(s, target, regularization)
             finite = np.all(np.isfinite(target)) and np.all(np.isfinite(self.forcing(s)))
