@@ -14,7 +14,7 @@ LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 ROS_TOOLS   ?= ../shared/ros
 ROS_STAMP   := $(VENV)/.ros-tools
 
-.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs config bench clean distclean help
+.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs docs-site config bench clean distclean help
 .DEFAULT_GOAL := help
 
 help:
@@ -26,6 +26,7 @@ help:
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
 	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
 	@echo "make docs       regenerate the README pictures in docs/img/"
+	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
 	@echo "                one of them: make bench-core|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
@@ -116,6 +117,12 @@ docs: reproduce
 	$(VENV)/bin/etdmp generalize --skill G --start -6 4 --goal 0 0 --obstacle -7.6 -4.4 \
 	  --plot docs/img/generalize_G.png
 	MUJOCO_GL=egl $(VENV_PY) tools/render_scene.py
+
+# The documentation site: docs/*.md (MyST) and the API reference from the docstrings (docs/conf.py;
+# rosdoc2.yaml points docs.ros.org's builder at the same files). Warnings are errors, as in the test.
+docs-site: $(STAMP)
+	$(VENV_PY) -m sphinx -W --keep-going -q -b html docs build/docs/html
+	@echo "open build/docs/html/index.html"
 
 # The benchmark's own environment: the project's pins plus the peer libraries it compares
 # against (movement-primitives, pydmps), which never enter .venv/.

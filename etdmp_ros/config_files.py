@@ -177,8 +177,8 @@ def parameter_table(spec):
 
 def docs_text(spec, current):
     """Return ``current`` (a docs page) with its parameter table replaced by the generated one."""
-    return _between(current, TABLE_BEGIN, TABLE_END, parameter_table(spec),
-                    f'docs/{spec.name}.md')
+    return replace_block(current, TABLE_BEGIN, TABLE_END, parameter_table(spec),
+                         f'docs/{spec.name}.md')
 
 
 def _limit_value(value):
@@ -217,7 +217,14 @@ def limits_table():
                        + '\n'.join(rows) for section, rows in out)
 
 
-def _between(current, begin, end, table, where):
+def replace_block(current, begin, end, table, where):
+    """
+    Return ``current`` with the text between the lines ``begin`` and ``end`` replaced by ``table``.
+
+    The generated parts of the docs (parameter and limit tables here, benchmark results in
+    test/benchmarks/_results.py) stand between such marker lines; ValueError names ``where``
+    when the markers are missing.
+    """
     if begin not in current or end not in current:
         raise ValueError(f'{where} has no "{begin}" ... "{end}" block')
     head, rest = current.split(begin, 1)
@@ -234,8 +241,8 @@ def generated_files(root):
         docs = root / 'docs' / f'{spec.name}.md'
         files[docs] = docs_text(spec, docs.read_text(encoding='utf-8'))
     page = root / 'docs' / 'limits.md'
-    files[page] = _between(page.read_text(encoding='utf-8'), LIMITS_BEGIN, LIMITS_END,
-                           limits_table(), 'docs/limits.md')
+    files[page] = replace_block(page.read_text(encoding='utf-8'), LIMITS_BEGIN, LIMITS_END,
+                                limits_table(), 'docs/limits.md')
     return files
 
 

@@ -28,7 +28,7 @@ import math
 from etdmp_ros.dmp import _quaternion as quat
 import numpy as np
 
-#: Largest |x_axis . y_axis| accepted for the (normalised) plane axes.
+#: Largest ``|x_axis . y_axis|`` accepted for the (normalised) plane axes.
 ORTHOGONALITY_TOLERANCE = 1e-3
 QUADRANTS = ('I', 'II', 'III', 'IV')
 

@@ -5,7 +5,8 @@ The real ``ros2`` command line against the colcon install, for the tests (no tes
 ``local_setup.sh``, with ``AMENT_PREFIX_PATH`` starting from this venv (where the message wheels
 and the ROS tools live), on a DDS domain of its own with localhost-only discovery. The readers
 at the end parse what the CLI prints (``ros2 service call``, ``ros2 topic echo --csv``,
-``ros2 topic hz``) and the README's commands and tables, so the tests cannot drift from them.
+``ros2 topic hz``), the README's commands and docs/ros.md's tables, so the tests cannot drift
+from them.
 """
 
 import importlib.util
@@ -25,11 +26,13 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / 'README.md'
+#: The page with the node and topic tables (docs/ros.md); the README links to it.
+INTERFACES = REPO / 'docs' / 'ros.md'
 ROS2 = Path(sys.executable).with_name('ros2')
 #: What ``ros2 run/launch/service/topic/param/node`` need beyond rclpy and the message wheels.
 REQUIRED_MODULES = ('ros2cli', 'launch_ros', 'composition_interfaces')
 NOT_INSTALLED = 'the ros2 CLI is not installed: run make ros-tools (needs ../shared/ros)'
-#: Services every rclpy node has (parameters, type descriptions): not in the README's table.
+#: Services every rclpy node has (parameters, type descriptions): not in the interface table.
 INTERNAL_SERVICES = ('describe_parameters', 'get_parameter_types', 'get_parameters',
                      'get_type_description', 'list_parameters', 'set_parameters',
                      'set_parameters_atomically')
@@ -245,12 +248,12 @@ TOPIC_TABLE = '| topic / service | type | from → to |'
 
 def readme_nodes(text=None):
     """
-    Return ``{name: row text}`` of the README's node table, helper nodes named in it included.
+    Return ``{name: row text}`` of docs/ros.md's node table, helper nodes named in it too.
 
     A row's first cell names an executable; a "node `x`" in its text names another node that
     executable starts (ur10_sim's camera helper).
     """
-    text = README.read_text() if text is None else text
+    text = INTERFACES.read_text() if text is None else text
     nodes = {}
     for row in _table(NODE_TABLE, text):
         for name in re.findall(r'`([^`]+)`', row[0]):
@@ -262,14 +265,14 @@ def readme_nodes(text=None):
 
 def readme_topics(text=None, published_only=False):
     """
-    Return ``({topic: type}, {service: type})`` of the README's topic table, types as ROS names.
+    Return ``({topic: type}, {service: type})`` of docs/ros.md's topic table, as ROS type names.
 
     A cell like ``/a/b/c``, ``/d`` names ``/a/b/c`` and ``/a/b/d`` (a one-part name after the
     first replaces its last part); types ``pkg/Name`` become ``pkg/msg/Name`` (``pkg/srv/Name``
     stays); one type for several names applies to each. ``published_only``: leave out the rows
     of topics that only a user publishes (``you → ...``).
     """
-    text = README.read_text() if text is None else text
+    text = INTERFACES.read_text() if text is None else text
     topics, services = {}, {}
     for row in _table(TOPIC_TABLE, text):
         if published_only and row[2].startswith('you'):
@@ -284,7 +287,7 @@ def readme_topics(text=None, published_only=False):
                  for part in re.sub(r'`[^`]*`', '', row[1]).split(',')]
         if len(kinds) == 1:
             kinds = kinds * len(names)
-        assert len(kinds) == len(names), f'README row {row}: {len(names)} names, types {kinds}'
+        assert len(kinds) == len(names), f'row {row}: {len(names)} names, types {kinds}'
         for name, kind in zip(names, kinds):
             if '/srv/' in kind:
                 services[name] = kind
@@ -299,11 +302,11 @@ def differences(documented, running):
     lines = []
     for name in sorted(set(documented) | set(running)):
         if name not in running:
-            lines.append(f'{name} [{documented[name]}]: in the README, not in the running system')
+            lines.append(f'{name} [{documented[name]}]: in docs/ros.md, not in the running system')
         elif name not in documented:
-            lines.append(f'{name} [{running[name]}]: running, not in the README')
+            lines.append(f'{name} [{running[name]}]: running, not in docs/ros.md')
         elif documented[name] != running[name]:
-            lines.append(f'{name}: README type {documented[name]}, running {running[name]}')
+            lines.append(f'{name}: docs/ros.md type {documented[name]}, running {running[name]}')
     return lines
 
 

@@ -235,7 +235,7 @@ def test_the_recording_holds_the_run_as_the_readme_lists_it(run):
     assert all(s.encoding == 'ros2msg' for s in summary.schemas.values())
     assert all(c.message_encoding == 'cdr' for c in summary.channels.values())
 
-    # Every topic of the README's table, with its type; images as image_transport's
+    # Every topic of docs/ros.md's table, with its type; images as image_transport's
     # compressed topic; /tf and /robot_description when the system publishes them.
     for topic, type_name in readme_topics(published_only=True)[0].items():
         if topic in NOT_RECORDED:   # left out on purpose, and said so

@@ -4,7 +4,7 @@ The system through the real ``ros2`` command line, as the README tells a user to
 From the colcon install, sourced, on a DDS domain of its own (fixture ``ros2``, conftest):
 ``ros2 run etdmp_ros <node>`` for every node; then one ``ros2 launch etdmp_ros etdmp.launch.py
 skill:=W`` shared by the rest of the module: the node, topic and service lists against the
-README's tables, both ``ros2 service call /generalize`` examples of the README verbatim (the
+tables of docs/ros.md, both ``ros2 service call /generalize`` examples of the README verbatim (the
 first one makes the arm write the W, checked on the true tool tip, the commands with ``ros2
 topic echo`` and ``ros2 topic hz``), bad requests, ``ros2 param set|get|describe`` (a list
 parameter set to ``[]``), and Ctrl-C to ``ros2 launch``. The tests of the shared system run in
@@ -102,7 +102,7 @@ def projected(point):
 
 def test_ros2_run_starts_every_node(ros2):
     """
-    Run ``ros2 run etdmp_ros <node>`` (README: "Nodes one by one"); Ctrl-C ends each with 0.
+    Run ``ros2 run etdmp_ros <node>`` (docs/ros.md: "Nodes one by one"); Ctrl-C ends each with 0.
 
     Ctrl-C only once every node is ready: one that reaches the controller while numba compiles
     its kernels is swallowed (llvmlite: "Exception ignored on calling ctypes callback
@@ -174,7 +174,7 @@ def _listed(ros2, verb):
 
 
 def test_node_topic_and_service_lists_equal_the_readme_tables(launched):
-    """``ros2 node list``, ``ros2 topic list -t``, ``ros2 service list -t``: the README's."""
+    """``ros2 node list``, ``ros2 topic list -t``, ``ros2 service list -t``: docs/ros.md's."""
     ros2 = launched.ros2
     documented = ros2_cli.readme_nodes()
     # bringup is an executable that runs the four nodes in one process, not a node of its own.
@@ -185,8 +185,8 @@ def test_node_topic_and_service_lists_equal_the_readme_tables(launched):
     def complete():
         out = ros2.run('ros2 node list --no-daemon --spin-time 3', check=False).stdout
         return set(out.split()) >= nodes and set(out.split())
-    running = wait_for(complete, 60, f'the README nodes {sorted(nodes)} in ros2 node list')
-    assert running == nodes, f'running, not in the README: {sorted(running - nodes)}'
+    running = wait_for(complete, 60, f'the documented nodes {sorted(nodes)} in ros2 node list')
+    assert running == nodes, f'running, not in docs/ros.md: {sorted(running - nodes)}'
 
     topics, services = ros2_cli.readme_topics()
     # Discovery is incremental: take the union of lists for up to 30 s, then compare (three
@@ -201,7 +201,7 @@ def test_node_topic_and_service_lists_equal_the_readme_tables(launched):
             break
     diff = (ros2_cli.differences(topics, found_topics)
             + ros2_cli.differences(services, found_services))
-    assert not diff, 'README topic table vs ros2 topic/service list -t:\n' + '\n'.join(diff)
+    assert not diff, 'docs/ros.md topic table vs ros2 topic/service list -t:\n' + '\n'.join(diff)
 
 
 def test_first_readme_example_writes_the_letter(launched):

@@ -1,0 +1,207 @@
+"""
+The documentation is built and checked.
+
+The site builds without a warning, every relative link and image resolves, and every command in
+the README's code blocks names something real.
+
+The running graph is compared with the README's topic table by ``test_ros2_cli.py``; here a
+command's topic or service must be in that table, its node and parameter in the system
+description, its make target in the Makefile, its executable and module in the package.
+"""
+
+from functools import lru_cache
+import importlib.util
+from pathlib import Path
+import re
+import shlex
+import subprocess
+import sys
+
+from etdmp_ros import system
+import pytest
+from ros2_cli import readme_topics
+
+REPO = Path(__file__).resolve().parents[1]
+README = REPO / 'README.md'
+PAGES = (README, REPO / 'CONTRIBUTING.md', *sorted((REPO / 'docs').glob('*.md')))
+_LINK = re.compile(r'!?\[(?:[^\[\]]|\[[^\]]*\])*\]\(([^)\s]+)(?:\s+"[^"]*")?\)')
+_HTML_SRC = re.compile(r'<img[^>]*\ssrc="([^"]+)"')
+_FENCE = re.compile(r'^```[^\n]*\n(.*?)^```', re.S | re.M)
+_SHELL_FENCE = re.compile(r'^```(?:sh|bash|shell|console)\n(.*?)^```', re.S | re.M)
+
+
+def test_the_site_builds_without_a_warning(tmp_path):
+    result = subprocess.run(
+        [sys.executable, '-m', 'sphinx', '-W', '--keep-going', '-q', '-b', 'html',
+         str(REPO / 'docs'), str(tmp_path / 'html')],
+        capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, f'sphinx-build failed:\n{result.stdout}\n{result.stderr}'
+    assert (tmp_path / 'html' / 'api.html').stat().st_size > 10_000, 'the API reference is empty'
+
+
+def _slug(heading):
+    """Return GitHub's anchor of a Markdown heading (lower case, punctuation dropped)."""
+    text = re.sub(r'[`*_]|<[^>]+>', '', heading.strip().lower())
+    text = re.sub(r'\[([^\]]*)\]\([^)]*\)', r'\1', text)
+    return re.sub(r'[^\w\- ]', '', text).replace(' ', '-')
+
+
+@lru_cache(maxsize=None)
+def _anchors(path):
+    text = _FENCE.sub('', path.read_text())
+    anchors, seen = set(), {}
+    for heading in re.findall(r'^#{1,6}\s+(.+?)\s*#*$', text, re.M):
+        slug = _slug(heading)
+        count = seen.get(slug, 0)
+        seen[slug] = count + 1
+        anchors.add(slug if count == 0 else f'{slug}-{count}')
+    return anchors
+
+
+def _links(path):
+    text = _FENCE.sub('', path.read_text())
+    text = re.sub(r'`[^`\n]*`', '', text)
+    return _LINK.findall(text) + _HTML_SRC.findall(text)
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: str(p.relative_to(REPO)))
+def test_every_relative_link_and_image_resolves(page):
+    broken = []
+    for target in _links(page):
+        if re.match(r'[a-z][a-z0-9+.-]*:', target):   # http:, https:, mailto: ...
+            continue
+        file_part, _, anchor = target.partition('#')
+        resolved = (page.parent / file_part).resolve() if file_part else page
+        if not resolved.exists():
+            broken.append(f'{target}: no file {resolved}')
+        elif anchor and resolved.suffix == '.md' and anchor not in _anchors(resolved):
+            broken.append(f'{target}: no heading #{anchor} in {resolved.name}')
+    assert not broken, f'{page.name}:\n' + '\n'.join(broken)
+
+
+# ------------------------------------------------------------------ the README's commands
+
+def _shell_commands(page):
+    """Return every command of a page's shell code blocks, continuation lines joined."""
+    commands = []
+    for block in _SHELL_FENCE.findall(page.read_text()):
+        for line in block.replace('\\\n', ' ').splitlines():
+            line = line.split(' # ')[0].strip()
+            if line and not line.startswith(('#', '>>>', '$ ')) and not line[0].isupper():
+                commands.append(line)
+    return commands
+
+
+def _make_targets():
+    text = (REPO / 'Makefile').read_text()
+    targets = set(re.findall(r'^([A-Za-z0-9_.%-]+):(?!=)', text, re.M))
+    for pattern in [t for t in targets if '%' in t]:
+        prefix = pattern.split('%')[0]
+        listed = re.search(r'^BENCHMARKS\s*:=\s*(.+)$', text, re.M)
+        targets |= {prefix + name for name in (listed.group(1).split() if listed else ())}
+    return targets
+
+
+def _executables():
+    setup = (REPO / 'setup.py').read_text()
+    return set(re.findall(r"'([a-z0-9_]+) = etdmp_ros\.", setup))
+
+
+def _check(argv):
+    """Return what is wrong with one command (None if it names only real things)."""
+    names = {'make': _check_make, 'ros2': _check_ros2, 'python': _check_python,
+             'python3': _check_python}
+    words = [w for w in argv if not re.match(r'^[A-Z_]+=', w)]   # VAR=value prefixes
+    if not words:
+        return None
+    check = names.get(Path(words[0]).name)
+    return check(words) if check else None
+
+
+def _check_make(words):
+    targets = _make_targets()
+    wanted = [w for w in words[1:] if not w.startswith('-') and '=' not in w]
+    missing = [w for w in wanted if w not in targets]
+    return f'make targets {missing} are not in the Makefile' if missing else None
+
+
+def _check_ros2(words):
+    verb = words[1:3]
+    topics, services = readme_topics()
+    args = [w for w in words[2:] if not w.startswith('-')]
+    if words[1] == 'run' and len(args) >= 2 and args[0] == 'etdmp_ros':
+        return None if args[1] in _executables() else f'no executable {args[1]}'
+    if words[1] == 'launch' and len(args) >= 2 and args[0] == 'etdmp_ros':
+        return None if (REPO / 'launch' / args[1]).exists() else f'no launch file {args[1]}'
+    if verb[0] == 'topic' and len(args) >= 2 and args[1].startswith('/'):
+        return None if args[1] in topics else f'topic {args[1]} is not in the README table'
+    if verb[0] == 'service' and len(args) >= 2 and args[1].startswith('/'):
+        return None if args[1] in services else f'service {args[1]} is not in the README table'
+    if verb[0] == 'param' and len(args) >= 3 and args[1].startswith('/'):
+        node, parameter = args[1].rsplit('/', 1)[-1], args[2]
+        try:
+            system.node(node).parameter(parameter)
+        except KeyError as exc:
+            return str(exc)
+    return None
+
+
+def _check_python(words):
+    if len(words) >= 3 and words[1] == '-m' and words[2].startswith('etdmp_ros'):
+        if importlib.util.find_spec(words[2]) is None:
+            return f'no module {words[2]}'
+    return None
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: str(p.relative_to(REPO)))
+def test_every_command_names_real_targets_executables_topics_and_parameters(page):
+    commands = _shell_commands(page)
+    if page == README:
+        assert any(c.startswith('make demo') for c in commands), 'the README lost `make demo`'
+    problems = []
+    for command in commands:
+        for part in re.split(r'\s*(?:&&|;|\|)\s*', command):
+            try:
+                argv = shlex.split(part)
+            except ValueError as exc:
+                problems.append(f'{part}: {exc}')
+                continue
+            problem = _check(argv)
+            if problem:
+                problems.append(f'{part}: {problem}')
+    assert not problems, '\n'.join(problems)
+
+
+def test_the_checks_find_what_is_wrong():
+    """The command checks fail on made-up names (so the test above can fail)."""
+    assert _check(['make', 'no-such-target'])
+    assert _check(['ros2', 'run', 'etdmp_ros', 'no_such_node'])
+    assert _check(['ros2', 'topic', 'echo', '/no/such/topic'])
+    assert _check(['ros2', 'param', 'set', '/dmp_server', 'no_such_parameter', '1'])
+    assert _check(['python', '-m', 'etdmp_ros.no_such_module'])
+    assert _check(['make', 'demo', 'SKILL=W']) is None
+    assert _slug('3D mode 1: Rodrigues') == '3d-mode-1-rodrigues'
+
+
+# ------------------------------------------------------------------ the ecosystem files
+
+def test_license_changelog_and_citation_agree_with_package_xml():
+    import xml.etree.ElementTree as ElementTree
+
+    import yaml
+    package = ElementTree.parse(REPO / 'package.xml').getroot()
+    version = package.findtext('version')
+    assert package.findtext('license') == 'Apache-2.0'
+    assert 'Apache License' in (REPO / 'LICENSE').read_text()
+    assert 'Version 2.0, January 2004' in (REPO / 'LICENSE').read_text()
+    changelog = (REPO / 'CHANGELOG.rst').read_text()
+    assert 'Changelog for package etdmp_ros' in changelog
+    # Released versions as catkin_generate_changelog writes them: "X.Y.Z (YYYY-MM-DD)".
+    released = re.findall(r'^(\d+\.\d+\.\d+) \(\d{4}-\d{2}-\d{2}\)\n-+$', changelog, re.M)
+    assert released and released[0] == version, (released, version)
+    citation = yaml.safe_load((REPO / 'CITATION.cff').read_text())
+    assert citation['cff-version'] == '1.2.0'
+    assert citation['version'] == version and citation['license'] == 'Apache-2.0'
+    assert 'Euclidean' in citation['preferred-citation']['title']
+    for entry in [citation, citation['preferred-citation'], *citation['references']]:
+        assert entry['authors'] and entry['title'], entry
