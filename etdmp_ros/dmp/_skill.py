@@ -144,20 +144,24 @@ class Skill:
         if not self.size >= limits.MIN_DEMO_EXTENT:
             raise DemonstrationError(f'demonstration hardly moves: its extent {self.size:.3g} is '
                                      f'below MIN_DEMO_EXTENT = {limits.MIN_DEMO_EXTENT:g}')
-        self.forcing = ForcingTerm(n_basis, alpha)
+        self.forcing = ForcingTerm(n_basis, alpha, K, D)
         # Paper Eq. 6 with v = tau dx/dt: the forcing the demonstration needed at each sample.
         xd = np.gradient(y, t, axis=0, edge_order=2)
         xdd = np.gradient(xd, t, axis=0, edge_order=2)
         s = phase(t, self.tau, alpha)
         needed = self.tau ** 2 * xdd + D * self.tau * xd - K * (self.goal - y)
+        offset = self.goal - self.start
         if formulation == 'ijspeert':
             target = needed / self.size
+            end = (-offset, self.size, None)
         else:  # Hoffmann: tau dv = K(g - x) - D v - K (g - x0) s + K f(s)
-            # Hoffmann's term fades with the gated phase, as the forcing does (_forcing_term).
-            target = (needed / K + (self.goal - self.start) * self.forcing.drive(s)[:, None]) \
-                / self.size
+            # Hoffmann's term, made to end at tau (_forcing_term.hoffmann_term).
+            target = (needed / K + offset * self.forcing.phase_term(s)[:, None]) / self.size
+            end = (-offset, K * self.size,
+                   lambda s_end: -K * offset * self.forcing.phase_term(s_end)[:, None])
         with np.errstate(all='ignore'):   # an overflow is reported just below, not warned of
-            self.forcing.fit(s, target, regularization)
+            # The reproduction ends at its goal at rest (docs/design.md#coming-to-rest).
+            self.forcing.fit(s, target, regularization, end=end)
             finite = np.all(np.isfinite(target)) and np.all(np.isfinite(self.forcing(s)))
         if not finite:
             raise DemonstrationError('learning this demonstration overflows (its coordinates or '
