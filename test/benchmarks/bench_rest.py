@@ -53,17 +53,16 @@ import tempfile
 import time
 import warnings
 
+from etdmp_ros.dmp import _quaternion as quat
+from etdmp_ros.dmp import GeneralizationError, learn, nrmse, OBSTACLE_MARGIN
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
 sys.path.insert(0, str(HERE.parent))        # test/: shapes.py, drawings.py
 
-import drawings  # noqa: E402
+import drawings  # noqa: E402, I100
 import shapes  # noqa: E402
-
-from etdmp_ros.dmp import GeneralizationError, learn, nrmse, OBSTACLE_MARGIN  # noqa: E402, I100
-from etdmp_ros.dmp import _quaternion as quat  # noqa: E402
 
 PBDLIB = REPO.parent / 'shared' / 'data' / 'pbdlib_2Dletters'
 FORMULATIONS = ('ijspeert', 'hoffmann')
@@ -95,7 +94,8 @@ def drawn_strokes():
     return [
         _drawn('Z', z),
         _drawn('Z lifted while moving', z[:-12]),
-        _drawn('circle at speed', np.c_[320 + 120 * np.cos(circle_a), 240 + 120 * np.sin(circle_a)]),
+        _drawn('circle at speed', np.c_[320 + 120 * np.cos(circle_a),
+                                        240 + 120 * np.sin(circle_a)]),
         _drawn('spiral speeding up', np.c_[320 + spiral_r * np.cos(spiral_a) / 3.0,
                                            240 + spiral_r * np.sin(spiral_a) / 3.0]),
     ]
@@ -164,7 +164,7 @@ def rest_figures(tr, goal, tau):
 
 
 def _on_learned_clock(skill, rec, tr):
-    """The plan at the learned time of each recorded sample (the recording's own before)."""
+    """Return the plan at the learned time of each recorded sample (the recording's own before)."""
     retiming = getattr(skill, 'retiming', None)
     times = rec.t if retiming is None else retiming.times
     return np.stack([np.interp(times, tr.t, tr.x[:, i]) for i in range(tr.x.shape[1])], axis=1)
@@ -241,8 +241,8 @@ def _obstacles_on(path, goal, size):
 
 def obstacle_and_online_figures(quick):
     """Return {metric: [values]}: obstacles (1.5 tau) and online (2 tau) end figures."""
-    out = {'obstacles_end': [], 'obstacles_speed': [], 'online_end': [], 'online_speed': [],
-           'recordings': 0}
+    out = {'obstacles_end': [], 'obstacles_speed': [], 'obstacles_later': [], 'online_end': [],
+           'online_speed': [], 'recordings': 0}
     chosen = [rec for family, rec in recordings(True)
               if family in ('LASA ends moving', 'LASA abrupt stop', 'drawn strokes', '3D shapes')]
     for rec in chosen[::2 if quick else 1]:
@@ -253,14 +253,44 @@ def obstacle_and_online_figures(quick):
             free = skill.generalize(start, goal)
             size = np.max(np.linalg.norm(free.x - goal, axis=1))
             obstacles = _obstacles_on(free.x, goal, size)
-            tr = skill.generalize(start, goal, obstacles=obstacles)
-            out['obstacles_end'].append(float(np.linalg.norm(tr.x[-1] - goal) / size))
-            out['obstacles_speed'].append(float(np.linalg.norm(tr.v[-1]) * skill.tau / size))
+            # To 2.5 tau; the plan's own end is at 1.5 tau (OBSTACLE_MARGIN).
+            tr = skill.generalize(start, goal, obstacles=obstacles, margin=1.5)
+            k = int(round((len(tr.t) - 1) * (1.0 + OBSTACLE_MARGIN) / 2.5))
+            out['obstacles_end'].append(float(np.linalg.norm(tr.x[k] - goal) / size))
+            out['obstacles_speed'].append(float(np.linalg.norm(tr.v[k]) * skill.tau / size))
+            out['obstacles_later'].append(float(np.max(np.linalg.norm(tr.x[k:] - goal, axis=1))
+                                                / size))
             run = skill.online(start, goal)
             _, x, v, _ = run.run(2.0 * skill.tau)
             out['online_end'].append(float(np.linalg.norm(x[-1] - goal) / size))
             out['online_speed'].append(float(np.linalg.norm(v[-1]) * skill.tau / size))
     return out
+
+
+#: The remedies (docs/design.md#coming-to-rest) that ``--ablation`` turns off one by one.
+REMEDIES = ('gate', 'hoffmann', 'retime', 'end')
+#: The configurations of the ablation table, by the remedies they keep.
+ABLATION = (('none (as before)', ()), ('gate', ('gate',)),
+            ('gate, Hoffmann', ('gate', 'hoffmann')),
+            ('gate, Hoffmann, re-timed ends', ('gate', 'hoffmann', 'retime')),
+            ('gate, Hoffmann, end condition', ('gate', 'hoffmann', 'end')),
+            ('all four (this code)', REMEDIES))
+
+
+def keep_only(remedies):
+    """Turn off the remedies not in ``remedies`` in this process (for the ablation table)."""
+    from etdmp_ros.dmp import _forcing_term, _retime, _skill
+    if 'gate' not in remedies:
+        _forcing_term.gate = lambda s, alpha, width=None: np.ones(np.shape(s))
+    if 'hoffmann' not in remedies:      # Hoffmann's own term, K s (gated if the gate is kept)
+        gate = _forcing_term.gate
+        _forcing_term.hoffmann_term = lambda s, K, D, alpha: np.asarray(s) * gate(s, alpha)
+    if 'retime' not in remedies:
+        _skill.come_to_rest = lambda t, y, q: (t, y, q, _retime.Retiming(0.0, 0.0, t))
+    if 'end' not in remedies:
+        fit = _forcing_term.ForcingTerm.fit
+        _forcing_term.ForcingTerm.fit = lambda self, s, f, regularization=1e-8, end=None: fit(
+            self, s, f, regularization)
 
 
 def measure(quick):
@@ -312,16 +342,18 @@ def report(now, before=None):
               f"{_cell(o, ob, 'omega_2tau', 1)} |"]
     p, pb = now['obstacles_online'], before['obstacles_online'] if before else None
     lines += ['', '| moving ends, other start | n | distance at the end, % of size | '
-              'speed there, % of size per tau |', '|---|---|---|---|',
+              'speed there, % of size per tau | farthest after the end, to 2.5 tau |',
+              '|---|---|---|---|---|',
               f"| two obstacles on the path, at 1.5 tau | {2 * p['recordings']} | "
-              f"{_cell(p, pb, 'obstacles_end', 100)} | {_cell(p, pb, 'obstacles_speed', 100)} |",
+              f"{_cell(p, pb, 'obstacles_end', 100)} | {_cell(p, pb, 'obstacles_speed', 100)} | "
+              f"{_cell(p, pb, 'obstacles_later', 100)} |",
               f"| online (`Skill.online`), at 2 tau | {2 * p['recordings']} | "
-              f"{_cell(p, pb, 'online_end', 100)} | {_cell(p, pb, 'online_speed', 100)} |"]
+              f"{_cell(p, pb, 'online_end', 100)} | {_cell(p, pb, 'online_speed', 100)} | |"]
     return '\n'.join(lines)
 
 
 def missed(now):
-    """Return the targets missed (empty when every figure is within its target)."""
+    """List the targets not met; empty when every figure is within its target."""
     out = []
     for family, row in now['positions'].items():
         for key in ('after', 'at_2tau', 'speed'):
@@ -334,16 +366,36 @@ def missed(now):
     return out
 
 
+def ablation(quick):
+    """Return the ablation table: each configuration measured in a subprocess of its own."""
+    lines = ['| remedies kept | after tau, % of size: LASA as recorded | ends moving | '
+             'abrupt stop | 3D shapes | reproduction nRMSE, LASA as recorded | orientation '
+             'at tau, degrees |', '|---|---|---|---|---|---|---|']
+    for label, kept in ABLATION:
+        with tempfile.TemporaryDirectory(prefix='bench_rest_') as tmp:
+            out = Path(tmp) / 'figures.json'
+            subprocess.run([sys.executable, __file__, '--measure-only', str(out), '--keep',
+                            ','.join(kept)] + (['--quick'] if quick else []), check=True)
+            f = json.loads(out.read_text())
+        rows = f['positions']
+        cells = [_median_worst(rows[family]['after'], 100) for family in
+                 ('LASA as recorded', 'LASA ends moving', 'LASA abrupt stop', '3D shapes')]
+        lines.append(f"| {label} | {' | '.join(cells)} | "
+                     f"{_median_worst(rows['LASA as recorded']['rep_clock'])} | "
+                     f"{_median_worst(f['orientation']['angle_tau'])} |")
+    return '\n'.join(lines)
+
+
 def _before(revision, quick):
-    """Measure the code of ``revision`` in a subprocess; return its figures."""
+    """Measure the code of git ``revision`` in a subprocess; return its figures."""
     with tempfile.TemporaryDirectory(prefix='bench_rest_') as tmp:
         archive = subprocess.run(['git', 'archive', revision, 'etdmp_ros'], cwd=REPO,
                                  capture_output=True, check=True).stdout
         subprocess.run(['tar', '-x', '-C', tmp], input=archive, check=True)
         out = Path(tmp) / 'figures.json'
         env = dict(os.environ, PYTHONPATH=tmp + os.pathsep + os.environ.get('PYTHONPATH', ''))
-        cmd = [sys.executable, __file__, '--measure-only', str(out)] + (['--quick'] if quick
-                                                                       else [])
+        cmd = [sys.executable, __file__, '--measure-only', str(out)]
+        cmd += ['--quick'] if quick else []
         subprocess.run(cmd, env=env, check=True)
         return json.loads(out.read_text())
 
@@ -355,9 +407,14 @@ def main(argv=None):
     parser.add_argument('--before', metavar='REV', help='also measure the code of git REV')
     parser.add_argument('--json', type=Path, help='also write the figures here')
     parser.add_argument('--publish', action='store_true', help='write the table into the docs')
+    parser.add_argument('--ablation', action='store_true',
+                        help='also: what each remedy contributes (a run per configuration)')
     parser.add_argument('--measure-only', type=Path, help=argparse.SUPPRESS)
+    parser.add_argument('--keep', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.measure_only:
+        if args.keep is not None:
+            keep_only(set(filter(None, args.keep.split(','))))
         args.measure_only.write_text(json.dumps(measure(args.quick)))
         return 0
     load = os.getloadavg()[0]
@@ -369,6 +426,9 @@ def main(argv=None):
           + (f", {before['seconds']:.0f} s for {args.before}" if before else ''))
     for line in missed(now) or ['every target met']:
         print(line)
+    if args.ablation:
+        table += '\n\nWhat each remedy contributes (median / worst):\n\n' + ablation(args.quick)
+        print(table[table.index('What each'):])
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({'now': now, 'before': before}))
