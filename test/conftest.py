@@ -33,6 +33,7 @@ _DOMAIN_IDS = itertools.count(1 + os.getpid() % 50)
 SUITES = {
     'unit': ('test_bag', 'test_cli', 'test_controller_sim', 'test_demos', 'test_dmp_core',
              'test_docs', 'test_dmp_obstacles', 'test_dmp_online', 'test_dmp_orientation',
+             'test_dmp_rest',
              'test_dmp_similarity', 'test_dmp_skill', 'test_flake8', 'test_guide',
              'test_ik', 'test_metrics', 'test_package_xml', 'test_paper_reproduction',
              'test_pep257', 'test_planning',
