@@ -104,22 +104,28 @@ def _held(values, scale, tolerance, from_end):
     return int(np.argmin(order)) if not np.all(order) else len(values)
 
 
-def _span(tm, slopes, scales, duration, k):
+def _span(tm, values, scales, duration, k):
     """
     Return the samples (i, j) of ``tm`` that the stretch at end ``k`` (0 or -1) covers, or None.
 
-    The end's speed is the highest of any channel (``slopes`` at the motion's times ``tm``,
-    each divided by its ``scales``) within END_WINDOW of it. The stretch covers W = W'/2 of the
+    The end's speed is the distance the recording travels in its last (first) END_WINDOW of
+    the duration, per time, in the channel where it is largest (``values`` at the motion's times
+    ``tm``, each divided by its ``scales``): a smooth arrival travels little there (a
+    minimum-jerk one 3 % of a size per duration), a pen lifted while moving or a hand that
+    halts within a few samples travels its full speed. The stretch covers W = W'/2 of the
     recording, taken to whole sample intervals (none: not re-timed) and at most a quarter of the
     motion (so the two stretches never meet).
     """
-    near = np.abs(tm - tm[k]) <= END_WINDOW * duration
-    speed = max(float(np.max(np.linalg.norm(m[near], axis=1))) * duration / s
-                for m, s in zip(slopes, scales))
+    sign = 1.0 if k == 0 else -1.0          # inwards from the end
+    window = min(END_WINDOW * duration, 0.5 * (tm[-1] - tm[0]))
+    inner = tm[k] + sign * window
+    speed = 0.0
+    for v, s in zip(values, scales):
+        there = np.array([np.interp(inner, tm, v[:, i]) for i in range(v.shape[1])])
+        speed = max(speed, float(np.linalg.norm(v[k] - there)) / window * duration / s)
     wanted = 0.5 * MAX_STRETCH * duration * float(np.sqrt(np.clip(
         (speed - MIN_SPEED) / (FULL_SPEED - MIN_SPEED), 0.0, 1.0)))
     edge = k % len(tm)
-    sign = 1.0 if k == 0 else -1.0
     j = int(np.argmin(np.abs(tm - (tm[k] + sign * min(wanted, 0.25 * (tm[-1] - tm[0]))))))
     return None if j == edge or wanted <= 0.0 else (min(edge, j), max(edge, j))
 
@@ -158,10 +164,10 @@ def come_to_rest(t, positions, orientations=None):
         return unchanged
     motion = slice(first, last + 1)
     tm = t[motion]
-    slopes = [np.gradient(v[motion], tm, axis=0, edge_order=2) for v in channels]
-    spans = [_span(tm, slopes, scales, duration, k) for k in (0, -1)]
+    spans = [_span(tm, [v[motion] for v in channels], scales, duration, k) for k in (0, -1)]
     if spans == [None, None]:
         return unchanged
+    slopes = [np.gradient(v[motion], tm, axis=0, edge_order=2) for v in channels]
     period = duration / (T - 1)
     recorded_times = np.array(t, dtype=float)
     pieces_t, pieces = [], [[] for _ in channels]
