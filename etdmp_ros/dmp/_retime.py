@@ -16,8 +16,9 @@ with ``u`` the new time: the speed is the recording's at the stretch's beginning
 acceleration: ``p'(0) = 0``) and reaches zero at its end with no jerk (``p ~ (1 - r)^4``). The
 stretch lasts ``W'`` in the new time and covers ``W = W' / 2`` of the recording (the integral
 of ``p`` is 1/2), so the duration grows by ``W``. ``W'`` grows with the end's speed (a faster end
-slows down over a longer stretch) up to ``MAX_STRETCH`` of the duration; an end already at rest
-(slower than ``MIN_SPEED``) is left as it was, so such demonstrations learn exactly as before.
+slows down over a longer stretch), ``W' = MAX_STRETCH T sqrt((nu - MIN_SPEED) / (FULL_SPEED -
+MIN_SPEED))`` up to ``MAX_STRETCH T``; an end already at rest (``nu <= MIN_SPEED``) is left as it
+was, so such demonstrations learn exactly as before.
 
 Samples the recording holds still at an end (a hand that halted, then waited) are not part of the
 motion: the speed is taken where the motion stops, and the hold stays after the slowed stretch.
@@ -34,14 +35,14 @@ from . import _quaternion as quat
 
 #: Longest slowed stretch, in the new time, as a fraction of the recording's duration.
 MAX_STRETCH = 0.1
-#: An end's speed is the highest within this fraction of the duration from it (a hand that
-#: halts within a few samples is moving there).
+#: An end's speed ``nu``: the distance travelled over this fraction of the duration from it,
+#: per time (a hand that halts within a few samples is moving there; a smooth arrival is not).
 END_WINDOW = 0.01
 #: An end speed (sizes per duration; for orientations ANGLE_SIZE per duration) at which the
-#: stretch reaches MAX_STRETCH; slower ends slow down over proportionally shorter stretches.
+#: stretch reaches MAX_STRETCH; slower ends slow down over shorter stretches.
 FULL_SPEED = 1.0
-#: Ends at most this fast (same units) are at rest: not re-timed (the gate alone brings what
-#: little motion they have to rest within 0.2 % of the size).
+#: Ends at most this fast (same units) are at rest: not re-timed (the gate and the fit's end
+#: condition bring what little motion they have to rest).
 MIN_SPEED = 0.05
 #: The angle (rad) that counts as an orientation's size: 0.1 degree of it is about what 0.5 %
 #: of the size is for positions.
