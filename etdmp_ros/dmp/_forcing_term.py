@@ -99,8 +99,7 @@ def hoffmann_term(s, K, D, alpha):
     smootherstep from 1 to 0 at tau: the offset is carried to 0 at tau, the plan up to then is
     Hoffmann's own, and from tau on the term is 0 (docs/design.md#coming-to-rest).
     """
-    u, rho = _hoffmann_table(float(K), float(D), float(alpha))
-    return np.interp(_time(s, alpha), u, rho, right=0.0)
+    return ForcingTerm(2, alpha, K, D).phase_term(s)
 
 
 @lru_cache(maxsize=16)
@@ -149,19 +148,31 @@ class ForcingTerm:
         self.widths = 1.0 / np.append(gaps, gaps[-1]) ** 2
         self.weights = np.zeros((self.n_basis, 0))
         self._tables = OrderedDict()    # timing -> (s_mid, f(s_mid), s_out, f(s_out))
+        self._hoffmann = None           # (u, rho / K) of Hoffmann's term, made when first used
+        # Phases above these: the gate is 1, Hoffmann's term is his own (K s).
+        self._s_gate = float(np.exp(-self.alpha * (1.0 - GATE_WIDTH)))
+        self._s_hoffmann = float(np.exp(-self.alpha * (1.0 - HOFFMANN_WIDTH)))
 
     def phase_term(self, s):
         """Return Hoffmann's phase term ``rho(s) / K`` (:func:`hoffmann_term`), shape (n,)."""
-        return hoffmann_term(s, self.K, self.D, self.alpha)
+        s = np.asarray(s, dtype=float)
+        if s.size and s.min() >= self._s_hoffmann:     # Hoffmann's own: an online step's case
+            return s
+        if self._hoffmann is None:
+            self._hoffmann = _hoffmann_table(self.K, self.D, self.alpha)
+        u, rho = self._hoffmann
+        return np.where(s >= self._s_hoffmann, s, np.interp(_time(s, self.alpha), u, rho,
+                                                            right=0.0))
 
     def design_matrix(self, s):
         """Regressors ``s G(s) psi_i(s) / sum_j psi_j(s)`` for phases ``s`` (shape (n, N))."""
         s = np.asarray(s, dtype=float)
         psi = np.exp(-self.widths * (s[:, None] - self.centres) ** 2)
+        # Before the gate closes (an online step's case) it is 1: skip it.
+        gated = s if s.size and s.min() >= self._s_gate else s * gate(s, self.alpha)
         # Kernels never all vanish inside [exp(-alpha), 1]; the floor guards phases far past it
         # (where the gate is 0 anyway).
-        return (s * gate(s, self.alpha))[:, None] * psi / np.maximum(
-            psi.sum(axis=1, keepdims=True), 1e-300)
+        return gated[:, None] * psi / np.maximum(psi.sum(axis=1, keepdims=True), 1e-300)
 
     def fit(self, s, f_target, regularization=1e-8, end=None):
         """

@@ -284,7 +284,8 @@ def keep_only(remedies):
         _forcing_term.gate = lambda s, alpha, width=None: np.ones(np.shape(s))
     if 'hoffmann' not in remedies:      # Hoffmann's own term, K s (gated if the gate is kept)
         gate = _forcing_term.gate
-        _forcing_term.hoffmann_term = lambda s, K, D, alpha: np.asarray(s) * gate(s, alpha)
+        _forcing_term.ForcingTerm.phase_term = lambda self, s: np.asarray(s) * gate(s,
+                                                                                   self.alpha)
     if 'retime' not in remedies:
         _skill.come_to_rest = lambda t, y, q: (t, y, q, _retime.Retiming(0.0, 0.0, t))
     if 'end' not in remedies:
