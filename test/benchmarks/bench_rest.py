@@ -284,8 +284,10 @@ def keep_only(remedies):
         _forcing_term.gate = lambda s, alpha, width=None: np.ones(np.shape(s))
     if 'hoffmann' not in remedies:      # Hoffmann's own term, K s (gated if the gate is kept)
         gate = _forcing_term.gate
-        _forcing_term.ForcingTerm.phase_term = lambda self, s: np.asarray(s) * gate(s,
-                                                                                   self.alpha)
+
+        def own(self, s):
+            return np.asarray(s) * gate(s, self.alpha)
+        _forcing_term.ForcingTerm.phase_term = own
     if 'retime' not in remedies:
         _skill.come_to_rest = lambda t, y, q: (t, y, q, _retime.Retiming(0.0, 0.0, t))
     if 'end' not in remedies:
