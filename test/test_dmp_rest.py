@@ -116,6 +116,24 @@ def test_a_1d_recording_ending_moving_comes_to_rest():
                            np.array([y[-1]]), method)
 
 
+def test_a_hand_led_stir_as_recorded_comes_to_rest_from_every_octant():
+    # The kinesthetic recording's path (etdmp_ros.kinesthetic.hand_stir, trimmed to the motion
+    # as dmp_server trims a bag) with 20 um of sensor noise; through the simulation and a bag:
+    # test_kinesthetic.py.
+    from etdmp_ros.kinesthetic import hand_stir
+    from etdmp_ros.skill_library import _motion_span
+    t, positions = hand_stir([0.75, -0.2, 0.3], [0.7, -0.3, 0.2])
+    positions = positions + np.random.default_rng(0).normal(0.0, 2e-5, positions.shape)
+    first, last = _motion_span(positions)
+    y, t = positions[first:last + 1], t[first:last + 1]
+    for formulation in ('ijspeert', 'hoffmann'):
+        skill = learn(y, t=t, formulation=formulation)
+        starts = starts_around(y[0], y[-1])
+        for mode in (1, 2):
+            assert_at_rest(skill, starts, y[-1], 'etdmp', mode=mode)
+        assert_at_rest(skill, starts, y[-1], 'dmp')
+
+
 # ---------------------------------------------------------------------- what the fix keeps
 
 def _on_learned_clock(skill, traj):
