@@ -29,7 +29,7 @@ help:
 	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-obstacles|bench-obstacle_volumes|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
+	@echo "                one of them: make bench-core|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
 	@echo "make bench-two-hosts  the system across two network namespaces (root): rates, latency, link cut"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
@@ -58,7 +58,7 @@ ros-tools: $(STAMP)
 	@test -f $(ROS_STAMP) -a $(ROS_STAMP) -nt requirements-ros.txt -a $(ROS_STAMP) -nt tools/ros_tools.py \
 	  || $(VENV_PY) tools/ros_tools.py --from "$(ROS_TOOLS)" --stamp $(ROS_STAMP)
 
-# Headless Chromium and its WebDriver for test/test_teach_page.py: Debian's chromium and
+# Headless Chromium and its WebDriver for test/system/test_teach_page.py: Debian's chromium and
 # chromium-driver, installed with apt-get when missing and this is root; otherwise (or when apt
 # fails) the test skips and says why.
 BROWSER_PACKAGES := chromium chromium-driver
@@ -149,6 +149,11 @@ bench: $(addprefix bench-,$(BENCHMARKS))
 # Record a stir by hand, learn it, repeat it (issue 16; needs no peer library).
 bench-kinesthetic: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_kinesthetic.py $(BENCH_ARGS)
+
+# Every plan at rest at its goal past tau, on recordings that start or end moving (issue 24;
+# needs no peer library). BENCH_ARGS="--before REV" adds the code of git REV beside it.
+bench-rest: $(STAMP)
+	$(VENV_PY) test/benchmarks/bench_rest.py $(BENCH_ARGS)
 
 # The closed loop as `make demo` runs it, idle and next to a busy core (needs no peer library).
 bench-system: $(STAMP)

@@ -6,9 +6,10 @@ Notation (the paper's symbols, used in every module here):
 - ``x``, ``v = tau dx/dt``: position and scaled velocity of the transformation system;
   ``x0``, ``g``: start and goal; ``K``, ``D``: stiffness and damping (Table 1: 156.25, 25).
 - ``tau``: duration scale; ``s``: phase, ``tau ds/dt = -alpha s``, ``s(0) = 1``.
-- ``f(s) = s sum_i psi_i(s) w_i / sum_i psi_i(s)``: forcing term, with
+- ``f(s) = s G(s) sum_i psi_i(s) w_i / sum_i psi_i(s)``: forcing term, with
   ``tau dv/dt = K (g - x) - D v + (g - x0) f(s)`` (Ijspeert; docs/design.md#dmp-formulations) or
-  ``tau dv/dt = K (g - x) - D v - K (g - x0) s + K f(s)`` (Hoffmann).
+  ``tau dv/dt = K (g - x) - D v - K (g - x0) s + K f(s)`` (Hoffmann); ``G`` the gate that ends
+  the forcing at tau, and Hoffmann's ``K s`` made to end there too (docs/design.md#coming-to-rest).
 - ``I_D = x0_D - g_D``, ``I_C = x0_C - g_C``: demonstrated and current start relative to the goal;
   ``R``: the Euclidean transform turning ``I_C`` onto the direction of ``I_D``;
   ``theta``: its angle;

@@ -498,7 +498,8 @@ class OnlineRun:
         theta_mid = (theta[:, None] + self._h * (np.arange(sub) + 0.5)).ravel()
         s_mid = np.exp(-skill.alpha * theta_mid / self.tau)
         s_out = np.exp(-skill.alpha * (theta + self.dt) / self.tau)
-        return s_mid, skill.forcing(s_mid), s_out, skill.forcing(s_out)
+        term = skill.forcing.phase_term     # Hoffmann's phase term, as in the skill's table
+        return term(s_mid), skill.forcing(s_mid), term(s_out), skill.forcing(s_out)
 
     def warm(self):
         """Build the forcing table :meth:`run` reads (~10 ms once per timing), so it is fast."""
@@ -624,6 +625,7 @@ class OnlineRun:
                                 self._theta + rate * self.dt * np.arange(samples + 1)])
         s = np.exp(-skill.alpha * theta / self.tau)
         f = skill.forcing(s)
+        s = skill.forcing.phase_term(s)     # Hoffmann's phase term, as in the skill's table
         step = self._steps.get(tau)
         if step is None:
             step = discretize(skill.K, skill.D, tau, self._h)

@@ -113,9 +113,10 @@ class OrientationDMP:
         edd = np.gradient(ed, t, axis=0, edge_order=2)
         s = phase(t, tau, alpha)
         target = tau ** 2 * edd + D * tau * ed + K * e
-        self.forcing = ForcingTerm(n_basis, alpha)
+        self.forcing = ForcingTerm(n_basis, alpha, K, D)
         with np.errstate(all='ignore'):
-            self.forcing.fit(s, target, regularization)
+            # The reproduction ends at its goal orientation, at rest (design.md#coming-to-rest).
+            self.forcing.fit(s, target, regularization, end=(self.e_start, 1.0, None))
         self._reproductions = OrderedDict()
 
     # -- rollout in the virtual situation ---------------------------------------------------

@@ -4,6 +4,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from etdmp_ros import limits
+from etdmp_ros.geometry import quaternion as quat
 import numpy as np
 
 from ._demos import Demonstration
@@ -14,6 +15,7 @@ from ._integrate import MAX_SUBSTEP, rollout
 from ._obstacles import ObstacleGains
 from ._online import OnlineRun
 from ._orientation import check_goal_orientation, OrientationDMP, turn_quaternions
+from ._retime import come_to_rest
 from ._transform import EPS, EuclideanTransform, transforms
 
 FORMULATIONS = ('ijspeert', 'hoffmann')
@@ -122,6 +124,11 @@ class Skill:
 
     def __init__(self, y, t, n_basis, K, D, alpha, formulation, regularization,
                  orientations=None):
+        if orientations is not None:
+            orientations = quat.continuous(orientations)
+        #: The demonstration as learned (``demo``, ``demo_t``): re-timed to start and end at rest
+        #: along its own path (docs/design.md#coming-to-rest); ``retiming`` says what changed.
+        t, y, orientations, self.retiming = come_to_rest(t, y, orientations)
         self.demo, self.demo_t = y, t
         self.K, self.D, self.alpha = K, D, alpha
         self.formulation = formulation
@@ -135,18 +142,24 @@ class Skill:
         if not self.size >= limits.MIN_DEMO_EXTENT:
             raise DemonstrationError(f'demonstration hardly moves: its extent {self.size:.3g} is '
                                      f'below MIN_DEMO_EXTENT = {limits.MIN_DEMO_EXTENT:g}')
-        self.forcing = ForcingTerm(n_basis, alpha)
+        self.forcing = ForcingTerm(n_basis, alpha, K, D)
         # Paper Eq. 6 with v = tau dx/dt: the forcing the demonstration needed at each sample.
         xd = np.gradient(y, t, axis=0, edge_order=2)
         xdd = np.gradient(xd, t, axis=0, edge_order=2)
         s = phase(t, self.tau, alpha)
         needed = self.tau ** 2 * xdd + D * self.tau * xd - K * (self.goal - y)
+        offset = self.goal - self.start
         if formulation == 'ijspeert':
             target = needed / self.size
+            end = (-offset, self.size, None)
         else:  # Hoffmann: tau dv = K(g - x) - D v - K (g - x0) s + K f(s)
-            target = (needed / K + (self.goal - self.start) * s[:, None]) / self.size
+            # Hoffmann's term, made to end at tau (_forcing_term.hoffmann_term).
+            target = (needed / K + offset * self.forcing.phase_term(s)[:, None]) / self.size
+            end = (-offset, K * self.size,
+                   lambda s_end: -K * offset * self.forcing.phase_term(s_end)[:, None])
         with np.errstate(all='ignore'):   # an overflow is reported just below, not warned of
-            self.forcing.fit(s, target, regularization)
+            # The reproduction ends at its goal at rest (docs/design.md#coming-to-rest).
+            self.forcing.fit(s, target, regularization, end=end)
             finite = np.all(np.isfinite(target)) and np.all(np.isfinite(self.forcing(s)))
         if not finite:
             raise DemonstrationError('learning this demonstration overflows (its coordinates or '

@@ -12,7 +12,7 @@ anything shuts down (``_spin.run``).
 
 ``ros2 run etdmp_ros bringup --host robot`` (or ``workstation``) runs the part of the system one
 computer of a lab runs (docs/two_hosts.md), ``--nodes ur10_sim,controller`` any part, as the
-launch file's ``host:=`` and ``nodes:=`` (:func:`etdmp_ros.system.select_nodes`).
+launch file's ``host:=`` and ``nodes:=`` (:func:`etdmp_ros.ros.system.select_nodes`).
 """
 
 import argparse

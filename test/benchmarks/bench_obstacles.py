@@ -9,10 +9,10 @@ movement-primitives is installed: its Hoffmann term is checked against ours); it
 
 Shapes (none of them the built-in demonstrations the defaults were chosen on): the 30 LASA
 handwriting shapes (demonstration 0), the Z as the teaching page draws it, 8 random 2D scribbles,
-and in 3D the helix, the figure eight, 8 random 3D scribbles (``test/shapes.py``). Each is learned
-once; for each of 3 starts (other quadrants/octants, 0.8-1.25 times the demonstrated distance)
-and 1, 2 and 3 obstacles, the obstacles are drawn on and near the obstacle-free ET-DMP plan
-(``shapes.obstacles_on_path``: radius 3-15 % of the plan's size, centre on the plan at 15-85 %
+and in 3D the helix, the figure eight, 8 random 3D scribbles (``test/support/shapes.py``). Each is
+learned once; for each of 3 starts (other quadrants/octants, 0.8-1.25 times the demonstrated
+distance) and 1, 2 and 3 obstacles, the obstacles are drawn on and near the obstacle-free ET-DMP
+plan (``shapes.obstacles_on_path``: radius 3-15 % of the plan's size, centre on the plan at 15-85 %
 of its arc length, moved sideways by up to one radius; start and goal kept clear). A second set
 of the same radii lies beside the plan, each at least its radius plus 3 % of the size from it
 ("far": it must change nothing).

@@ -15,9 +15,10 @@ Kinesthetic teaching (issue 16), through the installed ur10_sim and then the who
 
 import math
 
-from etdmp_ros.demo import kinesthetic, run as demo
-from etdmp_ros.demo.scenario import Scenario, TAUGHT_STIR_TURN_DEG
-from etdmp_ros.dmp import load_demo
+from etdmp_ros.demo.run import kinesthetic, run as demo
+from etdmp_ros.demo.run.scenario import Scenario, TAUGHT_STIR_TURN_DEG
+from etdmp_ros.dmp import learn, load_demo
+from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.robot import UR10Model
 from etdmp_ros.ros.processes import installed_command
 from etdmp_ros.skills.library import _motion_span, load_demonstration
@@ -88,6 +89,33 @@ def test_the_learned_demonstration_is_the_true_tool_path_trimmed_to_the_motion(t
     assert np.linalg.norm(recorded.positions[matched] - true, axis=1).max() < 1e-4
     speed = np.linalg.norm(np.diff(recorded.positions, axis=0), axis=1) / np.diff(recorded.t)
     assert max(speed[0], speed[-1]) < 0.1 * speed.max()      # from (near) rest to rest
+
+
+def test_the_skill_learned_from_the_recording_comes_to_rest_at_its_goal(taught):
+    """Issue 24 on a kinesthetic recording: every plan at its goal, at rest, also past tau."""
+    path, _, scenario = taught
+    recorded = load_demonstration(path, scenario.plane, kinematics=UR10Model(
+        tool_offset=scenario.scene['tool_offset']))
+    goal = recorded.positions[-1]
+    offset = np.linalg.norm(recorded.positions[0] - goal)
+    octants = np.array([[x, y, z] for x in (1, -1) for y in (1, -1) for z in (1, -1)])
+    starts = np.vstack([recorded.positions[0], goal + offset * octants / math.sqrt(3.0)])
+    for formulation in ('ijspeert', 'hoffmann'):
+        skill = learn(recorded, formulation=formulation)
+        for method, mode in (('etdmp', 1), ('etdmp', 2), ('dmp', 1)):
+            traj = skill.generalize(starts, goal, method=method, mode=mode, margin=1.0,
+                                    dt=skill.tau / 500)
+            dist = np.linalg.norm(traj.x - goal, axis=2)
+            k = (len(traj.t) - 1) // 2          # the sample at tau
+            size = dist[:, :k + 1].max(axis=1)
+            assert np.all(dist[:, k:].max(axis=1) <= 0.005 * size), (method, mode)
+            assert np.all(dist[:, -1] <= 0.001 * size)
+            assert np.all(np.linalg.norm(traj.v[:, -1], axis=1) * skill.tau <= 0.01 * size)
+        # Its recorded orientations: a goal orientation a half turn away, reached at tau.
+        q_goal = quat.multiply(quat.about_axis(np.array([0.0, 0.0, 1.0]), math.pi),
+                               recorded.orientations[-1])
+        traj = skill.generalize(starts[:3], goal, goal_orientation=q_goal, dt=skill.tau / 500)
+        assert np.all(np.degrees(quat.angle_between(traj.q[:, -1], q_goal[None])) <= 0.1)
 
 
 def test_the_robot_repeats_the_taught_stir_from_another_quadrant(taught, repeated):

@@ -12,7 +12,7 @@ the closed-form motion of a critically damped spring.
 import math
 
 from etdmp_ros.dmp import euclidean_transform, GeneralizationError
-from etdmp_ros.dmp._forcing_term import ForcingTerm, phase
+from etdmp_ros.dmp._forcing_term import ForcingTerm, gate, GATE_WIDTH, phase
 from etdmp_ros.dmp._integrate import rollout_reference
 import numpy as np
 import pytest
@@ -107,8 +107,27 @@ def test_kernels_are_normalised_and_spaced_evenly_in_time():
     times = -np.log(forcing.centres) / forcing.alpha
     assert np.allclose(times, np.linspace(0.0, 1.0, 30))
     s = phase(np.linspace(0.0, 1.0, 101), 1.0, 4.0)
-    # s * psi_i / sum_j psi_j summed over the kernels is s itself.
-    assert np.allclose(forcing.design_matrix(s).sum(axis=1), s, rtol=1e-12)
+    # s G(s) psi_i / sum_j psi_j summed over the kernels is the gated phase s G(s).
+    assert np.allclose(forcing.design_matrix(s).sum(axis=1), s * gate(s, 4.0), rtol=1e-12)
+
+
+def test_the_gate_ends_the_forcing_at_tau_smoothly():
+    # docs/design.md#coming-to-rest: G = 1 until (1 - GATE_WIDTH) tau, 0 from tau on, C2.
+    alpha = 4.0
+    t = np.linspace(0.0, 3.0, 30001)
+    g = gate(phase(t, 1.0, alpha), alpha)
+    assert np.all(g[t <= 1.0 - GATE_WIDTH] == 1.0)
+    assert np.all(g[t >= 1.0] == 0.0)
+    assert np.all(np.diff(g) <= 1e-12)
+    h = t[1] - t[0]
+    # The smootherstep's slopes: at most 15/8 / GATE_WIDTH per tau, 0 at both ends.
+    slope = np.diff(g) / h
+    assert np.max(np.abs(slope)) <= 1.875 / GATE_WIDTH * 1.001
+    assert abs(slope[np.searchsorted(t, 1.0 - GATE_WIDTH)]) < 1e-2
+    assert abs(slope[np.searchsorted(t, 1.0) - 1]) < 1e-2
+    forcing = ForcingTerm(30, alpha)
+    forcing.weights = np.random.default_rng(0).normal(size=(30, 2)) * 1e4
+    assert np.all(forcing(phase(t[t >= 1.0], 1.0, alpha)) == 0.0)
 
 
 def test_forcing_vanishes_with_the_phase_and_fits_a_smooth_target():

@@ -1,16 +1,15 @@
 """
 Obstacles with a size, avoided by the detour (docs/design.md#obstacles-with-a-size).
 
-Held-out shapes (LASA, random scribbles in 2D and 3D: ``test/shapes.py``), disks and balls of
-radius 3-15 % of the plan's size on and near the obstacle-free plan. What must hold: no sample
+Held-out shapes (LASA, random scribbles in 2D and 3D: ``test/support/shapes.py``), disks and balls
+of radius 3-15 % of the plan's size on and near the obstacle-free plan. What must hold: no sample
 and no segment between samples closer to a centre than its radius; far obstacles change nothing,
 bit for bit; the goal is reached and kept; ET-DMP and the plain DMP, 2D and 3D, batches and the
 online run with an obstacle that moves; a clearance that cannot be kept is refused, never
 returned; the numba loop agrees with its numpy reference.
 """
 
-from etdmp_ros.dmp import (AVOIDANCES, builtin_demo, GeneralizationError, learn,
-                           ObstacleGains)
+from etdmp_ros.dmp import AVOIDANCES, builtin_demo, GeneralizationError, learn, ObstacleGains
 from etdmp_ros.dmp._detour import (amplitude, amplitudes, bump, candidate_directions,
                                    check_clearance, Displacement, Obstacles)
 import numpy as np

@@ -437,7 +437,11 @@ def test_limits_leave_usable_demonstrations_alone():
     n = limits.MAX_DEMO_SAMPLES
     wave = np.column_stack([np.linspace(0.0, 8.0, n), np.sin(np.linspace(0.0, 6.0, n))])
     skill = learn(wave, t=np.linspace(0.0, limits.MAX_DEMO_DURATION, n))
-    assert skill.tau == limits.MAX_DEMO_DURATION
+    # The wave starts and ends moving: it is learned as slowing to rest (docs/design.md
+    # #coming-to-rest), which adds the re-timing's seconds to its duration.
+    assert skill.retiming.start > 0.0 and skill.retiming.end > 0.0
+    assert skill.tau == pytest.approx(limits.MAX_DEMO_DURATION + skill.retiming.start
+                                      + skill.retiming.end, rel=1e-12)
     big = learn(_WAVE / 8.0 * limits.MAX_DEMO_COORDINATE)
     traj = big.generalize(big.start, big.goal + 1.0)
     assert np.all(np.isfinite(traj.x))

@@ -77,10 +77,15 @@ def test_uneven_pointer_events_are_resampled_before_learning():
     assert demo.n_samples == round(drawing.duration / teaching.SAMPLE_PERIOD) + 1
     shown = teaching.generalizations(skill, CANVAS, PLANE)
     assert max(p['etdmp']['nrmse'] for p in shown['panels']) < 0.01
-    rollout = skill.generalize(skill.start, skill.goal).x
+    # The drawing sent (evenly in time) against the reproduction at each sample's time on the
+    # skill's clock: resampled linearly between sparse events, this drawing starts moving and
+    # is learned speeding up from rest there (docs/design.md#coming-to-rest).
+    rollout = skill.generalize(skill.start, skill.goal)
+    on_clock = np.stack([np.interp(skill.retiming.times, rollout.t, rollout.x[:, i])
+                         for i in range(2)], axis=1)
     drawn = PLANE.to_plane(CANVAS.to_base_link(drawing.points, PLANE))
-    drawn = teaching.uniform(drawing.t, drawn, len(rollout))
-    assert nrmse(rollout, drawn) < 0.01
+    drawn = teaching.uniform(drawing.t, drawn, demo.n_samples)
+    assert nrmse(on_clock, drawn) < 0.01
 
 
 def test_points_sharing_a_time_keep_the_last_and_strokes_are_joined_without_the_pause():
@@ -196,6 +201,56 @@ def test_the_generalizations_are_the_paper_s_fig5_for_the_drawing():
     by_quadrant = {p['quadrant']: p for p in shown['panels']}
     assert by_quadrant['III']['dmp']['nrmse'] < 0.01        # the DMP: only its own quadrant
     assert min(by_quadrant[q]['dmp']['nrmse'] for q in ('II', 'IV')) > 0.3
+
+
+#: Strokes drawn with the pen lifted while it still moves (issue 24), in canvas pixels: the Z
+#: lifted half way along its last part, a circle and a spiral drawn at speed to the end.
+_CIRCLE = np.linspace(0.0, 1.8 * math.pi, 90)
+_SPIRAL = np.linspace(0.0, 4.0 * math.pi, 150) ** 1.3
+LIFTED = {
+    'Z lifted': letter_z()[:63],
+    'circle': np.c_[320 + 120 * np.cos(_CIRCLE), 240 + 120 * np.sin(_CIRCLE)],
+    'spiral': np.c_[320 + (30 + 10 * _SPIRAL) * np.cos(_SPIRAL) / 3,
+                    240 + (30 + 10 * _SPIRAL) * np.sin(_SPIRAL) / 3],
+}
+
+
+@pytest.mark.parametrize('name', list(LIFTED))
+def test_a_stroke_lifted_while_moving_is_learned_coming_to_rest(name):
+    """A drawing that ends (or starts) at speed: every plan still ends at its goal, at rest."""
+    drawing = teaching.parse_drawing(request('S', [stroke(LIFTED[name])]), CANVAS)
+    demo, skill = teaching.learn_drawing(drawing, CANVAS, PLANE)
+    assert skill.retiming.end > 0.0     # learned as slowing to rest along its own path
+    goal = skill.goal
+    offset = skill.start - goal
+    for method in ('etdmp', 'dmp'):
+        for k in range(4):              # a start in each quadrant, as the page shows
+            c, s = math.cos(k * math.pi / 2), math.sin(k * math.pi / 2)
+            start = goal + (1.0 + 0.2 * k) * np.array([[c, -s], [s, c]]) @ offset
+            try:
+                traj = skill.generalize(start, goal, method=method, margin=1.0)
+            except ValueError as err:   # the plain DMP's division by ~0 (a closed stroke)
+                assert method == 'dmp' and 'plain DMP cannot' in str(err)
+                continue
+            dist = np.linalg.norm(traj.x - goal, axis=1)
+            n = (len(traj.t) - 1) // 2
+            size = dist[:n + 1].max()
+            assert dist[n:].max() <= 0.005 * size, (method, k)      # after tau
+            assert dist[-1] <= 0.001 * size and np.linalg.norm(traj.v[-1]) * skill.tau <= \
+                0.01 * size, (method, k)                            # at 2 tau
+    # The path drawn is the path learned: the drawn samples outside the slowed stretches are
+    # learned as they are, at their re-timed times; those inside lie on the curve through
+    # them (sampled finer: between its samples, within 0.5 mm).
+    times, drawn = skill.retiming.times, demo.positions
+    index = np.minimum(np.searchsorted(skill.demo_t, times), len(skill.demo_t) - 1)
+    kept = np.abs(skill.demo_t[index] - times) <= 1e-12
+    assert kept.mean() > 0.8 and np.array_equal(skill.demo[index[kept]], drawn[kept])
+    between = np.stack([np.interp(times, skill.demo_t, skill.demo[:, i]) for i in range(2)], 1)
+    assert np.max(np.linalg.norm(between - drawn, axis=1)) * PLANE.scale < 5e-4
+    # A Z drawn to rest at its end is not re-timed there.
+    _, at_rest = teaching.learn_drawing(teaching.parse_drawing(request('Z'), CANVAS), CANVAS,
+                                        PLANE)
+    assert at_rest.retiming.end == 0.0
 
 
 def test_a_closed_stroke_shows_why_the_plain_dmp_refuses_it():
