@@ -20,6 +20,7 @@ import subprocess
 import sys
 import time
 
+from etdmp_ros.ros import fastdds_files
 from etdmp_ros.ros.processes import isolated_environment, NodeProcess, sourced
 from etdmp_ros.ros.spin import DDS_PROFILE_VARIABLES
 import numpy as np
@@ -134,13 +135,18 @@ class Background(NodeProcess):
             self._signal(signal.SIGINT, group)
 
     def wait(self, timeout=10.0):
-        """Wait for the exit, then kill the group (stragglers too); return the exit code."""
+        """
+        Wait for the exit, then kill the group (stragglers too); return the exit code.
+
+        The Fast DDS shared-memory files of what was killed are removed.
+        """
         try:
             self.process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             pass
         self._signal(signal.SIGKILL)
         self.process.wait()
+        fastdds_files.clean()
         self._log.close()
         return self.process.returncode
 
