@@ -109,11 +109,11 @@ def launch(ros2, name):
 
 def write(ros2, process):
     """Call /generalize from the tool to the perceived goal; wait for the end of the path."""
+    before = len(process.log())
     ros2.run('ros2 service call /generalize nav_msgs/srv/GetPlan "{}"', timeout=120)
-    log = process.log
 
     def ended():
-        text = log()
+        text = process.log()[before:]
         return ('[controller]: path tracked' in text or 'status: stale-input' in text
                 or 'status: unreachable' in text or 'status: halted' in text)
     wait_for(ended, 120, 'the end of the path', process)
@@ -124,6 +124,13 @@ def kill_group(process):
     """SIGKILL ``ros2 launch`` and every node it started (a crash of the whole terminal)."""
     os.killpg(process.pid, signal.SIGKILL)
     process.process.wait()      # not Background.wait(): it would remove what they left
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:      # the nodes: gone once their group is empty
+        try:
+            os.killpg(process.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
 
 
 def figures(text):
