@@ -114,6 +114,8 @@ def write(ros2, process):
 
     def ended():
         text = process.log()[before:]
+        moving = text.find('[controller]: status: approaching')
+        text = text[moving:] if moving >= 0 else ''
         return ('[controller]: path tracked' in text or 'status: stale-input' in text
                 or 'status: unreachable' in text or 'status: halted' in text)
     wait_for(ended, 120, 'the end of the path', process)
