@@ -124,3 +124,73 @@ def test_lock_owners_and_mappers_name_the_processes(tmp_path):
         finally:
             view.close()
     assert lock.stat().st_ino not in lock_owners(tmp_path)
+
+
+# ----------------------------------------------------------------- which profile a process gets
+
+def _profile_name(monkeypatch, shared_memory, **env):
+    from etdmp_ros.nodes._spin import dds_profile
+    for name in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_LOCALHOST_ONLY', 'ROS_STATIC_PEERS',
+                 'FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE',
+                 'ETDMP_DDS_PROFILE', 'RMW_IMPLEMENTATION'):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    path = dds_profile(shared_memory)
+    return None if path is None else path.name
+
+
+def test_the_control_loop_gets_udp_the_image_processes_shared_memory(monkeypatch):
+    assert _profile_name(monkeypatch, False) == 'fastdds_udp.xml'
+    assert _profile_name(monkeypatch, True) == 'fastdds.xml'
+    local = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    assert _profile_name(monkeypatch, False, **local) == 'fastdds_udp_localhost.xml'
+    assert _profile_name(monkeypatch, True, **local) == 'fastdds_localhost.xml'
+    assert _profile_name(monkeypatch, False, ROS_LOCALHOST_ONLY='1') == 'fastdds_udp_localhost.xml'
+    # Static peers cannot be written into a fixed file: rmw_fastrtps's LOCALHOST then applies.
+    assert _profile_name(monkeypatch, False, ROS_STATIC_PEERS='10.0.0.2', **local) == \
+        'fastdds_udp.xml'
+    # A profile the user names is theirs; the package's own choice (marked) is chosen again.
+    assert _profile_name(monkeypatch, False, FASTRTPS_DEFAULT_PROFILES_FILE='/x.xml') is None
+    assert _profile_name(monkeypatch, True, FASTRTPS_DEFAULT_PROFILES_FILE='/a/fastdds_udp.xml',
+                         ETDMP_DDS_PROFILE='/a/fastdds_udp.xml') == 'fastdds.xml'
+    assert _profile_name(monkeypatch, True, RMW_IMPLEMENTATION='rmw_cyclonedds_cpp') is None
+
+
+def test_localhost_discovery_is_handed_to_the_profile_only_during_init(monkeypatch):
+    from etdmp_ros.nodes import _spin
+    monkeypatch.setattr(fastdds_files, 'clean', lambda: ['fastrtps_x'])
+    _profile_name(monkeypatch, False, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    with _spin.dds_settings(shared_memory=False) as removed:
+        assert removed == ['fastrtps_x']
+        assert os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SYSTEM_DEFAULT'
+        assert os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'].endswith(
+            'fastdds_udp_localhost.xml')
+    assert os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+
+
+def test_the_localhost_profiles_are_the_others_with_localhost_discovery():
+    """Each *_localhost.xml is its base file plus rmw_fastrtps's LOCALHOST settings."""
+    import xml.etree.ElementTree as ElementTree
+    from etdmp_ros._paths import config_path
+    ns = '{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}'
+
+    def parts(name):
+        root = ElementTree.parse(config_path(name)).getroot()
+        transports = {d.find(f'{ns}transport_id').text: {c.tag: c.text for c in d}
+                      for d in root.iter(f'{ns}transport_descriptor')}
+        rtps = root.find(f'{ns}participant/{ns}rtps')
+        used = [t.text for t in rtps.find(f'{ns}userTransports')]
+        return transports, used, rtps.find(f'{ns}builtin'), rtps
+    for base in ('fastdds.xml', 'fastdds_udp.xml'):
+        transports, used, builtin, _ = parts(base)
+        local, local_used, local_builtin, rtps = parts(base.replace('.xml', '_localhost.xml'))
+        assert builtin is None and local_used == used
+        assert local['etdmp_udpv4'].pop(f'{ns}maxInitialPeersRange') == '32'
+        assert local == transports
+        assert [e.tag for e in local_builtin] == [f'{ns}metatrafficUnicastLocatorList',
+                                                  f'{ns}initialPeersList']
+        peers = [a.text for a in local_builtin.iter(f'{ns}address')]
+        assert peers == ['127.0.0.1']
+        assert rtps.find(f'{ns}useBuiltinTransports').text == 'false'
+    assert 'etdmp_shm' not in parts('fastdds_udp.xml')[0]
