@@ -23,39 +23,38 @@ import uuid
 from etdmp_ros.ros import fastdds_files
 
 #: Seconds between two looks at which files the suite's processes use.
-POLL = 0.25
+POLL = 0.5
 SESSION_VARIABLE = 'ETDMP_TEST_SESSION'
 _PR_SET_CHILD_SUBREAPER = 36
 
 
-def _parents():
-    """Return ``{pid: (ppid, state)}`` of every process."""
-    table = {}
-    for entry in os.listdir('/proc'):
-        if not entry.isdigit():
-            continue
-        try:
-            stat = Path(f'/proc/{entry}/stat').read_text()
-        except OSError:
-            continue
-        fields = stat[stat.rindex(')') + 2:].split()
-        table[int(entry)] = (int(fields[1]), fields[0])
-    return table
-
-
 def descendants(root):
     """Return the pids of the live (not zombie) processes below ``root``."""
-    table = _parents()
-    children = {}
-    for pid, (ppid, _) in table.items():
-        children.setdefault(ppid, []).append(pid)
     found, todo = set(), [root]
     while todo:
-        for child in children.get(todo.pop(), ()):
-            if child not in found:
-                found.add(child)
-                todo.append(child)
-    return {pid for pid in found if table[pid][1] != 'Z'}
+        pid = todo.pop()
+        try:
+            tasks = os.listdir(f'/proc/{pid}/task')
+        except OSError:
+            continue
+        for task in tasks:
+            try:    # /proc/<pid>/task/<tid>/children: the children each thread started
+                children = Path(f'/proc/{pid}/task/{task}/children').read_text().split()
+            except OSError:
+                continue
+            for child in map(int, children):
+                if child not in found:
+                    found.add(child)
+                    todo.append(child)
+    return {pid for pid in found if _state(pid) not in ('Z', None)}
+
+
+def _state(pid):
+    try:
+        stat = Path(f'/proc/{pid}/stat').read_text()
+    except OSError:
+        return None
+    return stat[stat.rindex(')') + 2:].split()[0]
 
 
 def marked(token):
@@ -69,8 +68,7 @@ def marked(token):
                     pids.add(int(entry))
             except OSError:
                 continue
-    table = _parents()
-    return {pid for pid in pids if pid in table and table[pid][1] != 'Z'}
+    return {pid for pid in pids if _state(pid) not in ('Z', None)}
 
 
 def _describe(pid):
