@@ -117,7 +117,7 @@ def dds_settings(shared_memory=True):
     Prepare the middleware for an rclpy.init inside: the DDS profile, /dev/shm cleaned.
 
     Removes the shared-memory files of processes that died without cleaning up
-    (:func:`etdmp_ros.fastdds_files.clean`) and loads the package's profile
+    (:func:`etdmp_ros.ros.fastdds_files.clean`) and loads the package's profile
     (:func:`use_dds_profile`). Under localhost-only discovery rmw_fastrtps would add a
     shared-memory transport of its own to the profile's, so the profile carries the localhost
     discovery itself (config/fastdds*_localhost.xml) and rcl sees SYSTEM_DEFAULT inside this
@@ -267,7 +267,7 @@ def run(make_nodes, name, args=None, startup_errors=(), shared_memory=None):
     ParameterException (or one of ``startup_errors``) while creating the nodes is a bad
     configuration: logged as FATAL without a traceback, exit code 1. Returns the exit code.
     ``shared_memory``: see :func:`dds_profile`; None: as the system description says of the
-    node called ``name`` (:attr:`etdmp_ros.system.NodeSpec.shared_memory`; True for others).
+    node called ``name`` (:attr:`etdmp_ros.ros.system.NodeSpec.shared_memory`; True for others).
     """
     from rclpy.exceptions import ParameterException
     if shared_memory is None:

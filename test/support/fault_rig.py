@@ -1,12 +1,13 @@
 """
-The system with its nodes killed and restarted one at a time (test/system/test_faults.py, bench_faults).
+The system with its nodes killed and restarted one at a time (test_faults, bench_faults).
 
-:class:`System`: the four installed nodes as ``ros2 run`` runs them (:mod:`etdmp_ros.processes`,
-the letter G's scene, a 4 s letter), each one killable (SIGKILL, as a crash) and restartable
-alone in the same domain. :class:`Watch`: rclpy in the calling process (joint states with their
-simulated stamps, the commands, the controller's status, perceived and true goal, /rosout;
-/generalize and dmp_server's parameters). The functions below run one fault each and return
-what happened as figures (the tests assert on them, the benchmark prints them):
+:class:`System`: the four installed nodes as ``ros2 run`` runs them
+(:mod:`etdmp_ros.ros.processes`, the letter G's scene, a 4 s letter), each one killable
+(SIGKILL, as a crash) and restartable alone in the same domain. :class:`Watch`: rclpy in the
+calling process (joint states with their simulated stamps, the commands, the controller's
+status, perceived and true goal, /rosout; /generalize and dmp_server's parameters). The
+functions below run one fault each and return what happened as figures (the tests assert on
+them, the benchmark prints them):
 
 - :func:`kill_while_writing`: a node killed KILL_AT into the letter; whether the letter was
   completed, the largest stall of the simulation (its own ``simulation loop stalled``

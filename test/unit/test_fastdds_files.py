@@ -1,5 +1,5 @@
 """
-Which Fast DDS shared-memory files belong to dead processes (etdmp_ros.fastdds_files).
+Which Fast DDS shared-memory files belong to dead processes (etdmp_ros.ros.fastdds_files).
 
 In a folder of this test's own: files laid out as Fast DDS 2.14 lays them out in /dev/shm,
 their lock files held (flock) by a live helper process or by nobody, their age set with utime.
@@ -129,7 +129,7 @@ def test_lock_owners_and_mappers_name_the_processes(tmp_path):
 # ----------------------------------------------------------------- which profile a process gets
 
 def _profile_name(monkeypatch, shared_memory, **env):
-    from etdmp_ros.nodes._spin import dds_profile
+    from etdmp_ros.ros.spin import dds_profile
     for name in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_LOCALHOST_ONLY', 'ROS_STATIC_PEERS',
                  'FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE',
                  'ETDMP_DDS_PROFILE', 'RMW_IMPLEMENTATION'):
@@ -158,7 +158,7 @@ def test_the_control_loop_gets_udp_the_image_processes_shared_memory(monkeypatch
 
 
 def test_localhost_discovery_is_handed_to_the_profile_only_during_init(monkeypatch):
-    from etdmp_ros.nodes import _spin
+    from etdmp_ros.ros import spin as _spin
     monkeypatch.setattr(fastdds_files, 'clean', lambda: ['fastrtps_x'])
     _profile_name(monkeypatch, False, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     with _spin.dds_settings(shared_memory=False) as removed:
@@ -172,7 +172,7 @@ def test_localhost_discovery_is_handed_to_the_profile_only_during_init(monkeypat
 def test_the_localhost_profiles_are_the_others_with_localhost_discovery():
     """Each *_localhost.xml is its base file plus rmw_fastrtps's LOCALHOST settings."""
     import xml.etree.ElementTree as ElementTree
-    from etdmp_ros._paths import config_path
+    from etdmp_ros.ros.paths import config_path
     ns = '{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}'
 
     def parts(name):
