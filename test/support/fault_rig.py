@@ -371,7 +371,9 @@ def kill_simulation(sys_, watch):
 
 
 def restart(sys_, watch, name):
-    """Start node ``name`` again, alone; return when it serves (RESTART s at most)."""
+    """Start node ``name`` again, alone, if it was killed; return when it serves."""
+    if name not in sys_.down:
+        return
     since = time.monotonic()
     sys_.restart(name)
     if name == 'dmp_server':

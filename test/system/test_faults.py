@@ -75,14 +75,15 @@ def check_motion(figures, what):
 
 def test_dmp_server_killed_mid_motion_the_path_completes(faults):
     sys_, watch = faults
-    check_motion(kill_while_writing(sys_, watch, 'dmp_server'), 'dmp_server killed')
-    restart(sys_, watch, 'dmp_server')
+    figures = kill_while_writing(sys_, watch, 'dmp_server')
+    restart(sys_, watch, 'dmp_server')      # first: the next tests need it whatever happened
+    check_motion(figures, 'dmp_server killed')
 
 
 def test_perception_killed_mid_motion_the_last_goal_is_used(faults):
     sys_, watch = faults
     # Planned by the restarted dmp_server: the system serves again.
-    check_motion(kill_while_writing(sys_, watch, 'perception'), 'perception killed')
+    figures = kill_while_writing(sys_, watch, 'perception')
     last = watch.goals[-1][1]
     # Not executed: the request shows which goal dmp_server takes without perception.
     watch.set_dmp_server(execute=False)
@@ -90,15 +91,19 @@ def test_perception_killed_mid_motion_the_last_goal_is_used(faults):
         plan = watch.generalize()
     finally:
         watch.set_dmp_server(execute=True)
+        restart(sys_, watch, 'perception')
+    check_motion(figures, 'perception killed')
     end = plan.poses[-1].pose.position
     assert np.linalg.norm([end.x - last[0], end.y - last[1]]) < 1e-3, (end, last)
-    restart(sys_, watch, 'perception')
     assert np.linalg.norm(watch.goals[-1][1] - watch.truth) < 3e-3
 
 
 def test_controller_killed_mid_motion_the_watchdog_brakes(faults):
     sys_, watch = faults
-    f = kill_controller(sys_, watch)
+    try:
+        f = kill_controller(sys_, watch)
+    finally:
+        restart(sys_, watch, 'controller')
     # The plan went to the goal perceived by the restarted perception: it serves again.
     assert np.linalg.norm(f['plan_end'][:2] - watch.truth[:2]) < 3e-3, f['plan_end']
     assert f['speed_at_kill'] > 0.01, 'the arm did not move when the controller was killed'
@@ -112,12 +117,14 @@ def test_controller_killed_mid_motion_the_watchdog_brakes(faults):
     assert f['standstill_s'] <= watchdog + 0.06, f
     assert not f['moved_again'], 'the arm moved again without a controller'
     assert f['largest_gap_s'] <= STALL_LIMIT, f
-    restart(sys_, watch, 'controller')
 
 
 def test_simulation_killed_mid_motion_the_controller_stops_and_says_why(faults):
     sys_, watch = faults
-    f = kill_simulation(sys_, watch)      # tracked by the restarted controller
+    try:
+        f = kill_simulation(sys_, watch)      # tracked by the restarted controller
+    finally:
+        restart(sys_, watch, 'ur10_sim')
     print(f"simulation killed: the controller said after {f['said_after_s']:.2f} s: "
           f"{f['status']}")
     stall = system.node('controller').parameter('simulation_stall_timeout').default
@@ -125,7 +132,6 @@ def test_simulation_killed_mid_motion_the_controller_stops_and_says_why(faults):
     assert f['status'].startswith('stale-input: joint states'), f
     assert f['last_command'] is not None and np.all(f['last_command'] == 0.0), (
         'no zero velocity after the simulation died')
-    restart(sys_, watch, 'ur10_sim')
 
 
 def test_tools_joining_and_leaving_while_the_arm_moves(faults, colcon_install, tmp_path):
