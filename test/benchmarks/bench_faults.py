@@ -302,14 +302,22 @@ def main(argv=None):
             kills = []
             for i in range(args.kill_runs):
                 print(f'nodes killed, {load}, sequence {i + 1}:', flush=True)
-                with busy_core(load == 'busy'):
-                    kills.append(kill_sequence(install, dict(env, ROS_HOME=str(tmp / 'home')),
-                                               KILL_LOGS / f'{load}_{i}'))
+                try:
+                    with busy_core(load == 'busy'):
+                        kills.append(kill_sequence(install,
+                                                   dict(env, ROS_HOME=str(tmp / 'home')),
+                                                   KILL_LOGS / f'{load}_{i}'))
+                except (AssertionError, RuntimeError) as err:    # a target missed: say so
+                    print(f'  FAILED: {err} (logs: {KILL_LOGS / f"{load}_{i}"})', flush=True)
+                    results.setdefault('kill_failures', []).append(f'{load} {i}: {err}')
+                    continue
                 print(f'  {kills[-1]}', flush=True)
             if kills:
                 results['kills'][load] = kills
                 tables.append(f'{kill_summary(kills)}\n(load: {load})')
                 print(tables[-1], flush=True)
+    for failure in results.get('kill_failures', []):
+        tables.append(f'kill sequence FAILED ({failure})')
     results['load_after'] = os.getloadavg()
     print(f'\nload average after: {os.getloadavg()}\n')
     print('\n\n'.join(tables))
