@@ -140,7 +140,11 @@ def figures(text):
     stalls = [float(ms) for ms, t in _STALL.findall(text) if float(t) >= STARTED]
     tracked = _TRACKED.search(text)
     return {'largest_gap_ms': max(stalls, default=0.0),
-            'stale_input': text.count('[controller]: status: stale-input'),
+            # The controller's status before its first joint state is stale-input too
+            # ("never received"): the start, not a fault.
+            'stale_input': text.count('[controller]: status: stale-input')
+            - text.count('[controller]: status: stale-input: joint states on joint_states are '
+                         'stale (never received)'),
             'tracked': bool(tracked) and 'status: unreachable' not in text,
             'tracking_max_mm': float(tracked.group(2)) if tracked else None,
             'removed_files': sum(int(n) for n in _REMOVED.findall(text)),

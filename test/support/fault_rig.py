@@ -382,6 +382,10 @@ def restart(sys_, watch, name):
         # discovery a moment to match the service's endpoints too.
         wait(lambda: watch.logged('dmp_server', 'serving /generalize', since), RESTART,
              'the restarted dmp_server', sys_.running())
+        # The new server has no perceived goal until perception's next one reaches it.
+        serving = time.monotonic()
+        wait(lambda: watch.goals[-1][0] > serving, RESTART, 'a goal perceived since',
+             sys_.running())
         time.sleep(1.0)
     elif name == 'perception':
         wait(lambda: watch.goals[-1][0] > since, RESTART, 'a goal perceived again',
