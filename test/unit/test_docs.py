@@ -216,8 +216,10 @@ def _instance_attributes(cls):
 
 
 def test_every_dotted_name_in_code_and_docs_names_something():
-    """``etdmp_ros.x.y`` in code, docstrings, comments and pages resolves (a moved module is
-    found here, not by a user's ImportError)."""
+    """Every ``etdmp_ros.x.y`` in code, docstrings, comments and pages resolves.
+
+    A module moved without its references is found here, not by a user's ImportError.
+    """
     files = [REPO / 'README.md', REPO / 'Makefile', REPO / 'setup.py']
     for folder in _SOURCES:
         files += [f for f in (REPO / folder).rglob('*') if f.suffix in ('.py', '.md')]
