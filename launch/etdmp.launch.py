@@ -14,7 +14,7 @@ system's overrides (use_sim_time for the nodes that follow /clock), exactly as
     ros2 launch etdmp_ros etdmp.launch.py host:=workstation     # perception, dmp_server
     ros2 launch etdmp_ros etdmp.launch.py nodes:=ur10_sim       # any part, by node name
 
-``host`` and ``nodes`` choose the part of the system this computer runs (etdmp_ros.system:
+``host`` and ``nodes`` choose the part of the system this computer runs (etdmp_ros.ros.system:
 ``HOSTS``, ``select_nodes``): a lab with two computers runs ``host:=robot`` on the one beside the
 arm and ``host:=workstation`` on the other, on the same ROS_DOMAIN_ID (docs/two_hosts.md has
 the recipe). An unknown host or node stops the launch with an error naming the choices.

@@ -7,7 +7,7 @@ Its place in the system: docs/design.md#nodes-and-interfaces.
 config/perception.yaml``. Subscribes ``/camera/camera/color/image_raw`` (rgb8),
 ``/camera/camera/aligned_depth_to_color/image_raw`` (16UC1, mm, 0 = no data) and
 ``/camera/camera/color/camera_info``; matches them by stamp (:class:`FrameSynchronizer`: no
-message_filters here) and runs :class:`etdmp_ros.robot.Detector` (the ROS-free vision) on the
+message_filters here) and runs :class:`etdmp_ros.perception.Detector` (the ROS-free vision) on the
 newest complete frame. Publishes, stamped with the image's stamp, in base_link:
 
 - ``/etdmp/goal`` (geometry_msgs/PointStamped): centre of the goal marker's top face; nothing

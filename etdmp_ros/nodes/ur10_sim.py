@@ -1,5 +1,5 @@
 """
-ur10_sim: the MuJoCo UR10 workcell (:class:`etdmp_ros.robot.UR10Sim`) as a ROS 2 node.
+ur10_sim: the MuJoCo UR10 workcell (:class:`etdmp_ros.sim.UR10Sim`) as a ROS 2 node.
 
 Subscribes ``/forward_velocity_controller/commands`` (std_msgs/Float64MultiArray, 6 joint
 velocities in rad/s, UR order). Publishes, stamped with the simulated time:
@@ -13,7 +13,7 @@ velocities in rad/s, UR order). Publishes, stamped with the simulated time:
   stamped like it (what the camera saw), or at 10 Hz when the camera is off;
 - ``/ur10_sim/ground_truth/contacts`` (visualization_msgs/MarkerArray, transient local): the
   robot's contacts with the obstacles, the bottle, the table and the floor
-  (:attr:`etdmp_ros.robot.UR10Sim.contacts`; a SPHERE per contact, its text ``<part> <item>
+  (:attr:`etdmp_ros.sim.UR10Sim.contacts`; a SPHERE per contact, its text ``<part> <item>
   <depth mm>``, see :mod:`etdmp_ros.ros.conversions._markers`), at every tick while there are
   any, once empty when they end (and at start);
 - as a UR driver, robot_state_publisher and realsense-ros would: ``/robot_description``

@@ -6,7 +6,7 @@ A script, not a pytest test. From the repository root::
     MUJOCO_GL=egl .venv/bin/python test/benchmarks/bench_perception.py [--quick] [--json PATH]
 
 1. Processing time per frame, in this process, on frames rendered by the simulation
-   (:class:`etdmp_ros.robot.UR10Sim`) with random placements of the goal and 1-4 obstacles
+   (:class:`etdmp_ros.sim.UR10Sim`) with random placements of the goal and 1-4 obstacles
    (the arm turned away, every object fully in view: the placements of test/unit/test_vision.py):
 
    - ``detect``: :meth:`Detector.detect` alone (HSV, blobs, depth, deprojection, fits);

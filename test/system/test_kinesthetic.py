@@ -15,8 +15,8 @@ Kinesthetic teaching (issue 16), through the installed ur10_sim and then the who
 
 import math
 
-from etdmp_ros.demo.run import kinesthetic, run as demo
-from etdmp_ros.demo.run.scenario import Scenario, TAUGHT_STIR_TURN_DEG
+from etdmp_ros.demo import kinesthetic, run as demo
+from etdmp_ros.demo.scenario import Scenario, TAUGHT_STIR_TURN_DEG
 from etdmp_ros.dmp import learn, load_demo
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.robot import UR10Model

@@ -31,8 +31,8 @@ from pathlib import Path
 import shutil
 import time
 
-from etdmp_ros.demo.run.metrics import clearance_mm
-from etdmp_ros.demo.run.teach_session import TeachSession
+from etdmp_ros.demo.metrics import clearance_mm
+from etdmp_ros.demo.teach_session import TeachSession
 from etdmp_ros.dmp import nrmse
 from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.ros import system

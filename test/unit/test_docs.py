@@ -183,6 +183,59 @@ def test_the_checks_find_what_is_wrong():
     assert _slug('3D mode 1: Rodrigues') == '3d-mode-1-rodrigues'
 
 
+_DOTTED = re.compile(r'etdmp_ros(?:\.[A-Za-z_]\w*)+')
+_SOURCES = ('etdmp_ros', 'launch', 'test', 'tools', 'docs')
+
+
+def _unresolved(name):
+    """Return why a dotted ``etdmp_ros.…`` name names nothing (None if it resolves)."""
+    parts = name.split('.')
+    for end in range(len(parts), 0, -1):
+        try:
+            found = importlib.import_module('.'.join(parts[:end]))
+        except ImportError:
+            continue
+        for attribute in parts[end:]:
+            if not hasattr(found, attribute):
+                # An attribute set in __init__ (UR10Sim.contacts) is not on the class.
+                if isinstance(found, type) and attribute in _instance_attributes(found):
+                    return None
+                return f'{".".join(parts[:end])} has no {".".join(parts[end:])}'
+            found = getattr(found, attribute)
+        return None
+    return f'no module {parts[0]}'
+
+
+def _instance_attributes(cls):
+    import inspect
+    try:
+        source = inspect.getsource(cls)
+    except (OSError, TypeError):
+        return set()
+    return set(re.findall(r'self\.(\w+)\s*=', source))
+
+
+def test_every_dotted_name_in_code_and_docs_names_something():
+    """Every ``etdmp_ros.x.y`` in code, docstrings, comments and pages resolves.
+
+    A module moved without its references is found here, not by a user's ImportError.
+    """
+    files = [REPO / 'README.md', REPO / 'Makefile', REPO / 'setup.py']
+    for folder in _SOURCES:
+        files += [f for f in (REPO / folder).rglob('*') if f.suffix in ('.py', '.md')]
+    wrong = {}
+    for path in files:
+        if path == Path(__file__).resolve():
+            continue
+        for name in set(_DOTTED.findall(path.read_text(errors='replace'))):
+            problem = _unresolved(name.rstrip('.'))
+            if problem:
+                wrong.setdefault(problem, []).append(str(path.relative_to(REPO)))
+    assert not wrong, '\n'.join(f'{k}: {v}' for k, v in sorted(wrong.items()))
+    assert _unresolved('etdmp_ros.robot.NoSuchClass')
+    assert _unresolved('etdmp_ros.no_such_module')
+
+
 # ------------------------------------------------------------------ the ecosystem files
 
 def test_license_changelog_and_citation_agree_with_package_xml():

@@ -101,7 +101,7 @@ def cylinders_from_markers(msg, frame_ids=('', 'base_link')):
 
 def contact_markers(contacts, stamp, frame_id='base_link'):
     """
-    Return the MarkerArray of contacts (:class:`etdmp_ros.robot.Contact` or alike).
+    Return the MarkerArray of contacts (:class:`etdmp_ros.sim.Contact` or alike).
 
     Each has ``part``, ``item``, ``position`` (3,) and ``depth`` (m).
     """
