@@ -112,8 +112,8 @@ class CameraPose:
     :attr:`rotation` maps optical-frame vectors to base_link: ``p_base = R p_cam + position``.
     """
 
-    position: Sequence[float]
-    orientation: Sequence[float]
+    position: Sequence[float] | Array
+    orientation: Sequence[float] | Array
 
     def __post_init__(self) -> None:
         """Validate and normalize (position finite, quaternion non-zero)."""
