@@ -14,7 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from etdmp_ros import limits
-from etdmp_ros.geometry.arrays import Array
+from etdmp_ros.geometry.arrays import Array, Quaternions
 from etdmp_ros.geometry.quaternion import MIN_NORM, unit_and_norm
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,7 +43,7 @@ class Demonstration:
     # None (the default) means uniform times over 1 s: __post_init__ sets them, so the field
     # holds an array.
     t: Array = field(default=None)  # type: ignore[arg-type]
-    orientations: Array | None = field(default=None)
+    orientations: Quaternions | None = field(default=None)
 
     def __post_init__(self) -> None:
         """Validate and freeze the arrays."""
@@ -211,7 +211,8 @@ def _check_limits(positions: Array, t: Array, where: str, locate: Callable[..., 
                                  f'{limits.MAX_DEMO_COORDINATE:g} in absolute value')
 
 
-def unit_quaternions(values: ArrayLike, n: int, where: str, locate: Callable[[int], str]) -> Array:
+def unit_quaternions(values: ArrayLike, n: int, where: str,
+                     locate: Callable[[int], str]) -> Quaternions:
     """
     Check and normalise demonstrated orientations: ``values`` (n, 4), ROS order (x, y, z, w).
 

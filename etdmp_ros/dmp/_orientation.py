@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections import OrderedDict
 
 from etdmp_ros.geometry import quaternion as quat
-from etdmp_ros.geometry.arrays import Array
+from etdmp_ros.geometry.arrays import Array, Quaternions, Rotations, RotationVectors
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -39,7 +39,7 @@ _CACHE_SIZE = 8
 
 
 def check_goal_orientation(orientation: OrientationDMP | None, goal_orientation: ArrayLike | None,
-                           batch: int) -> Array | None:
+                           batch: int) -> Quaternions | None:
     """
     Validate ``goal_orientation`` of a request with ``batch`` starts; return (B, 4) or None.
 
@@ -71,8 +71,8 @@ def check_goal_orientation(orientation: OrientationDMP | None, goal_orientation:
     return unit
 
 
-def turn_quaternions(R: Array, method: str, mode: int,
-                     independent_axis: int) -> Array:
+def turn_quaternions(R: Rotations, method: str, mode: int,
+                     independent_axis: int) -> Quaternions:
     """
     Return the quaternions Q (B, 4) by which the orientation is turned: the rotation part of R^T.
 
@@ -162,7 +162,7 @@ class OrientationDMP:
                 self._reproductions.popitem(last=False)
         return found
 
-    def virtual_start(self, goals: Array) -> Array:
+    def virtual_start(self, goals: Quaternions) -> RotationVectors:
         """
         Return the start ``e0'`` (B, 3) of the DMP toward virtual goal orientations (B, 4).
 
@@ -175,9 +175,9 @@ class OrientationDMP:
 
     # -- generalization -----------------------------------------------------------------------
 
-    def generalize(self, turn: Array, goal_orientation: Array | None,
+    def generalize(self, turn: Quaternions, goal_orientation: Quaternions | None,
                    tau: float, dt: float, n_out: int, substeps: int,
-                   fast: bool = True) -> tuple[Array, Array]:
+                   fast: bool = True) -> tuple[Quaternions, Array]:
         """
         Return orientations q (B, n, 4) and angular velocities omega (B, n, 3), real situation.
 

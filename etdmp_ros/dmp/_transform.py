@@ -31,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-from etdmp_ros.geometry.arrays import Array
+from etdmp_ros.geometry.arrays import Array, Rotations
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -55,7 +55,7 @@ class EuclideanTransform:
     or (B, d).
     """
 
-    R: Array
+    R: Rotations
     scale: Array
 
     def to_virtual(self, points: ArrayLike, goal: Array) -> Array:
@@ -81,7 +81,7 @@ def _apply(R: Array, y: Array, transpose: bool) -> Array:
     return (y[:, None] @ Rt)[:, 0]
 
 
-def plane_rotation(i_demo: ArrayLike, i_current: ArrayLike) -> Array:
+def plane_rotation(i_demo: ArrayLike, i_current: ArrayLike) -> Rotations:
     """
     Rotations turning each row of ``i_current`` (B, d) onto the direction of ``i_demo`` (d,).
 
@@ -140,7 +140,7 @@ if numba is not None:
         return R
 
 
-def plane_rotation_numpy(i_demo: ArrayLike, i_current: ArrayLike) -> Array:
+def plane_rotation_numpy(i_demo: ArrayLike, i_current: ArrayLike) -> Rotations:
     """Compute :func:`plane_rotation` with numpy only (the reference; and d == 1)."""
     i_demo = np.asarray(i_demo, dtype=float)
     i_current = np.atleast_2d(np.asarray(i_current, dtype=float))
