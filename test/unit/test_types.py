@@ -17,15 +17,18 @@ REPO = Path(__file__).resolve().parents[2]
 WRONG = textwrap.dedent("""\
     from etdmp_ros.dmp import learn
     from etdmp_ros.geometry import quaternion
+    from etdmp_ros.robot import ControllerConfig
 
     skill = learn([[0.0, 0.0], [1.0, 2.0], [3.0, 3.0]])
     plan = skill.generalize([1.0, 0.0], [0.0, 0.0], method=2)
     first = plan.q[0]
     angle: float = quaternion.angle_between([0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 0.0])
+    config = ControllerConfig(rate='125 Hz')
     """)
 #: Line of WRONG -> error code: a method is named by a string; a position-only skill's plan has
-#: no orientations (q may be None); angle_between returns an array of angles.
-EXPECTED = {5: 'arg-type', 6: 'index', 7: 'assignment'}
+#: no orientations (q may be None); angle_between returns an array of angles; a rate is a number
+#: (Hz).
+EXPECTED = {6: 'arg-type', 7: 'index', 8: 'assignment', 9: 'arg-type'}
 
 
 def _mypy(*args):
