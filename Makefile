@@ -179,7 +179,7 @@ bench-%: $(BENCH_STAMP)
 	MUJOCO_GL=egl $(BENCH_VENV)/bin/python test/benchmarks/bench_$*.py $(BENCH_ARGS)
 
 clean:
-	rm -rf out build install log .pytest_cache *.egg-info
+	rm -rf out build install log .pytest_cache .mypy_cache *.egg-info
 	find . -path ./.git -prune -o -path './.venv*' -prune -o \
 	  \( -name __pycache__ -o -name '*.nbi' -o -name '*.nbc' \) -print0 | xargs -0 rm -rf
 
