@@ -14,7 +14,7 @@ declared with before rclpy checks the type; any other type is refused by rclpy w
 
 import math
 
-from etdmp_ros.ros.system import DOUBLE_ARRAY, STRING_ARRAY
+from etdmp_ros.ros.specs import DOUBLE_ARRAY, STRING_ARRAY
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,

@@ -202,32 +202,7 @@ def read_mcap_path(path, topic=None, kinematics=None):
     reader package, unreadable file, no or ambiguous topic, wrong frame, no samples).
     """
     path = Path(path)
-    try:
-        from mcap.reader import make_reader
-        from mcap_ros2.decoder import DecoderFactory
-    except ImportError:
-        raise DemonstrationError(f'{path}: reading .mcap files needs the Python package '
-                                 'mcap-ros2-support (pip install mcap-ros2-support)') from None
-    try:
-        check_file_size(path)
-        with open(path, 'rb') as stream:
-            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-            topics = _mcap_topics(reader)
-            chosen = _choose_topic(path, topics, topic)
-            kind = topics[chosen]
-            most = (limits.MAX_RECORDED_JOINT_STATES if kind == JOINT_STATE
-                    else limits.MAX_DEMO_SAMPLES) + 1
-            records = [(message.log_time, decoded) for _, _, message, decoded in
-                       itertools.islice(reader.iter_decoded_messages(topics=[chosen]), most)]
-    except DemonstrationError:
-        raise
-    except MemoryError:
-        raise DemonstrationError(f'{path}: too large to read (out of memory)') from None
-    except OSError as err:
-        raise DemonstrationError(f'{path}: cannot read: {err.strerror or err}') from None
-    except Exception as err:   # noqa: B902 - the mcap readers raise many types on corrupt files
-        raise DemonstrationError(f'{path}: not a readable rosbag2 .mcap file '
-                                 f'({type(err).__name__}: {err})') from None
+    chosen, kind, records = _read_mcap_topic(path, topic)
     if not records:
         raise DemonstrationError(f'{path}: topic {chosen!r} holds no messages')
     if kind == JOINT_STATE:
@@ -259,6 +234,42 @@ def read_mcap_path(path, topic=None, kinematics=None):
     orientations = recorded_orientations(quaternions, f'{path}: topic {chosen!r}')
     return RecordedPath(np.array(positions, dtype=float).reshape(-1, 3), stamps, chosen,
                         orientations)
+
+
+def _read_mcap_topic(path, topic):
+    """
+    Return (topic, its type, [(log time ns, decoded message)]) of a ``.mcap`` file's topic.
+
+    ``topic``: as :func:`read_mcap_path`'s. At most one message more than a demonstration may
+    have is read. Raises DemonstrationError (reader missing, file unreadable, no such topic).
+    """
+    try:
+        from mcap.reader import make_reader
+        from mcap_ros2.decoder import DecoderFactory
+    except ImportError:
+        raise DemonstrationError(f'{path}: reading .mcap files needs the Python package '
+                                 'mcap-ros2-support (pip install mcap-ros2-support)') from None
+    try:
+        check_file_size(path)
+        with open(path, 'rb') as stream:
+            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+            topics = _mcap_topics(reader)
+            chosen = _choose_topic(path, topics, topic)
+            kind = topics[chosen]
+            most = (limits.MAX_RECORDED_JOINT_STATES if kind == JOINT_STATE
+                    else limits.MAX_DEMO_SAMPLES) + 1
+            records = [(message.log_time, decoded) for _, _, message, decoded in
+                       itertools.islice(reader.iter_decoded_messages(topics=[chosen]), most)]
+    except DemonstrationError:
+        raise
+    except MemoryError:
+        raise DemonstrationError(f'{path}: too large to read (out of memory)') from None
+    except OSError as err:
+        raise DemonstrationError(f'{path}: cannot read: {err.strerror or err}') from None
+    except Exception as err:   # noqa: B902 - the mcap readers raise many types on corrupt files
+        raise DemonstrationError(f'{path}: not a readable rosbag2 .mcap file '
+                                 f'({type(err).__name__}: {err})') from None
+    return chosen, kind, records
 
 
 def _mcap_topics(reader):

@@ -165,7 +165,7 @@ def intrinsics_from_camera_info(msg):
     Raises ValueError if K is not a pinhole camera matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0,
     1]]`` (finite, fx and fy positive, no skew: nothing here would apply one) or distortion is
     non-zero (the images would need undistorting first). Whether the values are plausible for
-    the camera is the caller's check (:func:`etdmp_ros.perception._vision.check_intrinsics`).
+    the camera is the caller's check (:func:`etdmp_ros.perception._frames.check_intrinsics`).
     """
     k = np.asarray(msg.k, dtype=float).reshape(-1)
     if k.size != 9 or not np.all(np.isfinite(k)) or k[0] <= 0 or k[4] <= 0 or \
