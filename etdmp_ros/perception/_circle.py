@@ -1,9 +1,18 @@
 """Circles fitted to the rim points of an object (Gauss-Newton on the radial residuals)."""
 
+from __future__ import annotations
+
+from collections.abc import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: A point (x, y).
+Point = Sequence[float] | NDArray[np.float64]
 
 
-def fit_circle_and_radius(points, start, radius, iterations=30):
+def fit_circle_and_radius(points: ArrayLike, start: Point, radius: float, iterations: int = 30
+                          ) -> tuple[NDArray[np.float64], float, float]:
     """
     Return (centre (2,), radius, rms) of the circle fitted to points (N, 2), radius free.
 
@@ -31,7 +40,7 @@ def fit_circle_and_radius(points, start, radius, iterations=30):
     return np.array([cx, cy]), float(r), float(np.sqrt(np.mean(residual ** 2)))
 
 
-def rim_arc(points, centre):
+def rim_arc(points: ArrayLike, centre: ArrayLike) -> float:
     """Return the angle (rad) of the circle about ``centre`` that points (N, 2) span."""
     d = np.asarray(points, dtype=float) - centre
     angles = np.sort(np.arctan2(d[:, 1], d[:, 0]))
@@ -41,7 +50,8 @@ def rim_arc(points, centre):
     return float(2.0 * np.pi - gaps.max())
 
 
-def fit_circle(points, radius, start, iterations=20):
+def fit_circle(points: ArrayLike, radius: float, start: Point, iterations: int = 20
+               ) -> tuple[NDArray[np.float64], float]:
     """
     Return (centre (2,), rms) of the circle of given radius fitted to points (N, 2).
 

@@ -5,15 +5,20 @@ Frames in: the checks a colour + depth frame passes, and the matching of its mes
 message_filters): it keeps the newest complete set only, so processing never falls behind.
 """
 
+from __future__ import annotations
+
 from collections import deque
+from collections.abc import Iterable
 import math
+from typing import Any
 
 from etdmp_ros import limits
 from etdmp_ros.geometry.camera import CameraIntrinsics
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def check_frame(rgb, depth_mm, intrinsics):
+def check_frame(rgb: ArrayLike, depth_mm: ArrayLike, intrinsics: CameraIntrinsics) -> None:
     """
     Raise ValueError unless the frame can be processed.
 
@@ -36,7 +41,7 @@ def check_frame(rgb, depth_mm, intrinsics):
                          f'are {rgb.shape[1]}x{rgb.shape[0]}')
 
 
-def check_intrinsics(intrinsics):
+def check_intrinsics(intrinsics: object) -> None:
     """
     Raise ValueError unless ``intrinsics`` can be a RealSense D435 colour camera's.
 
@@ -81,7 +86,8 @@ class FrameSynchronizer:
     simulation, a looping bag): the synchronizer starts over.
     """
 
-    def __init__(self, streams, tolerance_ns, queue_size=4, reset_ns=1_000_000_000):
+    def __init__(self, streams: Iterable[str], tolerance_ns: int, queue_size: int = 4,
+                 reset_ns: int = 1_000_000_000) -> None:
         """Create empty queues for the named streams."""
         if not streams:
             raise ValueError('FrameSynchronizer needs at least one stream')
@@ -90,17 +96,19 @@ class FrameSynchronizer:
         self.streams = tuple(streams)
         self.tolerance_ns = int(tolerance_ns)
         self.reset_ns = int(reset_ns)
-        self._queues = {name: deque(maxlen=max(1, int(queue_size))) for name in self.streams}
-        self.last_stamp = None
+        self._queues: dict[str, deque[tuple[int, Any]]] = {
+            name: deque(maxlen=max(1, int(queue_size))) for name in self.streams}
+        self.last_stamp: int | None = None
         self.dropped = 0
 
-    def reset(self):
+    def reset(self) -> None:
         """Forget all stored messages and the last returned stamp."""
         for queue in self._queues.values():
             queue.clear()
         self.last_stamp = None
 
-    def add(self, stream, stamp_ns, message):
+    def add(self, stream: str, stamp_ns: int, message: Any
+            ) -> tuple[int, dict[str, Any]] | None:
         """Store a message; return ``(stamp_ns, {stream: message})`` when a set completes."""
         stamp_ns = int(stamp_ns)
         if self.last_stamp is not None and stamp_ns <= self.last_stamp:
@@ -111,7 +119,7 @@ class FrameSynchronizer:
         self._queues[stream].append((stamp_ns, message))
         return self._match()
 
-    def _match(self):
+    def _match(self) -> tuple[int, dict[str, Any]] | None:
         first = self.streams[0]
         for stamp, message in sorted(self._queues[first], key=lambda item: -item[0]):
             found = {first: message}
@@ -126,7 +134,7 @@ class FrameSynchronizer:
                 return stamp, found
         return None
 
-    def _drop_through(self, stamp):
+    def _drop_through(self, stamp: int) -> None:
         limit = stamp + self.tolerance_ns
         for queue in self._queues.values():
             kept = [item for item in queue if item[0] > limit]

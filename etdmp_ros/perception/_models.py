@@ -5,11 +5,18 @@ Every object of the workcell is an upright cylinder of known radius (:class:`Obj
 colour is a box in HSV space (:class:`HsvRange`); one frame's result is a :class:`Detections`.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass, field
 import math
+from typing import Any
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
+
+#: Pixel box (x, y, width, height) of a blob.
+Box = tuple[int, int, int, int]
 
 #: Kinds of detected objects, as in :attr:`Detection.kind`.
 GOAL = 'goal'
@@ -17,7 +24,7 @@ OBSTACLE = 'obstacle'
 BOTTLE = 'bottle'
 
 
-def _a(noun):
+def _a(noun: str) -> str:
     """Return ``noun`` with its indefinite article (a goal, an obstacle)."""
     return ('an ' if noun[:1] in 'aeiou' else 'a ') + noun
 
@@ -31,13 +38,13 @@ class HsvRange:
     through 0 (red: e.g. low h = 170, high h = 8).
     """
 
-    low: tuple
-    high: tuple
+    low: tuple[int, int, int]
+    high: tuple[int, int, int]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate: 3 integers each, H in 0..179, S and V in 0..255, S and V low <= high."""
         bounds = (179, 255, 255)
-        values = []
+        values: list[tuple[int, ...]] = []
         for name, value in (('low', self.low), ('high', self.high)):
             try:
                 triple = [float(v) for v in value]
@@ -57,11 +64,11 @@ class HsvRange:
         object.__setattr__(self, 'high', high)
 
     @property
-    def wraps(self):
+    def wraps(self) -> bool:
         """Whether the hue range wraps through 0 (low h > high h)."""
         return self.low[0] > self.high[0]
 
-    def mask(self, hsv):
+    def mask(self, hsv: NDArray[np.uint8]) -> NDArray[Any]:
         """Return the uint8 image (255 inside the range) of an HSV image in OpenCV units."""
         if not self.wraps:
             return cv2.inRange(hsv, self.low, self.high)
@@ -85,9 +92,9 @@ class ObjectModel:
     color: HsvRange
     radius: float
     height: float
-    radius_range: tuple = None
+    radius_range: tuple[float, float] | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate radius, height and radius_range (positive, finite, low < high)."""
         for name in ('radius', 'height'):
             value = float(getattr(self, name))
@@ -106,13 +113,13 @@ class ObjectModel:
             object.__setattr__(self, 'radius_range', (low, high))
 
     @property
-    def max_radius(self):
+    def max_radius(self) -> float:
         """Return the largest radius an object of this class can have (m)."""
         return self.radius if self.radius_range is None else max(self.radius,
                                                                  self.radius_range[1])
 
     @property
-    def depth_extent(self):
+    def depth_extent(self) -> float:
         """Largest depth difference between two points of the object, plus 2 cm (m)."""
         return 2.0 * self.max_radius + self.height + 0.02
 
@@ -141,7 +148,7 @@ class DetectorSettings:
     max_rim_rms: float = 0.004
     height_tolerance: float = 0.02
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate the values."""
         for name in ('min_blob_area', 'min_depth_pixels', 'min_rim_points'):
             value = getattr(self, name)
@@ -170,10 +177,10 @@ class Detection:
     """
 
     kind: str
-    position: np.ndarray
-    pixel: tuple
+    position: NDArray[np.float64]
+    pixel: tuple[float, float]
     area: int
-    bbox: tuple
+    bbox: Box
     depth: float
     depth_fraction: float
     rim_points: int
@@ -188,7 +195,7 @@ class Rejection:
     """A blob that was not reported: its kind, bbox (x, y, w, h), area and the reason."""
 
     kind: str
-    bbox: tuple
+    bbox: Box
     area: int
     reason: str
 
@@ -197,17 +204,17 @@ class Rejection:
 class Detections:
     """Result of one frame: the goal and the bottle (or None), the obstacles, rejected blobs."""
 
-    goal: Detection = None
-    obstacles: list = field(default_factory=list)
-    rejected: list = field(default_factory=list)
-    bottle: Detection = None
+    goal: Detection | None = None
+    obstacles: list[Detection] = field(default_factory=list)
+    rejected: list[Rejection] = field(default_factory=list)
+    bottle: Detection | None = None
 
-    def obstacle_positions(self):
+    def obstacle_positions(self) -> NDArray[np.float64]:
         """Return the obstacle points (N, 3) in base_link (N may be 0)."""
         if not self.obstacles:
             return np.zeros((0, 3))
         return np.array([d.position for d in self.obstacles])
 
-    def obstacle_radii(self):
+    def obstacle_radii(self) -> NDArray[np.float64]:
         """Return the obstacles' radii (N,) in metres, in the order of obstacle_positions."""
         return np.array([d.radius for d in self.obstacles], dtype=float)

@@ -63,17 +63,22 @@ the detection is flagged (``Detection.single`` False). Several goal blobs: the l
 goal, the others are rejected. Obstacles are reported in decreasing blob area.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 import math
+from typing import Any
 
 import cv2
 from etdmp_ros import limits
-from etdmp_ros.geometry.camera import CameraPose
+from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
 from etdmp_ros.perception._circle import fit_circle, fit_circle_and_radius, rim_arc
 from etdmp_ros.perception._frames import check_frame
 from etdmp_ros.perception._models import (_a, BOTTLE, Detection, Detections, DetectorSettings,
                                           GOAL, HsvRange, ObjectModel, OBSTACLE, Rejection)
-from etdmp_ros.robot._scene import GOAL_MARKER_THICKNESS
+from etdmp_ros.robot._scene import GOAL_MARKER_THICKNESS, SceneConfig
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 _RIM_KERNEL = np.ones((3, 3), np.uint8)
 # An occluder this many pixels from an outline pixel makes it an occlusion edge (2: across the
@@ -104,7 +109,9 @@ class Detector:
     between frames.
     """
 
-    def __init__(self, goal, obstacle, camera_pose, table, settings=None, bottle=None):
+    def __init__(self, goal: ObjectModel, obstacle: ObjectModel, camera_pose: CameraPose,
+                 table: tuple[ArrayLike, ArrayLike], settings: DetectorSettings | None = None,
+                 bottle: ObjectModel | None = None) -> None:
         """Keep the object models, the camera pose, the table and the settings."""
         if not isinstance(camera_pose, CameraPose):
             raise ValueError(f'camera_pose must be a CameraPose, got {type(camera_pose).__name__}')
@@ -127,8 +134,10 @@ class Detector:
         self._position = np.asarray(camera_pose.position)
 
     @classmethod
-    def from_scene(cls, scene, goal_color, obstacle_color, settings=None, bottle_color=None,
-                   obstacle_radius_range=None):
+    def from_scene(cls, scene: SceneConfig, goal_color: HsvRange, obstacle_color: HsvRange,
+                   settings: DetectorSettings | None = None,
+                   bottle_color: HsvRange | None = None,
+                   obstacle_radius_range: tuple[float, float] | None = None) -> Detector:
         """
         Return a detector for a :class:`SceneConfig` (object sizes, camera pose).
 
@@ -142,7 +151,8 @@ class Detector:
                                scene.obstacle_height, obstacle_radius_range),
                    scene.camera_pose, (scene.table_center, scene.table_size), settings, bottle)
 
-    def detect(self, rgb, depth_mm, intrinsics, bgr=False):
+    def detect(self, rgb: NDArray[np.uint8], depth_mm: NDArray[np.uint16],
+               intrinsics: CameraIntrinsics, bgr: bool = False) -> Detections:
         """
         Return the :class:`Detections` of one frame.
 
@@ -176,13 +186,15 @@ class Detector:
                                                      'another bottle blob is larger'))
         return result
 
-    def _detect_class(self, model, hsv, depth_mm, intrinsics, rejected):
+    def _detect_class(self, model: ObjectModel, hsv: NDArray[Any],
+                      depth_mm: NDArray[np.uint16], intrinsics: CameraIntrinsics,
+                      rejected: list[Rejection]) -> list[Detection]:
         mask = model.color.mask(hsv)
         # Labelling costs ~1 ms on a full frame; the objects cover a small part of it. The
         # region is MARGIN pixels larger than the mask's bounding box (clipped to the image),
         # so that it holds the margin that _rim_points looks at around every blob.
         rx, ry, rw, rh = cv2.boundingRect(mask)
-        found = []
+        found: list[Detection] = []
         if rw == 0:
             return found
         height, width = mask.shape
@@ -211,7 +223,9 @@ class Detector:
                     found.append(detection)
         return found
 
-    def _implausible_blob(self, model, blob, depth, area, intrinsics):
+    def _implausible_blob(self, model: ObjectModel, blob: NDArray[np.bool_],
+                          depth: NDArray[np.uint16], area: int,
+                          intrinsics: CameraIntrinsics) -> str:
         """
         Return why a blob cannot be an object of ``model`` seen by a D435, or ''.
 
@@ -241,7 +255,8 @@ class Detector:
                     f'depth (at most {most:.0f} px)')
         return ''
 
-    def _implausible_position(self, model, points, position, single, radius):
+    def _implausible_position(self, model: ObjectModel, points: NDArray[np.float64],
+                              position: NDArray[np.float64], single: bool, radius: float) -> str:
         """
         Return why a located object does not fit the workcell, or ''.
 
@@ -275,7 +290,8 @@ class Detector:
                     f'{x0:.2f} to {x1:.2f} m, y {y0:.2f} to {y1:.2f} m)')
         return ''
 
-    def _split(self, model, blob, depth):
+    def _split(self, model: ObjectModel, blob: NDArray[np.bool_], depth: NDArray[np.uint16]
+               ) -> list[NDArray[np.bool_]]:
         """
         Return the blob cut at depth steps (objects of one colour overlapping in the image).
 
@@ -310,7 +326,8 @@ class Detector:
             return [blob]
         return [labels == i for i in sorted(big, key=lambda i: -stats[i, cv2.CC_STAT_AREA])]
 
-    def _locate(self, model, blob, depth, origin, intrinsics):
+    def _locate(self, model: ObjectModel, blob: NDArray[np.bool_], depth: NDArray[np.uint16],
+                origin: tuple[int, int], intrinsics: CameraIntrinsics) -> Detection | Rejection:
         """
         Return the Detection of one blob, or a Rejection saying why it cannot be located.
 
@@ -351,11 +368,10 @@ class Detector:
         position = np.array([centre[0], centre[1], z_top])
         single = rim_count == 0 or rim_rms <= s.max_rim_rms
         reason = self._implausible_position(model, points, position, single, radius)
-        if not reason and measured and not \
-                model.radius_range[0] <= radius <= model.radius_range[1]:
+        low, high = model.radius_range or (0.0, math.inf)   # measured: a range is given
+        if not reason and measured and not low <= radius <= high:
             reason = (f'its radius measures {radius * 1e3:.1f} mm, outside the range of '
-                      f'{_a(model.kind)} ({model.radius_range[0] * 1e3:g} to '
-                      f'{model.radius_range[1] * 1e3:g} mm)')
+                      f'{_a(model.kind)} ({low * 1e3:g} to {high * 1e3:g} mm)')
         if reason:
             return Rejection(model.kind, bbox, area, reason)
         pixel = intrinsics.project(self.camera_pose.from_base(position))[0]
@@ -363,7 +379,8 @@ class Detector:
                          bbox, median, float(np.count_nonzero(valid)) / area, rim_count,
                          rim_rms, single, radius, measured)
 
-    def _fit_rim(self, model, rim, inside):
+    def _fit_rim(self, model: ObjectModel, rim: NDArray[np.float64], inside: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float, bool]:
         """
         Return (rim points kept, centre (2,), radius, rms, radius measured) of a blob's rim.
 
@@ -376,7 +393,8 @@ class Detector:
         s = self.settings
         free = model.radius_range is not None
 
-        def fit(points, start, radius):
+        def fit(points: NDArray[np.float64], start: NDArray[np.float64], radius: float
+                ) -> tuple[NDArray[np.float64], float, float]:
             """Return (centre, radius, rms); the class's radius unless it is measured."""
             if free:
                 centre, radius, rms = fit_circle_and_radius(points, start, radius)
@@ -398,7 +416,9 @@ class Detector:
             centre, rms = fit_circle(rim, model.radius, inside)
         return rim, centre, model.radius, rms, False
 
-    def _rim_points(self, model, blob, depth, origin, median, z_top, intrinsics):
+    def _rim_points(self, model: ObjectModel, blob: NDArray[np.bool_], depth: NDArray[np.uint16],
+                    origin: tuple[int, int], median: float, z_top: float,
+                    intrinsics: CameraIntrinsics) -> NDArray[np.float64]:
         """Return the blob's real outline points (N, 2): x, y in base_link, see module doc."""
         s = self.settings
         blob8 = blob.view(np.uint8)
@@ -450,13 +470,14 @@ class Detector:
         points[on_top] = self._position + edge_rays[on_top] * t[on_top, None]
         return points[has_depth | on_top, :2]
 
-    def _to_base(self, points_cam):
+    def _to_base(self, points_cam: NDArray[np.float64]) -> NDArray[np.float64]:
         return points_cam @ self._rotation.T + self._position
 
-    def _to_base_directions(self, vectors_cam):
+    def _to_base_directions(self, vectors_cam: NDArray[np.float64]) -> NDArray[np.float64]:
         return vectors_cam @ self._rotation.T
 
-    def annotate(self, rgb, detections, intrinsics, bgr=False):
+    def annotate(self, rgb: ArrayLike, detections: Detections, intrinsics: CameraIntrinsics,
+                 bgr: bool = False) -> NDArray[np.uint8]:
         """
         Return a copy of the colour image with the detections drawn on it (same channel order).
 
@@ -469,7 +490,7 @@ class Detector:
             list(detections.obstacles) + \
             ([detections.bottle] if detections.bottle is not None else [])
         angles = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
-        models = {GOAL: self.goal, OBSTACLE: self.obstacle, BOTTLE: self.bottle}
+        models = {m.kind: m for m in (self.goal, self.obstacle, self.bottle) if m is not None}
         for det in items:
             model = models[det.kind]
             color = palette[det.kind]
@@ -483,10 +504,10 @@ class Detector:
             centre = tuple(int(round(c)) for c in det.pixel)
             cv2.drawMarker(image, centre, color, cv2.MARKER_CROSS, 10, 1)
             x, y, w, h = det.bbox
-            label = '{} {:.0f} {:.0f} {:.0f} mm{}{}'.format(
-                det.kind, *(det.position * 1000.0),
-                f' r {det.radius * 1000.0:.1f}' if det.radius_measured else '',
-                '' if det.single else ' (merged?)')
+            x_mm, y_mm, z_mm = det.position * 1000.0
+            label = (f'{det.kind} {x_mm:.0f} {y_mm:.0f} {z_mm:.0f} mm'
+                     + (f' r {det.radius * 1000.0:.1f}' if det.radius_measured else '')
+                     + ('' if det.single else ' (merged?)'))
             cv2.putText(image, label, (x, max(y - 4, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                         color, 1, cv2.LINE_AA)
         for rejection in detections.rejected:
@@ -511,7 +532,7 @@ DETECTOR_PARAMETERS = (
 BOTTLE_PARAMETERS = ('bottle.radius', 'bottle.height', 'bottle_hsv_low', 'bottle_hsv_high')
 
 
-def detector_from_parameters(params):
+def detector_from_parameters(params: Mapping[str, Any]) -> Detector:
     """
     Return the :class:`Detector` described by flat parameters (see DETECTOR_PARAMETERS).
 

@@ -167,6 +167,8 @@ class UR10Sim:
         self._command = np.zeros(6)
         self._command_time = -math.inf
         self.braked_at: float | None = None
+        self._obstacles: NDArray[np.float64]   # set by reset(), like the radii
+        self._radii: NDArray[np.float64]
         self.watchdog_active = self.watchdog_timeout > 0
         self.reset()
 
@@ -353,7 +355,8 @@ class UR10Sim:
         geoms, depths = contact.geom[:n], np.maximum(0.0, -contact.dist[:n])
         positions = contact.pos[:n].copy()
         d.ncon = 0              # the dynamics have none (the next step would clear them too)
-        names, found = self._contact_names, {}
+        names = self._contact_names
+        found: dict[tuple[str, str], Contact] = {}
         for (a, b), depth, position in zip(geoms, depths, positions):
             robot, other = (a, b) if m.geom_contype[a] else (b, a)
             if robot == self._tip_geom and other == self._table_geom and \
@@ -417,10 +420,10 @@ class UR10Sim:
         if len(points) > MAX_OBSTACLES:
             raise ValueError(f'at most {MAX_OBSTACLES} obstacles, got {len(points)}')
         if radii is not None:
-            radii = obstacle_radii_for(MAX_OBSTACLES, parse_obstacle_radii(radii),
+            sizes = obstacle_radii_for(MAX_OBSTACLES, parse_obstacle_radii(radii),
                                        self.scene.obstacle_radius)
-            self._set_radii(self.model, radii)
-            self._radii = radii
+            self._set_radii(self.model, sizes)
+            self._radii = sizes
         for i, (mocap, geom) in enumerate(zip(self._obstacle_mocap, self._obstacle_geoms)):
             used = i < len(points)
             # Unused ones are hidden from the camera and parked far below the floor.
@@ -433,7 +436,7 @@ class UR10Sim:
         """Size the obstacles: ``radii`` as in :meth:`set_obstacles`; ValueError if bad."""
         self.set_obstacles(self._obstacles, radii)
 
-    def _set_radii(self, model: Any, radii: ArrayLike) -> None:
+    def _set_radii(self, model: Any, radii: NDArray[np.float64]) -> None:
         """Give the obstacle cylinders of ``model`` these radii (MAX_OBSTACLES,)."""
         half = 0.5 * self.scene.obstacle_height
         for geom, r in zip(self._obstacle_geoms, radii):

@@ -198,7 +198,7 @@ def _add_tool(spec: Any, offset: NDArray[np.float64]) -> None:
     tool0 = spec.body('tool0')
     tool0.add_site(name='tool0', size=[0.005] * 3)
     tool0.add_site(name='tool_tip', pos=offset, size=[0.003] * 3, rgba=[0, 0, 0, 0])
-    length = np.linalg.norm(offset)
+    length = float(np.linalg.norm(offset))
     if length > 1e-6:
         tip_start = offset * max(0.0, 1.0 - PEN_TIP_LENGTH / length)
         if np.linalg.norm(tip_start) > 1e-6:

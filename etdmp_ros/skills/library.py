@@ -34,18 +34,27 @@ message default (0, 0, 0, 1), which mean "no orientation recorded": such a path 
 position-only demonstration it always was.
 """
 
+from __future__ import annotations
+
+from collections.abc import Container, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 import itertools
 import os
 from pathlib import Path
 import re
 import threading
+from typing import Any, TYPE_CHECKING
 
 from etdmp_ros import limits
 from etdmp_ros.dmp import (check_file_size, Demonstration, DemonstrationError, FORMULATIONS, learn,
-                           load_demo, save_demo, unit_quaternions)
+                           load_demo, save_demo, Skill, unit_quaternions)
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.task_plane import TaskPlane
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+if TYPE_CHECKING:   # the robot package loads Pinocchio: imported where joint states are read
+    from etdmp_ros.robot import UR10Model
 
 #: File types a demonstration can be read from.
 SUFFIXES = ('.csv', '.npy', '.npz', '.mcap')
@@ -84,7 +93,7 @@ class UnknownSkillError(ValueError):
     """A skill name that the library does not know (the message lists the known ones)."""
 
 
-def check_skill_name(name):
+def check_skill_name(name: object) -> str:
     """Return ``name`` if it is a valid skill name, else raise ValueError saying why."""
     if not isinstance(name, str) or not _NAME.match(name):
         raise ValueError(f'skill name {name!r} is not valid: use 1-64 letters, digits, "_" or '
@@ -92,7 +101,7 @@ def check_skill_name(name):
     return name
 
 
-def default_skills_dir(environ=None):
+def default_skills_dir(environ: Mapping[str, str] | None = None) -> Path:
     """Return where taught skills are kept: ``$ROS_HOME/etdmp_ros/skills`` or ``~/.ros/...``."""
     environ = os.environ if environ is None else environ
     ros_home = environ.get('ROS_HOME')
@@ -100,7 +109,7 @@ def default_skills_dir(environ=None):
     return base / 'etdmp_ros' / 'skills'
 
 
-def demonstration_files(paths):
+def demonstration_files(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
     """
     Expand files and folders into the list of demonstration files to read, in order.
 
@@ -108,7 +117,7 @@ def demonstration_files(paths):
     skipped). A file is kept as given whatever its suffix, so that loading it reports a clear
     error; a missing path raises DemonstrationError.
     """
-    files = []
+    files: list[Path] = []
     for entry in paths:
         path = Path(entry).expanduser()
         if path.is_dir():
@@ -130,13 +139,13 @@ class RecordedPath:
     (:func:`recorded_orientations`).
     """
 
-    positions: np.ndarray
-    t: np.ndarray | None
+    positions: NDArray[np.float64]
+    t: NDArray[np.float64] | None
     topic: str
-    orientations: np.ndarray | None = None
+    orientations: NDArray[np.float64] | None = None
 
 
-def recorded_orientations(values, where='path'):
+def recorded_orientations(values: ArrayLike, where: str = 'path') -> NDArray[np.float64] | None:
     """
     Return the recorded orientations (n, 4) of a path's poses, normalised, or None for none.
 
@@ -151,8 +160,9 @@ def recorded_orientations(values, where='path'):
     return unit_quaternions(q, len(q), where, lambda row: f'pose {row}')
 
 
-def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tolerance=0.01,
-                       orientations=None):
+def recorded_path_demo(name: str, positions: ArrayLike, t: ArrayLike | None, plane: TaskPlane,
+                       recorded_dim: str = 'auto', plane_tolerance: float = 0.01,
+                       orientations: ArrayLike | None = None) -> Demonstration:
     """
     Turn a base_link path (n, 3) with times ``t`` (n,) or None into a Demonstration.
 
@@ -165,34 +175,35 @@ def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tol
     if recorded_dim not in RECORDED_DIMS:
         raise DemonstrationError(f'recorded_dim must be one of {RECORDED_DIMS}, '
                                  f'got {recorded_dim!r}')
-    positions = np.asarray(positions, dtype=float)
+    x = np.asarray(positions, dtype=float)
     where = f'demonstration {name!r}'
-    if positions.ndim != 2 or positions.shape[1] != 3:
+    if x.ndim != 2 or x.shape[1] != 3:
         raise DemonstrationError(f'{where}: expected (n, 3) base_link positions, got shape '
-                                 f'{positions.shape}')
-    if not np.all(np.isfinite(positions)):
+                                 f'{x.shape}')
+    if not np.all(np.isfinite(x)):
         raise DemonstrationError(f'{where}: positions contain NaN or inf')
-    if t is not None:
-        t = np.asarray(t, dtype=float)
-        if t.size and np.all(t == t.flat[0]):
-            t = None
-        elif t.size:
-            t = t - t.flat[0]
+    times = None if t is None else np.asarray(t, dtype=float)
+    if times is not None:
+        if times.size and np.all(times == times.flat[0]):
+            times = None
+        elif times.size:
+            times = times - times.flat[0]
     dim = recorded_dim
     if dim == 'auto':
-        heights = plane.distance(positions) if len(positions) else np.zeros(1)
+        heights = plane.distance(x) if len(x) else np.zeros(1)
         dim = '2d' if np.ptp(heights) <= plane_tolerance else '3d'
-    if orientations is not None:
-        orientations = unit_quaternions(orientations, len(positions), where,
-                                        lambda row: f'pose {row}')
+    quats = None if orientations is None else unit_quaternions(
+        orientations, len(x), where, lambda row: f'pose {row}')
     if dim == '2d':
-        positions = plane.to_plane(positions)
-        if orientations is not None:
-            orientations = plane.orientation_to_plane(orientations)
-    return Demonstration(name, positions, t, orientations)
+        x = plane.to_plane(x)
+        if quats is not None:
+            quats = plane.orientation_to_plane(quats)
+    # times None: uniform over 1 s, which Demonstration sets (its field is typed as set).
+    return Demonstration(name, x, times, quats)  # type: ignore[arg-type]
 
 
-def read_mcap_path(path, topic=None, kinematics=None):
+def read_mcap_path(path: str | os.PathLike[str], topic: str | None = None,
+                   kinematics: UR10Model | None = None) -> RecordedPath:
     """
     Read the base_link path of a PoseStamped, Path or JointState topic from a ``.mcap`` file.
 
@@ -236,7 +247,7 @@ def read_mcap_path(path, topic=None, kinematics=None):
                         orientations)
 
 
-def _read_mcap_topic(path, topic):
+def _read_mcap_topic(path: Path, topic: str | None) -> tuple[str, str, list[tuple[int, Any]]]:
     """
     Return (topic, its type, [(log time ns, decoded message)]) of a ``.mcap`` file's topic.
 
@@ -272,7 +283,7 @@ def _read_mcap_topic(path, topic):
     return chosen, kind, records
 
 
-def _mcap_topics(reader):
+def _mcap_topics(reader: Any) -> dict[str, str]:
     """
     Return {topic: schema name} of the recordable channels (RECORDED_TYPES) in an mcap file.
 
@@ -281,6 +292,7 @@ def _mcap_topics(reader):
     nothing to learn from it, and it must not make the topic to learn from ambiguous.
     """
     summary = reader.get_summary()
+    pairs: Iterable[tuple[str, Any]]
     if summary is not None:
         counts = (None if summary.statistics is None
                   else summary.statistics.channel_message_counts)   # unlisted: none
@@ -293,7 +305,7 @@ def _mcap_topics(reader):
             if schema is not None and schema.name in RECORDED_TYPES}
 
 
-def _choose_topic(path, topics, topic):
+def _choose_topic(path: Path, topics: Mapping[str, str], topic: str | None) -> str:
     if topic:
         if topic not in topics:
             raise DemonstrationError(f'{path}: no {_TYPES_TEXT} topic named '
@@ -307,7 +319,8 @@ def _choose_topic(path, topics, topic):
     return next(iter(topics))
 
 
-def joint_state_path(records, kinematics, where, topic='joint_states'):
+def joint_state_path(records: Sequence[tuple[int, Any]], kinematics: UR10Model | None, where: str,
+                     topic: str = 'joint_states') -> RecordedPath:
     """
     Turn recorded joint states into the tool tip's base_link path (kinesthetic teaching).
 
@@ -327,10 +340,12 @@ def joint_state_path(records, kinematics, where, topic='joint_states'):
         raise DemonstrationError(f'{where}: more than MAX_RECORDED_JOINT_STATES = '
                                  f'{limits.MAX_RECORDED_JOINT_STATES} joint states; not learned')
     joints = np.empty((len(records), len(JOINT_NAMES)))
-    columns, names = None, None
+    columns: list[int] = []
+    names: list[str] | None = None
     for row, (_, msg) in enumerate(records):
-        if names != list(msg.name):
-            names = list(msg.name)
+        given = list(msg.name)
+        if names is None or names != given:
+            names = given
             missing = [j for j in JOINT_NAMES if j not in names]
             if missing:
                 raise DemonstrationError(f'{where}: message {row} has no position of '
@@ -347,11 +362,12 @@ def joint_state_path(records, kinematics, where, topic='joint_states'):
     if np.all(stamps == stamps[0]):   # unset header stamps: use the recording times
         stamps = np.array([log_time * 1e-9 for log_time, _ in records])
     positions = np.array([kinematics.tool_position(q) for q in joints])
-    first, last = _motion_span(positions)
-    if first is None:
+    span = _motion_span(positions)
+    if span is None:
         raise DemonstrationError(f'{where}: the tool never moves more than MOTION_THRESHOLD = '
                                  f'{MOTION_THRESHOLD * 1e3:g} mm from where it starts: nothing '
                                  'to learn')
+    first, last = span
     keep = np.arange(first, last + 1)
     if len(keep) > limits.MAX_DEMO_SAMPLES:
         keep = keep[np.linspace(0, len(keep) - 1, limits.MAX_DEMO_SAMPLES).round().astype(int)]
@@ -360,12 +376,12 @@ def joint_state_path(records, kinematics, where, topic='joint_states'):
     return RecordedPath(positions[keep], stamps[keep], topic, orientations)
 
 
-def _motion_span(positions):
-    """Return (first, last) indices of the motion in ``positions``, or (None, None) if none."""
+def _motion_span(positions: NDArray[np.float64]) -> tuple[int, int] | None:
+    """Return (first, last) indices of the motion in ``positions``, or None if none."""
     from_start = np.linalg.norm(positions - positions[0], axis=1)
     from_end = np.linalg.norm(positions - positions[-1], axis=1)
     if not np.any(from_start > MOTION_THRESHOLD):
-        return None, None
+        return None
     moves = int(np.argmax(from_start > MOTION_THRESHOLD))
     stops = len(positions) - 1 - int(np.argmax(from_end[::-1] > MOTION_THRESHOLD))
     settled = np.flatnonzero(from_start[:moves] <= SETTLED_THRESHOLD)
@@ -375,20 +391,22 @@ def _motion_span(positions):
     return first, last
 
 
-def _xyz(point):
+def _xyz(point: Any) -> tuple[float, float, float]:
     return (point.x, point.y, point.z)
 
 
-def _xyzw(quaternion):
+def _xyzw(quaternion: Any) -> tuple[float, float, float, float]:
     return (quaternion.x, quaternion.y, quaternion.z, quaternion.w)
 
 
-def _stamp(stamp):
+def _stamp(stamp: Any) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def load_demonstration(path, plane, name=None, mcap_topic=None, recorded_dim='auto',
-                       plane_tolerance=0.01, kinematics=None):
+def load_demonstration(path: str | os.PathLike[str], plane: TaskPlane, name: str | None = None,
+                       mcap_topic: str | None = None, recorded_dim: str = 'auto',
+                       plane_tolerance: float = 0.01,
+                       kinematics: UR10Model | None = None) -> Demonstration:
     """
     Read one demonstration file (``.csv``, ``.npy``, ``.npz`` or ``.mcap``).
 
@@ -409,7 +427,7 @@ def load_demonstration(path, plane, name=None, mcap_topic=None, recorded_dim='au
         raise DemonstrationError(f'{path} (topic {recorded.topic!r}): {err}') from None
 
 
-def save_skill_demo(skills_dir, demo):
+def save_skill_demo(skills_dir: str | os.PathLike[str], demo: Demonstration) -> Path:
     """
     Write ``demo`` to ``<skills_dir>/<demo.name>.csv`` (with a ``t`` column) and return the path.
 
@@ -432,10 +450,10 @@ class SkillEntry:
     name: str
     demo: Demonstration
     source: str
-    _learned: dict = field(default_factory=dict, repr=False)
+    _learned: dict[tuple[str, int], Skill] = field(default_factory=dict, repr=False)
 
     @property
-    def planar(self):
+    def planar(self) -> bool:
         """Return True for a 2D skill (task plane, demo units), False for 3D (base_link)."""
         return self.demo.dim == 2
 
@@ -449,37 +467,38 @@ class SkillLibrary:
     functions, learning and caching it on first use.
     """
 
-    def __init__(self, formulation='ijspeert', n_basis=100):
+    def __init__(self, formulation: str = 'ijspeert', n_basis: int = 100) -> None:
         """Create an empty library that learns with ``formulation`` and ``n_basis``."""
         if formulation not in FORMULATIONS:
             raise ValueError(f'formulation must be one of {FORMULATIONS}, got {formulation!r}')
         self.formulation = formulation
         self.n_basis = int(n_basis)
-        self._entries = {}
+        self._entries: dict[str, SkillEntry] = {}
         self._lock = threading.RLock()
 
-    def __len__(self):
+    def __len__(self) -> int:
         """Return the number of skills."""
         with self._lock:
             return len(self._entries)
 
-    def __contains__(self, name):
+    def __contains__(self, name: object) -> bool:
         """Return True if a skill of that name is known."""
         with self._lock:
             return name in self._entries
 
-    def names(self):
+    def names(self) -> list[str]:
         """Return the known skill names, sorted."""
         with self._lock:
             return sorted(self._entries)
 
-    def source(self, name):
+    def source(self, name: str) -> str | None:
         """Return where skill ``name`` came from (its SkillEntry.source), or None if unknown."""
         with self._lock:
             entry = self._entries.get(name)
             return None if entry is None else entry.source
 
-    def add(self, name, demo, source, protected=()):
+    def add(self, name: str, demo: Demonstration, source: object,
+            protected: Container[str] = ()) -> SkillEntry:
         """
         Learn ``demo`` (a Demonstration) as skill ``name`` and return its SkillEntry.
 
@@ -508,7 +527,7 @@ class SkillLibrary:
             self._entries[name] = entry
         return entry
 
-    def _check_new(self, name, protected):
+    def _check_new(self, name: str, protected: Container[str]) -> None:
         """Raise if skill ``name`` may not be added (a protected one, or a case clash)."""
         with self._lock:
             existing = self._entries.get(name)
@@ -523,13 +542,13 @@ class SkillLibrary:
                     'itself to replace that one (names are case-sensitive, and the two would '
                     'be one file on a case-insensitive file system)')
 
-    def _case_twin(self, name):
+    def _case_twin(self, name: str) -> SkillEntry | None:
         """Return the entry whose name equals ``name`` but for case (not ``name`` itself)."""
         folded = name.casefold()
         return next((e for n, e in self._entries.items()
                      if n != name and n.casefold() == folded), None)
 
-    def get(self, name):
+    def get(self, name: str) -> SkillEntry:
         """Return the SkillEntry of ``name`` or raise UnknownSkillError listing the known ones."""
         with self._lock:
             entry = self._entries.get(name)
@@ -540,7 +559,8 @@ class SkillLibrary:
                                         f'{", ".join(sorted(self._entries)) or "none"}')
             return entry
 
-    def skill(self, name, formulation=None, n_basis=None):
+    def skill(self, name: str, formulation: str | None = None, n_basis: int | None = None
+              ) -> Skill:
         """Return the learned Skill of ``name`` (learned on first use for these settings)."""
         entry = self.get(name)
         key = (formulation or self.formulation, int(n_basis or self.n_basis))
@@ -551,8 +571,10 @@ class SkillLibrary:
                 entry._learned[key] = learned
             return learned
 
-    def add_files(self, paths, plane, mcap_topic=None, recorded_dim='auto', plane_tolerance=0.01,
-                  kinematics=None):
+    def add_files(self, paths: Iterable[str | os.PathLike[str]], plane: TaskPlane,
+                  mcap_topic: str | None = None, recorded_dim: str = 'auto',
+                  plane_tolerance: float = 0.01, kinematics: UR10Model | None = None
+                  ) -> tuple[list[SkillEntry], list[str]]:
         """
         Learn every demonstration file in ``paths`` (files or folders), named by file stem.
 
@@ -561,7 +583,8 @@ class SkillLibrary:
         Returns (added SkillEntries, error messages); a bad file is reported and skipped, the
         others are still learned.
         """
-        added, errors = [], []
+        added: list[SkillEntry] = []
+        errors: list[str] = []
         for entry in paths:
             try:
                 files = demonstration_files([entry])
