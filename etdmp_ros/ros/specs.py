@@ -9,6 +9,7 @@ tables of every node are in :mod:`etdmp_ros.ros.system`. The module needs no ROS
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,19 +35,19 @@ class Parameter:
     """
 
     name: str
-    default: object
+    default: Any
     description: str
     unit: str = ''
-    value_range: tuple = None
-    choices: tuple = ()
+    value_range: tuple[float, float] | None = None
+    choices: tuple[str, ...] = ()
     dynamic: bool = False
     dynamic_typing: bool = False
     array_type: str = ''
     section: str = ''
     note: str = ''
-    example: object = None
+    example: Any = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Check that the default fits the declared range and choices."""
         if self.value_range is not None:
             low, high = self.value_range
@@ -59,7 +60,7 @@ class Parameter:
         if isinstance(self.default, list) and not self.default and not self.array_type:
             raise ValueError(f'{self.name}: an empty default needs array_type')
 
-    def check(self, value):
+    def check(self, value: Any) -> None:
         """
         Raise ValueError saying why ``value`` is no value of this parameter, by its description.
 
@@ -84,7 +85,7 @@ class Parameter:
                                  f'{high:g}{unit}')
 
     @property
-    def type_name(self):
+    def type_name(self) -> str:
         """Return the ROS type name (``double``, ``integer[]`` ...) of the parameter."""
         if self.array_type:
             return {STRING_ARRAY: 'string[]', DOUBLE_ARRAY: 'double[]'}[self.array_type]
@@ -98,7 +99,7 @@ class Parameter:
         raise TypeError(f'{self.name}: no ROS type for {value!r}')
 
     @property
-    def full_description(self):
+    def full_description(self) -> str:
         """Return the description with its unit, as ``ros2 param describe`` shows it."""
         return f'{self.description} [{self.unit}]' if self.unit else self.description
 
@@ -130,17 +131,17 @@ class ServiceSpec:
 
     name: str
     summary: str
-    arguments: tuple
-    required: tuple = ()
+    arguments: tuple[Parameter, ...]
+    required: tuple[str, ...] = ()
 
-    def argument(self, name):
+    def argument(self, name: str) -> Parameter:
         """Return the argument :class:`Parameter` called ``name``; KeyError if none."""
         for a in self.arguments:
             if a.name == name:
                 return a
         raise KeyError(f'~/{self.name} has no argument {name!r}')
 
-    def values(self, given):
+    def values(self, given: Mapping[str, Any]) -> dict[str, Any]:
         """
         Return ``{argument: value}`` of a request's ``given`` arguments ({name: plain value}).
 
@@ -163,7 +164,7 @@ class ServiceSpec:
         return values
 
 
-def _typed(argument, value, service):
+def _typed(argument: Parameter, value: Any, service: str) -> Any:
     """Return ``value`` as the type of ``argument``'s default; ValueError if it is not one."""
     default = [] if argument.array_type == DOUBLE_ARRAY else argument.default
     number = (int, float)
@@ -197,40 +198,40 @@ class NodeSpec:
 
     name: str
     summary: str
-    scene: tuple
-    parameters: tuple
+    scene: tuple[Parameter, ...]
+    parameters: tuple[Parameter, ...]
     node_class: str
     sim_time: bool = False
     config_header: str = field(default='', repr=False)
-    services: tuple = ()
+    services: tuple[ServiceSpec, ...] = ()
 
     @property
-    def executable(self):
+    def executable(self) -> str:
         """Return the executable's name (``ros2 run etdmp_ros <executable>``)."""
         return self.name
 
     @property
-    def module(self):
+    def module(self) -> str:
         """Return the module that runs the node (``python -m <module>``)."""
         return f'etdmp_ros.nodes.{self.name}'
 
     @property
-    def all_parameters(self):
+    def all_parameters(self) -> tuple[Parameter, ...]:
         """Return every parameter the node declares: its scene ones, then its own."""
         return self.scene + self.parameters
 
-    def parameter(self, name):
+    def parameter(self, name: str) -> Parameter:
         """Return the :class:`Parameter` called ``name``; KeyError if the node has none."""
         for p in self.all_parameters:
             if p.name == name:
                 return p
         raise KeyError(f'{self.name} has no parameter {name!r}')
 
-    def defaults(self):
+    def defaults(self) -> dict[str, Any]:
         """Return ``{name: default}`` of every parameter the node declares."""
         return {p.name: p.default for p in self.all_parameters}
 
-    def service(self, name):
+    def service(self, name: str) -> ServiceSpec:
         """Return the :class:`ServiceSpec` called ``name``; KeyError if the node has none."""
         for spec in self.services:
             if spec.name == name:

@@ -19,15 +19,24 @@ MultiThreadedExecutor is never used: next to the simulation's 125 Hz topics it k
 (rclpy issues #1223, #1452).
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
 import gc
 import os
 import signal
 import threading
+from types import FrameType
+from typing import Any
 
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.context import Context
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
+EventsExecutor: Any
 try:
     from rclpy.experimental import EventsExecutor
 except ImportError:   # rclpy before 7.1.4
@@ -43,7 +52,7 @@ EXECUTOR_VARIABLE = 'ETDMP_EXECUTOR'
 DDS_PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
 
 
-def make_executor(context=None):
+def make_executor(context: Context | None = None) -> Executor:
     """Return the executor every node program and tool of this package spins with (above)."""
     choice = os.environ.get(EXECUTOR_VARIABLE, 'events')
     if choice not in ('events', 'single'):
@@ -53,7 +62,7 @@ def make_executor(context=None):
     return SingleThreadedExecutor(context=context)
 
 
-def use_dds_profile():
+def use_dds_profile() -> None:
     """
     Have Fast DDS load the package's config/fastdds.xml, unless a profile file is set already.
 
@@ -72,13 +81,13 @@ def use_dds_profile():
         pass
 
 
-def init(args=None):
+def init(args: list[str] | None = None) -> None:
     """Initialise rclpy (with the package's DDS profile) without its signal handlers."""
     use_dds_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
 
 
-def spin_until_signal(nodes, stop=None):
+def spin_until_signal(nodes: Sequence[Node], stop: threading.Event | None = None) -> None:
     """
     Spin ``nodes`` on one executor (:func:`make_executor`) until SIGINT or SIGTERM.
 
@@ -86,10 +95,10 @@ def spin_until_signal(nodes, stop=None):
     set. On return, further SIGINT/SIGTERM are ignored, so a second Ctrl-C cannot interrupt the
     caller's clean-up (stopping the simulation, sending zero velocity, destroying the nodes).
     """
-    stop = threading.Event() if stop is None else stop
+    event = threading.Event() if stop is None else stop
 
-    def request_stop(signum, frame):
-        stop.set()
+    def request_stop(signum: int, frame: FrameType | None) -> None:
+        event.set()
 
     for signum in SIGNALS:
         signal.signal(signum, request_stop)
@@ -97,7 +106,7 @@ def spin_until_signal(nodes, stop=None):
     try:
         for node in nodes:
             executor.add_node(node)
-        while not stop.is_set() and executor.context.ok():
+        while not event.is_set() and executor.context.ok():
             executor.spin_once(timeout_sec=SLICE)
     finally:
         for signum in SIGNALS:
@@ -106,7 +115,7 @@ def spin_until_signal(nodes, stop=None):
             executor.remove_node(node)
 
 
-def freeze_heap():
+def freeze_heap() -> None:
     """
     Collect garbage once, then exempt every object alive now from Python's cycle collector.
 
@@ -127,7 +136,7 @@ def freeze_heap():
 HISTORY_SECONDS = 1.0
 
 
-def rate_qos(rate):
+def rate_qos(rate: float) -> QoSProfile:
     """
     Return the QoS of a reliable publisher at ``rate`` Hz: a history of :data:`HISTORY_SECONDS`.
 
@@ -139,11 +148,10 @@ def rate_qos(rate):
     0.1 s watchdog. A second of history leaves a slow reader that much time; the samples are
     a few hundred bytes.
     """
-    from rclpy.qos import QoSProfile
     return QoSProfile(depth=max(10, int(round(rate * HISTORY_SECONDS))))
 
 
-def set_realtime_priority(priority):
+def set_realtime_priority(priority: int) -> str:
     """
     Put the calling thread under SCHED_FIFO at ``priority`` (1-99); 0 changes nothing.
 
@@ -166,13 +174,14 @@ def set_realtime_priority(priority):
     return ''
 
 
-def normal_scheduling():
+def normal_scheduling() -> None:
     """Return the calling thread to normal scheduling (SCHED_OTHER), e.g. a worker thread."""
     if hasattr(os, 'sched_getscheduler') and os.sched_getscheduler(0) != os.SCHED_OTHER:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
-def run(make_nodes, name, args=None, startup_errors=()):
+def run(make_nodes: Callable[[list[Node]], None], name: str, args: list[str] | None = None,
+        startup_errors: tuple[type[Exception], ...] = ()) -> int:
     """
     Run a node program: init, create the nodes, spin until a signal, stop them in order.
 
@@ -184,8 +193,10 @@ def run(make_nodes, name, args=None, startup_errors=()):
     configuration: logged as FATAL without a traceback, exit code 1. Returns the exit code.
     """
     from rclpy.exceptions import ParameterException
+    bad_configuration: tuple[type[Exception], ...] = (ValueError, ParameterException,
+                                                      *startup_errors)
     init(args)
-    nodes = []
+    nodes: list[Node] = []
     code = 0
     # A signal during start-up is remembered, not raised: a KeyboardInterrupt raised inside a
     # library callback (numba compiling the controller's kernels calls back from C) is printed
@@ -199,7 +210,7 @@ def run(make_nodes, name, args=None, startup_errors=()):
         spin_until_signal(nodes, stop)
     except KeyboardInterrupt:   # Ctrl-C before our handler was installed (during start-up)
         pass
-    except (ValueError, ParameterException, *startup_errors) as exc:
+    except bad_configuration as exc:
         rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
         code = 1
     finally:

@@ -25,6 +25,7 @@ the user's files. The module needs no ROS.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+import os
 from pathlib import Path
 from typing import Any
 
@@ -137,7 +138,7 @@ def scene_config(overrides: Mapping[str, Any] | None = None) -> SceneConfig:
     return SceneConfig.from_parameters(values)
 
 
-def parameter_files(name: str, config_dir: str | Path | None = None) -> list[Path]:
+def parameter_files(name: str, config_dir: str | os.PathLike[str] | None = None) -> list[Path]:
     """
     Return the parameter files of node ``name`` in order: scene.yaml, then ``<name>.yaml``.
 
