@@ -24,13 +24,13 @@ class BackgroundNode:
 
     def __init__(self, name: str, domain_id: int | None = None) -> None:
         """Create the context and the node (not spinning yet)."""
-        _spin.use_dds_profile()
         self.context = rclpy.Context()
-        if domain_id is None:
-            rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        else:
-            rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO,
-                       domain_id=int(domain_id))
+        with _spin.dds_settings():
+            if domain_id is None:
+                rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+            else:
+                rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO,
+                           domain_id=int(domain_id))
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = _spin.make_executor(self.context)
         self._thread = threading.Thread(target=self._spin, daemon=True, name=f'{name}_spin')

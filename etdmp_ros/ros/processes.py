@@ -26,7 +26,7 @@ import subprocess
 import sys
 import time
 
-from etdmp_ros.ros import system
+from etdmp_ros.ros import fastdds_files, system
 
 #: A file path.
 PathLike = str | os.PathLike[str]
@@ -133,12 +133,17 @@ class NodeProcess:
             self.process.send_signal(signal.SIGINT)
 
     def wait(self, timeout: float = 10.0) -> int:
-        """Wait up to ``timeout`` s for the exit, then kill; close the log; return the code."""
+        """
+        Wait up to ``timeout`` s for the exit, then kill; close the log; return the code.
+
+        A killed node leaves its Fast DDS shared-memory files: they are removed then.
+        """
         try:
             self.process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.process.wait()
+            fastdds_files.clean()
         self._log.close()
         return self.process.returncode
 

@@ -194,6 +194,11 @@ class NodeSpec:
     which stamps plans with the ROS clock, and the controller, which judges its joint states
     stale on the simulation's time (a stalled simulation is late, not lost). The others stamp
     with their inputs' stamps and need no clock.
+
+    ``shared_memory``: the node receives camera images, which Fast DDS's shared-memory
+    transport carries (config/fastdds.xml). The others talk UDP only (config/fastdds_udp.xml):
+    a shared-memory send can wait seconds for another process (docs/reliability.md), and the
+    simulation, the controller and dmp_server close the control loop.
     """
 
     name: str
@@ -202,6 +207,7 @@ class NodeSpec:
     parameters: tuple[Parameter, ...]
     node_class: str
     sim_time: bool = False
+    shared_memory: bool = False
     config_header: str = field(default='', repr=False)
     services: tuple[ServiceSpec, ...] = ()
 
