@@ -18,6 +18,7 @@ import argparse
 import ast
 from collections.abc import Iterable, Mapping, Sequence
 import json
+import keyword
 import os
 from pathlib import Path
 import sys
@@ -268,6 +269,59 @@ def replace_block(current: str, begin: str, end: str, table: str, where: str) ->
     return f'{head}{begin}\n{table}\n{end}{tail}'
 
 
+# ------------------------------------------------------------------------- typed parameters
+#: The module of every node's typed parameters, written from the description.
+NODE_PARAMETERS_MODULE = Path('etdmp_ros') / 'ros' / 'node_parameters.py'
+
+
+def parameters_class_name(spec: NodeSpec) -> str:
+    """Return the name of a node's typed parameters class (``ur10_sim``: Ur10SimParameters)."""
+    return ''.join(part.capitalize() for part in spec.name.split('_')) + 'Parameters'
+
+
+def node_parameters_text() -> str:
+    """Return the text of ``etdmp_ros/ros/node_parameters.py``: a frozen dataclass per node."""
+    lines = [
+        '"""',
+        "Each node's parameters as one typed, frozen object: written by ``make config``, do not "
+        'edit.',
+        '',
+        "Made from the node's description in :mod:`etdmp_ros.ros.system`: a field per parameter "
+        '(its',
+        'name with ``_`` for ``.``), typed as declared (lists as tuples). ``from_values`` checks '
+        'every',
+        'value by its description (:meth:`etdmp_ros.ros.specs.Parameter.typed`) and raises '
+        'ValueError',
+        'naming the first wrong one. What each parameter means: ``docs/<node>.md``.',
+        '"""',
+        '',
+        'from __future__ import annotations',
+        '',
+        'from collections.abc import Mapping',
+        'from dataclasses import dataclass',
+        'from typing import Any, ClassVar',
+        '',
+        'from etdmp_ros.ros import system',
+        'from etdmp_ros.ros.specs import NodeSpec, typed_values',
+    ]
+    for spec in system.ALL_NODES:
+        name = parameters_class_name(spec)
+        fields = [p.field_name for p in spec.all_parameters]
+        clash = {f for f in fields if fields.count(f) > 1 or keyword.iskeyword(f)}
+        if clash:
+            raise ValueError(f'{spec.name}: parameters {sorted(clash)} make no distinct fields')
+        lines += ['', '', '@dataclass(frozen=True)', f'class {name}:',
+                  f'    """The parameters of {spec.name} (docs/{spec.name}.md)."""', '',
+                  f"    SPEC: ClassVar[NodeSpec] = system.node('{spec.name}')", '']
+        lines += [f'    {p.field_name}: {p.python_type}' for p in spec.all_parameters]
+        lines += ['', '    @classmethod',
+                  f'    def from_values(cls, values: Mapping[str, Any]) -> {name}:',
+                  '        """Return the typed parameters of ``values`` ({name: value}); '
+                  'ValueError: a bad one."""',
+                  '        return cls(**typed_values(cls.SPEC, values))']
+    return '\n'.join(lines) + '\n'
+
+
 def generated_files(root: str | os.PathLike[str]) -> dict[Path, str]:
     """Return ``{path: text}`` of every file written from the system description."""
     folder = Path(root)
@@ -276,6 +330,7 @@ def generated_files(root: str | os.PathLike[str]) -> dict[Path, str]:
         files[folder / 'config' / f'{spec.name}.yaml'] = node_file_text(spec)
         docs = folder / 'docs' / f'{spec.name}.md'
         files[docs] = docs_text(spec, docs.read_text(encoding='utf-8'))
+    files[folder / NODE_PARAMETERS_MODULE] = node_parameters_text()
     page = folder / 'docs' / 'limits.md'
     files[page] = replace_block(page.read_text(encoding='utf-8'), LIMITS_BEGIN, LIMITS_END,
                                 limits_table(), 'docs/limits.md')

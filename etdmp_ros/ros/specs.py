@@ -99,9 +99,71 @@ class Parameter:
         raise TypeError(f'{self.name}: no ROS type for {value!r}')
 
     @property
+    def field_name(self) -> str:
+        """Return the name of the parameter's field in its node's typed parameters."""
+        return self.name.replace('.', '_')
+
+    @property
+    def python_type(self) -> str:
+        """Return the Python type of the parameter's typed value (``Any``: dynamic typing)."""
+        if self.dynamic_typing:
+            return 'Any'
+        element = _PYTHON_TYPES[self.type_name.removesuffix('[]')]
+        return f'tuple[{element}, ...]' if self.type_name.endswith('[]') else element
+
+    def typed(self, value: Any) -> Any:
+        """
+        Return ``value`` as this parameter's Python type, checked against its description.
+
+        A list becomes a tuple; an integer is a float where a float is declared. Raises
+        ValueError naming the parameter for a value of another type, or outside its range or
+        choices (:meth:`check`). A parameter with ``dynamic_typing`` takes a value of any type
+        as it is, a list as a tuple (its node parses it: a list as a YAML string, whole floats
+        for integers); only its range and choices are checked.
+        """
+        element = _PYTHON_TYPES[self.type_name.removesuffix('[]')]
+        result: Any
+        if self.dynamic_typing:
+            result = tuple(value) if isinstance(value, list) else value
+        elif self.type_name.endswith('[]'):
+            if not isinstance(value, (list, tuple)):
+                raise ValueError(f'{self.name} must be of type {self.type_name}, got {value!r}')
+            result = tuple(_as_element(element, v, self) for v in value)
+        else:
+            result = _as_element(element, value, self)
+        self.check(result)
+        return result
+
+    @property
     def full_description(self) -> str:
         """Return the description with its unit, as ``ros2 param describe`` shows it."""
         return f'{self.description} [{self.unit}]' if self.unit else self.description
+
+
+#: Python types of the ROS parameter types.
+_PYTHON_TYPES = {'bool': 'bool', 'integer': 'int', 'double': 'float', 'string': 'str'}
+
+
+def _as_element(element: str, value: Any, parameter: Parameter) -> Any:
+    """Return one value (a list's element) as the Python type named ``element``."""
+    if element == 'float' and isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    if element == 'int' and isinstance(value, int) and not isinstance(value, bool):
+        return value
+    if element in ('bool', 'str') and type(value).__name__ == element:
+        return value
+    raise ValueError(f'{parameter.name} must be of type {parameter.type_name}, got {value!r}')
+
+
+def typed_values(spec: NodeSpec, values: Mapping[str, Any]) -> dict[str, Any]:
+    """
+    Return ``{field name: typed value}`` of a node's parameter ``values`` (``{name: value}``).
+
+    Every parameter ``spec`` declares, typed and checked by :meth:`Parameter.typed`: what the
+    generated classes of :mod:`etdmp_ros.ros.node_parameters` are made from. KeyError names a
+    parameter missing from ``values``.
+    """
+    return {p.field_name: p.typed(values[p.name]) for p in spec.all_parameters}
 
 
 def parameter(name: str, default: Any, description: str, **kwargs: Any) -> Parameter:
