@@ -33,7 +33,8 @@ from etdmp_ros.demo.scenario import Scenario
 from etdmp_ros.dmp import load_demo
 from etdmp_ros.robot import UR10Model
 from etdmp_ros.ros.processes import DISCOVERY_VARIABLES, isolated_environment
-from etdmp_ros.skills.library import _motion_span, load_demonstration
+from etdmp_ros.skills.library import load_demonstration
+from etdmp_ros.skills.recorded import _motion_span
 from etdmp_ros.skills.recordings import read_messages
 from geometry_msgs.msg import PointStamped
 import numpy as np

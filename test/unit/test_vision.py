@@ -20,7 +20,8 @@ from etdmp_ros.geometry.camera import CameraIntrinsics
 from etdmp_ros.perception import (check_frame, Detections, Detector, detector_from_parameters,
                                   DetectorSettings, FrameSynchronizer, HsvRange, ObjectModel,
                                   Rejection)
-from etdmp_ros.perception._vision import check_intrinsics, fit_circle
+from etdmp_ros.perception._circle import fit_circle
+from etdmp_ros.perception._frames import check_intrinsics
 from etdmp_ros.ros.config_files import read_node_parameters
 from etdmp_ros.ros.system import scene_config
 from etdmp_ros.sim import UR10Sim
