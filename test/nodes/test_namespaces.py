@@ -9,7 +9,6 @@ is; nothing may be published under the root names.
 """
 
 import threading
-import time
 
 from etdmp_ros.ros import config_files, system
 from etdmp_ros.ros.background import BackgroundNode
@@ -22,6 +21,7 @@ import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from support.waiting import wait_for
 import yaml
 
 ROBOTS = ('/robot1', '/robot2')
@@ -92,13 +92,15 @@ class Client(BackgroundNode):
             return self.joints[ns][-1], self.tips[ns][-1], self.status[ns][-1]
 
 
-def wait_for(predicate, timeout, what, processes):
-    """Wait until ``predicate()``; fail with the nodes' logs."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f'timed out waiting for {what}\n' + '\n'.join(p.log() for p in processes))
-        time.sleep(0.02)
+def discovered(node, ns):
+    """Return whether ``node`` sees robot ``ns``'s publishers and subscribers of the test."""
+    return (node.count_publishers(f'{ns}/joint_states') >= 1
+            and node.count_publishers(f'{ns}/forward_velocity_controller/commands') >= 1
+            and node.count_subscribers(f'{ns}/forward_velocity_controller/commands') >= 1
+            and node.count_publishers(f'{ns}/etdmp/path') >= 1
+            and node.count_publishers(f'{ns}/clock') >= 1
+            and {f'{ns}/generalize', f'{ns}/controller/pause'}
+            <= set(dict(node.get_service_names_and_types())))
 
 
 @pytest.fixture(scope='module')
@@ -120,7 +122,9 @@ def robots(colcon_install, module_ros_env, tmp_path_factory):
                      and client.tips[ns], STARTUP, f'{ns} to be idle', processes)
             wait_for(lambda: client.generalize[ns].service_is_ready(), STARTUP,
                      f'{ns}/generalize', processes)
-        time.sleep(1.0)
+        # Every robot's endpoints discovered: what the graph test counts.
+        wait_for(lambda: all(discovered(client.node, ns) for ns in ROBOTS), STARTUP,
+                 "both robots' publishers and subscribers in the graph", processes)
         yield client, processes
     finally:
         client.close()
