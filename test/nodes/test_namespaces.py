@@ -9,6 +9,7 @@ is; nothing may be published under the root names.
 """
 
 import threading
+import time
 
 from etdmp_ros.ros import config_files, system
 from etdmp_ros.ros.background import BackgroundNode
@@ -92,17 +93,6 @@ class Client(BackgroundNode):
             return self.joints[ns][-1], self.tips[ns][-1], self.status[ns][-1]
 
 
-def discovered(node, ns):
-    """Return whether ``node`` sees robot ``ns``'s publishers and subscribers of the test."""
-    return (node.count_publishers(f'{ns}/joint_states') >= 1
-            and node.count_publishers(f'{ns}/forward_velocity_controller/commands') >= 1
-            and node.count_subscribers(f'{ns}/forward_velocity_controller/commands') >= 1
-            and node.count_publishers(f'{ns}/etdmp/path') >= 1
-            and node.count_publishers(f'{ns}/clock') >= 1
-            and {f'{ns}/generalize', f'{ns}/controller/pause'}
-            <= set(dict(node.get_service_names_and_types())))
-
-
 @pytest.fixture(scope='module')
 def robots(colcon_install, module_ros_env, tmp_path_factory):
     """Start three nodes per robot and the client; yield the client and the processes."""
@@ -122,9 +112,10 @@ def robots(colcon_install, module_ros_env, tmp_path_factory):
                      and client.tips[ns], STARTUP, f'{ns} to be idle', processes)
             wait_for(lambda: client.generalize[ns].service_is_ready(), STARTUP,
                      f'{ns}/generalize', processes)
-        # Every robot's endpoints discovered: what the graph test counts.
-        wait_for(lambda: all(discovered(client.node, ns) for ns in ROBOTS), STARTUP,
-                 "both robots' publishers and subscribers in the graph", processes)
+        # dmp_server says nothing when its first joint state arrives (it plans from the tool
+        # position they give): no condition to wait on, a moment for its subscription to match
+        # and receive (without it: "the tool position is unknown (none received yet)").
+        time.sleep(1.0)
         yield client, processes
     finally:
         client.close()
