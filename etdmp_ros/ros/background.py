@@ -22,11 +22,11 @@ class BackgroundNode:
 
     def __init__(self, name, domain_id=None):
         """Create the context and the node (not spinning yet)."""
-        _spin.use_dds_profile()
         self.context = rclpy.Context()
         kwargs = {} if domain_id is None else {'domain_id': int(domain_id)}
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO,
-                   **kwargs)
+        with _spin.dds_settings():
+            rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO,
+                       **kwargs)
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = _spin.make_executor(self.context)
         self._thread = threading.Thread(target=self._spin, daemon=True, name=f'{name}_spin')

@@ -23,7 +23,7 @@ import subprocess
 import sys
 import time
 
-from etdmp_ros.ros import system
+from etdmp_ros.ros import fastdds_files, system
 
 #: Environment variables that would widen discovery beyond this machine's private domain.
 DISCOVERY_VARIABLES = ('ROS_LOCALHOST_ONLY', 'ROS_STATIC_PEERS')
@@ -121,12 +121,17 @@ class NodeProcess:
             self.process.send_signal(signal.SIGINT)
 
     def wait(self, timeout=10.0):
-        """Wait up to ``timeout`` s for the exit, then kill; close the log; return the code."""
+        """
+        Wait up to ``timeout`` s for the exit, then kill; close the log; return the code.
+
+        A killed node leaves its Fast DDS shared-memory files: they are removed then.
+        """
         try:
             self.process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.process.wait()
+            fastdds_files.clean()
         self._log.close()
         return self.process.returncode
 

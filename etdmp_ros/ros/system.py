@@ -720,6 +720,11 @@ class NodeSpec:
     which stamps plans with the ROS clock, and the controller, which judges its joint states
     stale on the simulation's time (a stalled simulation is late, not lost). The others stamp
     with their inputs' stamps and need no clock.
+
+    ``shared_memory``: the node receives camera images, which Fast DDS's shared-memory
+    transport carries (config/fastdds.xml). The others talk UDP only (config/fastdds_udp.xml):
+    a shared-memory send can wait seconds for another process (docs/reliability.md), and the
+    simulation, the controller and dmp_server close the control loop.
     """
 
     name: str
@@ -728,6 +733,7 @@ class NodeSpec:
     parameters: tuple
     node_class: str
     sim_time: bool = False
+    shared_memory: bool = False
     config_header: str = field(default='', repr=False)
     services: tuple = ()
 
@@ -773,6 +779,7 @@ NODES = (
              'are its built-in defaults).'),
     NodeSpec('perception', 'goal and obstacles in base_link from the colour + depth camera',
              PERCEPTION_SCENE, PERCEPTION, 'etdmp_ros.nodes.perception:PerceptionNode',
+             shared_memory=True,
              config_header='Everything here except reliable_images can be changed at runtime '
              '(ros2 param set /perception <name> <value>).'),
     NodeSpec('dmp_server', 'learns skills from demonstrations and serves /generalize',
@@ -787,7 +794,7 @@ NODE_NAMES = tuple(n.name for n in NODES)
 #: launch file's ``teach:=true``), not by ``make demo``, ``bringup`` or the launch file's default.
 TEACH_NODE = NodeSpec('teach', 'the teaching page: draw a movement in a browser, teach it to '
                       'dmp_server, watch the UR10 write it', TEACH_SCENE, TEACH,
-                      'etdmp_ros.nodes.teach:TeachNode',
+                      'etdmp_ros.nodes.teach:TeachNode', shared_memory=True,
                       config_header='The page is served to this machine only unless address '
                       'says otherwise.')
 #: Every node of the package: the system's, then the teaching page's.

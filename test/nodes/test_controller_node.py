@@ -158,6 +158,16 @@ class Rig:
         self.domain = int(env['ROS_DOMAIN_ID'])
         self.rate = rate
         self.processes = []
+        self.client = None
+        try:
+            self._start(install, env, tmp, sim)
+        except BaseException:
+            # Nobody else would stop them: a failed start must not leave the nodes running.
+            self.close()
+            raise
+
+    def _start(self, install, env, tmp, sim):
+        rate = self.rate
         if sim:
             self.processes.append(NodeProcess(install, env, tmp, 'ur10_sim',
                                               {'camera_rate': 0.0, 'control_rate': rate}))
@@ -183,11 +193,14 @@ class Rig:
                 and self.client.commands, STARTUP, 'the controller topics', self.processes)
 
     def close(self):
-        """Stop everything; return the controller's exit code."""
-        self.client.close()
-        codes = [p.stop() for p in self.processes]
-        self._patch.undo()
-        return codes[-1]
+        """Stop everything (whatever fails on the way); return the controller's exit code."""
+        try:
+            if self.client is not None:
+                self.client.close()
+        finally:
+            codes = [p.stop() for p in self.processes]
+            self._patch.undo()
+        return codes[-1] if codes else None
 
     def logs(self):
         """Return the nodes' outputs."""
@@ -249,8 +262,12 @@ class Rig:
 @pytest.fixture(scope='module')
 def rig(colcon_install, tmp_path_factory):
     r = Rig(colcon_install, tmp_path_factory.mktemp('controller_125'), 125.0)
-    yield r
-    assert r.close() == 0, r.logs()
+    try:
+        yield r
+    finally:
+        # Stopped whatever happened before (the nodes of a failed test too).
+        code = r.close()
+    assert code == 0, r.logs()
 
 
 def report(name, errors):
