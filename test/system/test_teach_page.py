@@ -50,6 +50,7 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, String
+from support import waiting
 from support.drawings import letter_z
 
 CHROMIUM, CHROMEDRIVER = shutil.which('chromium'), shutil.which('chromedriver')
@@ -57,7 +58,6 @@ CHROMIUM, CHROMEDRIVER = shutil.which('chromium'), shutil.which('chromedriver')
 MAX_TRACE_NRMSE = 0.05
 #: A pointer move every this many ms while drawing (WebDriver adds its own few ms).
 MOVE_MS = 20
-CAMERA_PERIOD = 1.0 / system.node('teach').parameter('camera_rate').default
 WINDOW = (1400, 1460)
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -85,16 +85,7 @@ pytestmark = pytest.mark.skipif(bool(_missing()), reason=_missing() or 'runs')
 
 def wait_for(predicate, timeout, what, session=None):
     """Return predicate()'s first truthy value within ``timeout`` s, else fail naming ``what``."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if session is not None:
-            session.check_alive()
-        if time.monotonic() > deadline:
-            pytest.fail(f'timed out after {timeout} s waiting for {what}')
-        time.sleep(0.02)
+    return waiting.wait_for(predicate, timeout, what, [] if session is None else [session])
 
 
 class Listener(BackgroundNode):
@@ -145,9 +136,7 @@ class Listener(BackgroundNode):
                 type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=list(map(
                     float, value)))) for name, value in values.items()])
         future = self.scene.call_async(request)
-        deadline = time.monotonic() + 10.0
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_for(future.done, 10.0, "ur10_sim's answer to setting its parameters")
         assert future.done() and all(r.successful for r in future.result().results), values
 
     def server_parameters(self, *names):
@@ -356,7 +345,10 @@ def test_draw_a_z_teach_it_and_the_robot_writes_it(session, listener, browser):
     wait_for(finished, 60.0, 'the controller to write the Z and be idle again', session)
     seen = [s for t, s in listener.statuses if t > clicked]
     assert 'tracking' in seen and 'unreachable' not in seen, seen
-    time.sleep(2.5 * CAMERA_PERIOD)   # the page's next camera image and overlay
+    frames = browser.execute_script('return window.teach.cameraFrames')
+    # The page's next camera image and its overlay (fetched after the image, before the next).
+    wait_for(lambda: browser.execute_script('return window.teach.cameraFrames') >= frames + 2,
+             20.0, 'the next camera images on the page', session)
     shown = browser.execute_script(
         'const o = window.teach.overlay; return [document.getElementById("camera").naturalWidth,'
         ' window.teach.cameraFrames, o && o.plan.length, o && o.trace.length];')
@@ -534,9 +526,9 @@ def _cpu_seconds(pid):
 def test_with_no_page_open_the_teach_node_costs_next_to_nothing(session, browser):
     browser.get('about:blank')   # the page is closed: it asks for no more images
     timeout = system.node('teach').parameter('watch_timeout').default
-    time.sleep(timeout + 1.0)
+    time.sleep(timeout + 1.0)       # the subject: the page closed longer than watch_timeout ...
     start, started = _cpu_seconds(session.teach.pid), time.monotonic()
-    time.sleep(3.0)
+    time.sleep(3.0)                 # ... then 3 s of the node's CPU time measured
     cores = (_cpu_seconds(session.teach.pid) - start) / (time.monotonic() - started)
     print(f'\nteach node with no page open: {cores:.4f} cores')
     assert cores < 0.02
