@@ -1,5 +1,5 @@
 """
-Kinesthetic teaching benchmark (issue 16): record a stir by hand, learn it, repeat it.
+Kinesthetic teaching benchmark: record a stir by hand, learn it, repeat it.
 
 A script, not a pytest test; it needs no peer library. Run from the repository root::
 

@@ -1,5 +1,5 @@
 """
-Attacks on the controller through its topics (issue 13), against the installed nodes.
+Attacks on the controller through its topics, against the installed nodes.
 
 ``ur10_sim`` (camera off) and ``controller`` run from the colcon install as in
 test_controller_node (its :class:`Rig`). While the arm writes the letter G, each row of
@@ -33,7 +33,7 @@ from test_controller_node import Rig
 #: uses once started (360 MB with numba's cache, 450 MB when numba compiled in the process:
 #: a fresh clone). Measured: +3 to +33 MB; a 10^5-pose path is 8 MB of bytes.
 RSS_GROWTH_LIMIT = 64e6
-#: Joint states per second of the flood: the rate that stopped every letter before (issue 13).
+#: Joint states per second of the flood: the rate that stopped every letter before.
 FLOOD_RATE = 13000
 #: The shipped max_path_poses (config/controller.yaml).
 MAX_PATH_POSES = 20000

@@ -1,5 +1,5 @@
 """
-dmp_server under attack (issue 13): the installed node, attacked as a user on the machine can.
+dmp_server under attack: the installed node, attacked as a user on the machine can.
 
 Each row of ATTACKS does what ``ros2 service call``, ``ros2 param set`` or ``ros2 topic pub`` (or
 a file put in ``demo_files`` / ``skills_dir``) would, and then checks, for every row: the node

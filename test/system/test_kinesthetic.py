@@ -1,5 +1,5 @@
 """
-Kinesthetic teaching (issue 16), through the installed ur10_sim and then the whole system.
+Kinesthetic teaching, through the installed ur10_sim and then the whole system.
 
 1. :func:`etdmp_ros.demo.kinesthetic.record` (``make kinesthetic``) starts the installed ur10_sim,
    sets its ``teach_script`` as ``ros2 param set`` would (the teaching mode leads the arm

@@ -1,5 +1,5 @@
 """
-Every plan comes to rest at its goal, position and orientation, also past tau (issue 24).
+Every plan comes to rest at its goal, position and orientation, also past tau.
 
 On recordings that are not the built-in ones (test/support/shapes.py: the LASA handwriting data set
 and the ways a recording goes wrong; 3D shapes with a tool that turns with the stroke), with both

@@ -681,7 +681,7 @@ def test_frame_synchronizer():
         FrameSynchronizer((), 0)
 
 
-# ------------------------------------------------------------ the bottle (the stirring goal)
+# ----------------------------------------------------------------- the bottle (stir)
 
 
 def test_the_bottle_is_located_within_2_mm_moved_and_with_the_stirrer_in_it(sim, detector):
