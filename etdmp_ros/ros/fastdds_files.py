@@ -74,7 +74,7 @@ def kind(name):
 
 def listing(directory=SHM_DIR):
     """Return ``{name: os.stat_result}`` of the Fast DDS files in ``directory``."""
-    files: dict[str, os.stat_result] = {}
+    files = {}
     try:
         names = os.listdir(directory)
     except OSError:
@@ -122,7 +122,7 @@ def mappers(directory=SHM_DIR, pids=None):
     (another user's, or one that is not dumpable) counts as mapping nothing.
     """
     prefix = f'{directory}/'
-    found: dict[str, set[int]] = {}
+    found = {}
     for pid in _pids() if pids is None else pids:
         try:
             with open(f'/proc/{pid}/maps') as maps:
@@ -146,7 +146,7 @@ def lock_owners(directory=SHM_DIR):
     except OSError:
         return {}
     major, minor = os.major(device), os.minor(device)
-    owners: dict[int, set[int]] = {}
+    owners = {}
     for line in lines:
         fields = line.split()
         if '->' in fields or len(fields) < 6 or fields[1] != 'FLOCK':
@@ -264,9 +264,7 @@ def stale(directory=SHM_DIR, now=None):
                 taken.add(segment)
         elif k in ('port', 'lock', 'mutex'):
             port_name = name[:-3] if k == 'lock' else name
-            match = _MUTEX.fullmatch(name) or _PORT.fullmatch(port_name)
-            assert match is not None    # what made it a port, lock or mutex
-            number = match.group(1)
+            number = (_MUTEX.fullmatch(name) or _PORT.fullmatch(port_name)).group(1)
             if number in taken:
                 continue
             taken.add(number)
@@ -319,7 +317,7 @@ def clean(directory=SHM_DIR):
     """
     if not directory.is_dir():
         return []
-    removed: list[str] = []
+    removed = []
     for names, reason in stale(directory):
         if reason == 'port without reader':
             # Fast DDS opens a port holding its mutex: holding it here, no process can be

@@ -21,8 +21,9 @@ from typing import Any, TYPE_CHECKING
 from etdmp_ros import limits
 from etdmp_ros.dmp import check_file_size, DemonstrationError, unit_quaternions
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 if TYPE_CHECKING:   # the robot package loads Pinocchio: imported where joint states are read
     from etdmp_ros.robot import UR10Model
@@ -54,13 +55,13 @@ class RecordedPath:
     (:func:`recorded_orientations`).
     """
 
-    positions: NDArray[np.float64]
-    t: NDArray[np.float64] | None
+    positions: Array
+    t: Array | None
     topic: str
-    orientations: NDArray[np.float64] | None = None
+    orientations: Array | None = None
 
 
-def recorded_orientations(values: ArrayLike, where: str = 'path') -> NDArray[np.float64] | None:
+def recorded_orientations(values: ArrayLike, where: str = 'path') -> Array | None:
     """
     Return the recorded orientations (n, 4) of a path's poses, normalised, or None for none.
 
@@ -249,7 +250,7 @@ def joint_state_path(records: Sequence[tuple[int, Any]], kinematics: UR10Model |
     return RecordedPath(positions[keep], stamps[keep], topic, orientations)
 
 
-def _motion_span(positions: NDArray[np.float64]) -> tuple[int, int] | None:
+def _motion_span(positions: Array) -> tuple[int, int] | None:
     """Return (first, last) indices of the motion in ``positions``, or None if none."""
     from_start = np.linalg.norm(positions - positions[0], axis=1)
     from_end = np.linalg.norm(positions - positions[-1], axis=1)

@@ -24,8 +24,9 @@ from collections.abc import Collection, Iterable
 from typing import Any
 
 from builtin_interfaces.msg import Time
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -78,7 +79,7 @@ def cylinder_markers(tops: ArrayLike, radii: ArrayLike, stamp: Time | int,
 
 
 def cylinders_from_markers(msg: MarkerArray, frame_ids: Collection[str] = ('', 'base_link')
-                           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+                           ) -> tuple[Array, Array]:
     """
     Return ``(tops (n, 3), radii (n,))`` of the CYLINDER markers ADDed in a MarkerArray.
 
