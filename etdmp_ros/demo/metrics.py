@@ -85,7 +85,7 @@ from etdmp_ros.dmp import euclidean_transform, nrmse
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.task_plane import quadrant
 from etdmp_ros.robot import PEN_TIP_RADIUS, UR10Model
-from etdmp_ros.skills.planning import FOLLOW_CONFIRMATIONS
+from etdmp_ros.skills.following import FOLLOW_CONFIRMATIONS, goal_moved, MovedInput
 import numpy as np
 
 DEFINITIONS = {
@@ -626,19 +626,14 @@ def goal_seen_after_move(scene, goal_seen, plan_goal, since_ns, threshold,
     """
     rows = np.flatnonzero(goal_seen[:, 0] >= since_ns) if len(goal_seen) else []
     placed = _placed(scene, goal_seen[:, 3:6]) if len(goal_seen) else np.zeros((0, 3))
-    first = confirming = None
-    candidate, count = None, 0
+    first = None
+    decision = MovedInput(goal_moved, confirmations)    # dmp_server's own (Following)
     for i in rows:
-        moved = bool(np.linalg.norm(placed[i] - plan_goal) > threshold)
-        if first is None and moved:
+        if first is None and goal_moved(plan_goal, placed[i], threshold):
             first = int(i)
-        if candidate is None or np.linalg.norm(placed[i] - candidate) > threshold:
-            count = 0
-        candidate, count = placed[i], count + 1
-        if count >= confirmations and moved:
-            confirming = int(i)
-            break
-    return first, confirming
+        if decision.see(placed[i], plan_goal, threshold):
+            return first, int(i)
+    return first, None
 
 
 def perceived_goal_rows(run):

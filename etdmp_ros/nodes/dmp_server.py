@@ -51,12 +51,12 @@ from etdmp_ros.ros.parameters import (declared_settings, InvalidConfiguration, p
                                       values as parameter_values)
 from etdmp_ros.ros.queued_service import QueuedService
 from etdmp_ros.ros.spin import run
+from etdmp_ros.skills.following import FollowedPlan, Following, sized_obstacles
 from etdmp_ros.skills.library import (BASE_FRAMES, check_skill_name, default_skills_dir,
                                       RECORDED_DIMS, recorded_orientations, recorded_path_demo,
                                       save_skill_demo, SkillLibrary)
-from etdmp_ros.skills.planning import (bounded, FOLLOW_CONFIRMATIONS, FollowedPlan, place_demo,
-                                       Plan, PLAN_ORIENTATION_MODES, plan_path, PlanSettings,
-                                       Workspace)
+from etdmp_ros.skills.planning import (bounded, place_demo, Plan, PLAN_ORIENTATION_MODES,
+                                       plan_path, PlanSettings, Workspace)
 from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
@@ -280,7 +280,7 @@ class DmpServer(Node):
         self._refused_busy, self._busy_log_time = 0, -float('inf')
         self._planned = 0   # requests answered with a plan
         self._follow_lock = threading.Lock()
-        self._followed = None   # _Followed: the plan in execution, while it may still move
+        self._followed = None   # Following: the plan in execution, while it may still move
         self._generalize = QueuedService(self, GetPlan, 'generalize', self._on_generalize,
                                          self._refuse_busy, _SERVICE_QOS,
                                          settings.max_request_wait, limits.MAX_QUEUED_REQUESTS)
@@ -610,9 +610,8 @@ class DmpServer(Node):
         Return the obstacles to plan around: (points (m, 3), radii (m,) in metres).
 
         The perceived ones (/etdmp/obstacles), each with the radius of the nearest volume
-        (/etdmp/obstacle_volumes, within FOLLOW_MATCH_RADIUS: perception sends both for every
-        frame), then ``static_obstacles`` (points: radius 0). A perceived obstacle without a
-        volume is a point (warned).
+        (/etdmp/obstacle_volumes, :func:`sized_obstacles`), then ``static_obstacles`` (points:
+        radius 0). A perceived obstacle without a volume is a point (warned).
         """
         with self._state_lock:
             seen = self._obstacles.fresh(settings.obstacle_max_age)
@@ -626,14 +625,7 @@ class DmpServer(Node):
         static = settings.static_obstacles
         if seen is None or len(seen) == 0:
             return static, np.zeros(len(static))
-        radii = np.zeros(len(seen))
-        if volumes is not None and len(volumes[0]):
-            gaps = np.linalg.norm(seen[:, None] - volumes[0][None], axis=2)
-            nearest = gaps.argmin(axis=1)
-            sized = gaps[np.arange(len(seen)), nearest] <= FOLLOW_MATCH_RADIUS
-            radii[sized] = volumes[1][nearest[sized]]
-        else:
-            sized = np.zeros(len(seen), bool)
+        radii, sized = sized_obstacles(seen, *(volumes or (None, None)))
         if not np.all(sized):
             self.get_logger().warn(
                 f'{np.count_nonzero(~sized)} perceived obstacle(s) without a volume on '
@@ -855,7 +847,7 @@ class DmpServer(Node):
         if settings.follow_goal:
             try:
                 with self._core_lock:
-                    followed = _Followed(FollowedPlan(skill, plan, settings.plan,
+                    followed = Following(FollowedPlan(skill, plan, settings.plan,
                                                       settings.plane),
                                          skill, stamp, perceived_goal)
             except ValueError as err:   # e.g. a skill the online rollout cannot take
@@ -870,91 +862,63 @@ class DmpServer(Node):
             f = self._followed
             if f is None or not settings.follow_goal:
                 return
-            now = self.get_clock().now().nanoseconds
-            tau_now = (now - f.stamp) * 1e-9
-            if tau_now > f.plan.duration + _FOLLOW_AFTER_END:
+            tau_now = (self.get_clock().now().nanoseconds - f.stamp) * 1e-9
+            if f.ended(tau_now):
                 self._followed = None           # done: nothing left to follow
                 return
             threshold = settings.follow_threshold
-            new_goal = None
-            if goal is not None and f.perceived_goal:
-                placed = f.plan.placed(goal)
-                if f.goal_seen.confirm(placed, _goal_moved, threshold) and \
-                        _goal_moved(f.plan.goal, placed, threshold) and \
-                        _goal_moved(f.refused_goal, placed, threshold):
-                    new_goal = goal
-            new_obstacles = None
-            if obstacles:
-                seen, seen_radii = self._current_volumes(settings)
-                merged, merged_radii = _merged_obstacles(
-                    f.plan.obstacles, f.plan.obstacle_sizes, f.plan.placed(seen), seen_radii,
-                    threshold)
-                if f.obstacles_seen.confirm(merged, _obstacles_moved, threshold) and \
-                        _obstacles_moved(f.plan.obstacles, merged, threshold) and \
-                        _obstacles_moved(f.refused_obstacles, merged, threshold):
-                    new_obstacles = merged
+            new_goal = None if goal is None else f.goal_to_follow(goal, threshold)
+            new_obstacles = None if not obstacles else f.obstacles_to_follow(
+                *self._current_volumes(settings), threshold)
             if new_goal is None and new_obstacles is None:
                 return
             received = time.perf_counter()
-            tau_c = self._controller_path_time(f, tau_now, settings)
-            t_switch = tau_c + settings.follow_lead
+            try:
+                tool = self._tool_position(settings)
+            except ValueError:
+                tool = None
+            tau_c = f.controller_path_time(tool, tau_now)
             try:
                 with self._core_lock, np.errstate(over='raise', invalid='raise',
                                                   divide='raise'):
                     if new_goal is not None:
                         self._check_goal(new_goal, f.skill, settings)
                     first = f.plan.update(
-                        t_switch, goal=new_goal, obstacles=new_obstacles,
-                        obstacle_radii=None if new_obstacles is None else merged_radii)
+                        tau_c + settings.follow_lead, goal=new_goal,
+                        obstacles=None if new_obstacles is None else new_obstacles[0],
+                        obstacle_radii=None if new_obstacles is None else new_obstacles[1])
             except (ValueError, ArithmeticError) as err:
                 # Said once for this goal or obstacle set, not at every message that shows it.
-                f.refused_goal = f.goal_seen.candidate if new_goal is not None else None
-                f.refused_obstacles = (f.obstacles_seen.candidate if new_obstacles is not None
-                                       else None)
+                f.refused(goal=new_goal is not None, obstacles=new_obstacles is not None)
                 self.get_logger().error(f'the plan in execution does not follow: '
                                         f'{_short(err)}; it goes on as it was')
                 return
-            p = f.plan
-            keep = p.index(max(0.0, tau_c - _FOLLOW_OVERLAP))
-            # Its bytes written with numpy: 0.2 ms where building the message takes ~8.
-            orientation = p.orientation if isinstance(p.orientation, tuple) else \
-                p.orientation[keep:]
-            self._path_pub.publish(serialize_path(p.positions[keep:], p.t[keep:], f.stamp,
-                                                  'base_link', orientation))
-            took = (time.perf_counter() - received) * 1e3
-            what = ' and '.join(
-                ([f'goal moved to ({new_goal[0]:.3f}, {new_goal[1]:.3f}, {new_goal[2]:.3f})']
-                 if new_goal is not None else []) +
-                ([f'obstacles moved to {np.round(new_obstacles, 3).tolist()}']
-                 if new_obstacles is not None else []))
-            self.get_logger().info(
-                f'following: {what}: re-planned from path time {p.t[first]:.2f} s (the '
-                f'controller at about {tau_c:.2f} s), {len(p.t) - keep} poses to '
-                f'{p.duration:.2f} s published in {took:.1f} ms (update {p.updates})')
-            if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
-                shown = Plan(p.t, p.positions, p.velocities, p.orientation, f.start, p.goal,
-                             p.obstacles, settings.plan.method, None)
-                header = Header(stamp=ns_to_stamp(f.stamp), frame_id='base_link')
-                self._request_markers((settings, f.skill, shown, header))
+            self._publish_remainder(f, first, tau_c, new_goal, new_obstacles, received, settings)
 
-    def _controller_path_time(self, f, tau_now, settings):
-        """
-        Estimate the path time the controller is at: where the tool is closest to the path.
-
-        Searched between the previous estimate and ``tau_now`` (the controller cannot be ahead
-        of the time since the plan's stamp); without a tool position, ``tau_now``.
-        """
-        try:
-            tool = self._tool_position(settings)
-        except ValueError:
-            return tau_now
+    def _publish_remainder(self, f, first, tau_c, new_goal, new_obstacles, received, settings):
+        """Publish a followed plan's new remainder (and its markers); say what was followed."""
         p = f.plan
-        lo, hi = p.index(f.tau_c), p.index(tau_now) + 1
-        if hi <= lo:
-            return tau_now
-        i = lo + int(np.argmin(np.linalg.norm(p.positions[lo:hi] - tool, axis=1)))
-        f.tau_c = float(p.t[i])
-        return f.tau_c
+        keep = f.remainder_start(tau_c)
+        # Its bytes written with numpy: 0.2 ms where building the message takes ~8.
+        orientation = p.orientation if isinstance(p.orientation, tuple) else \
+            p.orientation[keep:]
+        self._path_pub.publish(serialize_path(p.positions[keep:], p.t[keep:], f.stamp,
+                                              'base_link', orientation))
+        took = (time.perf_counter() - received) * 1e3
+        what = ' and '.join(
+            ([f'goal moved to ({new_goal[0]:.3f}, {new_goal[1]:.3f}, {new_goal[2]:.3f})']
+             if new_goal is not None else []) +
+            ([f'obstacles moved to {np.round(new_obstacles[0], 3).tolist()}']
+             if new_obstacles is not None else []))
+        self.get_logger().info(
+            f'following: {what}: re-planned from path time {p.t[first]:.2f} s (the '
+            f'controller at about {tau_c:.2f} s), {len(p.t) - keep} poses to '
+            f'{p.duration:.2f} s published in {took:.1f} ms (update {p.updates})')
+        if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
+            shown = Plan(p.t, p.positions, p.velocities, p.orientation, f.start, p.goal,
+                         p.obstacles, settings.plan.method, None)
+            header = Header(stamp=ns_to_stamp(f.stamp), frame_id='base_link')
+            self._request_markers((settings, f.skill, shown, header))
 
     # -- markers --------------------------------------------------------------------------------
 
@@ -1009,86 +973,6 @@ class DmpServer(Node):
             _axes_marker(header, 'orientation', plan.positions, plan.orientations),
         ])
         self._marker_pub.publish(markers)
-
-
-#: The remainder published on a change starts this far (path time, s) before the controller's
-#: estimated place, so that it covers where the controller is when it takes it over.
-_FOLLOW_OVERLAP = 0.1
-#: A perceived obstacle within this distance (m) of one the plan avoids is that one, moved.
-FOLLOW_MATCH_RADIUS = 0.05
-#: A plan is followed until this long (s) after its end.
-_FOLLOW_AFTER_END = 1.0
-
-
-class _Followed:
-    """A plan in execution: its FollowedPlan, its skill, stamp, and what it follows."""
-
-    def __init__(self, plan, skill, stamp, perceived_goal):
-        self.plan, self.skill, self.stamp = plan, skill, stamp
-        self.perceived_goal = perceived_goal    # the request used the perceived goal
-        self.refused_goal = self.refused_obstacles = None    # the last the plan could not take
-        self.start = plan.positions[0].copy()
-        self.tau_c = 0.0                        # the controller's path time, last estimate
-        self.goal_seen, self.obstacles_seen = _Confirmed(), _Confirmed()
-
-
-class _Confirmed:
-    """A perceived value taken as changed once FOLLOW_CONFIRMATIONS messages agree on it."""
-
-    def __init__(self):
-        self.candidate, self.count = None, 0
-
-    def confirm(self, value, differ, threshold):
-        """Note ``value``; return whether the last FOLLOW_CONFIRMATIONS agree (``differ``)."""
-        if differ(self.candidate, value, threshold):
-            self.count = 0
-        self.candidate, self.count = value, self.count + 1
-        return self.count >= FOLLOW_CONFIRMATIONS
-
-
-def _merged_obstacles(used, used_radii, seen, seen_radii, threshold):
-    """
-    Return the obstacles (m, 3) and radii (m,) a plan in execution follows: ``used`` updated.
-
-    A seen obstacle within FOLLOW_MATCH_RADIUS of a used one is that one (moved, if by more than
-    ``threshold``, and then with its seen radius); the nearest such wins, others near it are
-    the same obstacle seen twice. A seen obstacle near none appeared. A used obstacle that is
-    not seen is kept where it was: the arm may be hiding it from the camera.
-    """
-    used, seen = np.asarray(used).reshape(-1, 3), np.asarray(seen).reshape(-1, 3)
-    merged, radii = used.copy(), np.array(used_radii, dtype=float).reshape(-1)
-    seen_radii = np.asarray(seen_radii, dtype=float).reshape(-1)
-    appeared = list(range(len(seen)))
-    if len(used):
-        gaps = np.linalg.norm(seen[:, None] - used[None], axis=2)
-        nearest = gaps.argmin(axis=1) if len(seen) else np.zeros(0, int)
-        for j in range(len(used)):
-            mine = np.flatnonzero((nearest == j) & (gaps[:, j] <= FOLLOW_MATCH_RADIUS))
-            if len(mine):
-                best = mine[np.argmin(gaps[mine, j])]
-                if gaps[best, j] > threshold:
-                    merged[j], radii[j] = seen[best], seen_radii[best]
-        appeared = [i for i in range(len(seen)) if gaps[i].min() > FOLLOW_MATCH_RADIUS]
-    return (np.vstack([merged, seen[appeared]]), np.concatenate([radii, seen_radii[appeared]]))
-
-
-def _goal_moved(before, now, threshold):
-    """Return whether goal ``now`` is more than ``threshold`` from ``before`` (or no before)."""
-    return before is None or bool(np.linalg.norm(now - before) > threshold)
-
-
-def _obstacles_moved(used, seen, threshold):
-    """Return whether the obstacle set ``seen`` differs from ``used`` by more than threshold."""
-    if used is None:
-        return True
-    seen, used = np.asarray(seen).reshape(-1, 3), np.asarray(used).reshape(-1, 3)
-    if len(seen) != len(used):
-        return True
-    if not len(seen):
-        return False
-    # Each used obstacle's nearest seen one (sets are small and unordered).
-    gaps = np.linalg.norm(used[:, None] - seen[None], axis=2).min(axis=1)
-    return bool(gaps.max() > threshold)
 
 
 def _marker(header, ns, kind, points, rgba, size):

@@ -160,6 +160,8 @@ class UR10SimNode(Node):
                       'frames_dropped': 0, 'max_tick_gap': 0.0, 'late_ticks': 0,
                       'waits': 0, 'waits_expired': 0, 'wait_time': 0.0,
                       'contact_ticks': 0, 'contact_pairs': set()}
+        self._unreported_stall = (0.0, 0.0)     # (gap, simulated time) not warned about yet
+        self._last_stall_warning = -1.0
 
         reliable = QoSProfile(depth=10)
         # A second of history: a slow reader must never block the simulation's publish().
@@ -367,16 +369,26 @@ class UR10SimNode(Node):
         self._answered_ticks = self._answered_ticks + 1 if answered else 0
 
     def _note_gap(self, gap):
-        """Keep the largest wall-clock gap between ticks; warn about one over LATE_TICKS."""
+        """
+        Keep the largest wall-clock gap between ticks; warn about those over LATE_TICKS.
+
+        At most one warning a second, naming the largest stall since the previous one (a
+        throttled log would show the first and hide a longer one right after it).
+        """
         stats = self.stats
         stats['max_tick_gap'] = max(stats['max_tick_gap'], gap)
         rtf = self.real_time_factor
         if rtf > 0 and gap > LATE_TICKS * self.tick_period / rtf:
             stats['late_ticks'] += 1
+            if gap > self._unreported_stall[0]:
+                self._unreported_stall = (gap, self.sim.time)
+        now = time.monotonic()
+        if self._unreported_stall[0] > 0.0 and now - self._last_stall_warning >= 1.0:
+            gap, at = self._unreported_stall
+            self._unreported_stall, self._last_stall_warning = (0.0, 0.0), now
             self.get_logger().warning(
                 f'simulation loop stalled: {gap * 1e3:.0f} ms between two ticks at t = '
-                f'{self.sim.time:.3f} s (the machine is overloaded?)',
-                throttle_duration_sec=1.0)
+                f'{at:.3f} s (the machine is overloaded?)')
 
     def run_for(self, duration):
         """Run ``duration`` s of simulated time in the calling thread, unpaced (benchmarks)."""

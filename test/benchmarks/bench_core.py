@@ -48,8 +48,8 @@ import platform
 import sys
 import time
 
-from etdmp_ros.dmp import builtin_demo, clearance, learn, nrmse
-from etdmp_ros.dmp._online import compare_goal_jump, goal_jump_case, GOAL_JUMP_WAYS
+from etdmp_ros.dmp import (builtin_demo, clearance, compare_goal_jump, goal_jump_case,
+                           GOAL_JUMP_WAYS, learn, nrmse)
 import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
