@@ -34,11 +34,11 @@ ET-DMP core and map the result back.
 """
 
 from dataclasses import dataclass, field, replace
-from typing import Optional, Tuple
+from typing import Optional, Tuple, Union
 
 from etdmp_ros import limits
 from etdmp_ros.dmp import (AVOIDANCES, euclidean_transform, GeneralizationError, METHODS,
-                           ObstacleGains, Skill)
+                           ObstacleGains, Skill, Trajectory)
 from etdmp_ros.geometry.arrays import Array as FloatArray
 from etdmp_ros.geometry.quaternion import unit_and_norm
 from etdmp_ros.geometry.task_plane import TaskPlane
@@ -82,13 +82,13 @@ class Workspace:
     joint limits).
     """
 
-    shoulder: tuple = (0.0, 0.0, 0.1273)
+    shoulder: Tuple[float, float, float] = (0.0, 0.0, 0.1273)
     reach: float = 1.3
     margin: float = 0.15
     min_radius: float = 0.2
     min_height: float = -0.005
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate the numbers."""
         shoulder = np.asarray(self.shoulder, dtype=float)
         if shoulder.shape != (3,) or not np.all(np.isfinite(shoulder)):
@@ -100,7 +100,7 @@ class Workspace:
             raise ValueError(f'workspace needs reach - margin > min_radius >= 0, got reach '
                              f'{self.reach}, margin {self.margin}, min_radius {self.min_radius}')
 
-    def violation(self, points):
+    def violation(self, points: ArrayLike) -> Optional[Tuple[int, str]]:
         """
         Return (index, reason) of the first point (n, 3) outside the workspace, or None.
 
@@ -160,13 +160,13 @@ class PlanSettings:
     avoidance: str = ''
     goal_clearance: float = 0.02
     min_distance: float = 0.005
-    orientation: tuple = TOOL_DOWN
+    orientation: Tuple[float, float, float, float] = TOOL_DOWN
     orientation_mode: str = 'demo'
     workspace: Workspace = field(default_factory=Workspace)
     tool_radius: float = PEN_RADIUS
     obstacle_clearance: float = 0.008
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate and normalise."""
         if self.method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {self.method!r}')
@@ -213,25 +213,25 @@ class Plan:
     radii; ``avoidance`` as used.
     """
 
-    t: np.ndarray
-    positions: np.ndarray
-    velocities: np.ndarray
-    orientation: tuple
-    start: np.ndarray
-    goal: np.ndarray
-    obstacles: np.ndarray
+    t: Array
+    positions: Array
+    velocities: Array
+    orientation: Union[Tuple[float, ...], Array]
+    start: Array
+    goal: Array
+    obstacles: Array
     method: str
-    trajectory: object
-    obstacle_radii: np.ndarray = None
+    trajectory: Optional[Trajectory]
+    obstacle_radii: Optional[Array] = None
     avoidance: str = 'paper'
 
     @property
-    def orientations(self):
+    def orientations(self) -> Array:
         """Return the orientation of every pose (n, 4), (x, y, z, w) in base_link."""
         return pose_orientations(self.orientation, len(self.t))
 
 
-def pose_orientations(orientation, n):
+def pose_orientations(orientation: Union[Tuple[float, ...], ArrayLike], n: int) -> Array:
     """Return ``orientation`` (a (4,) tuple or an (n, 4) array) as an (n, 4) array."""
     if isinstance(orientation, tuple):
         return np.tile(np.asarray(orientation, dtype=float), (n, 1))
@@ -255,7 +255,7 @@ def checked_points(value: ArrayLike, what: str, shape: Optional[Tuple[int, ...]]
     return bounded(array, what)
 
 
-def bounded(points, what):
+def bounded(points: ArrayLike, what: str) -> Array:
     """
     Return ``points`` (any shape, base_link metres) as a float array, checked as a request's.
 
@@ -321,7 +321,8 @@ class SkillSpace:
         return q if self.plane is None else self.plane.orientation_from_plane(q)
 
 
-def goal_orientation_of(skill, value, settings):
+def goal_orientation_of(skill: Skill, value: Optional[ArrayLike],
+                        settings: PlanSettings) -> Optional[Array]:
     """
     Return the requested goal orientation (4,) as the plan uses it, or None for none.
 
@@ -370,7 +371,8 @@ def format_point(point: ArrayLike) -> str:
     return '(' + ', '.join(f'{c:.3f}' if abs(c) < 1e6 else f'{c:.3g}' for c in point) + ')'
 
 
-def obstacle_clearances(radii, settings, count):
+def obstacle_clearances(radii: Optional[ArrayLike], settings: PlanSettings,
+                        count: int) -> Optional[Array]:
     """
     Return the clearance (count,) a plan keeps from each obstacle's centre (m), or None.
 
@@ -414,7 +416,7 @@ def _check_request(start, goal, obstacles, settings, where):
 def plan_path(skill: Skill, start: ArrayLike, goal: ArrayLike, obstacles: ArrayLike = (),
               settings: Optional[PlanSettings] = None, plane: Optional[TaskPlane] = None,
               goal_orientation: Optional[ArrayLike] = None,
-              obstacle_radii: Optional[ArrayLike] = None) -> 'Plan':
+              obstacle_radii: Optional[ArrayLike] = None) -> Plan:
     """
     Plan ``skill`` (an ``etdmp_ros.dmp.Skill``) from ``start`` to ``goal`` around ``obstacles``.
 
@@ -465,7 +467,9 @@ def plan_path(skill: Skill, start: ArrayLike, goal: ArrayLike, obstacles: ArrayL
                 start_b, goal_b, obstacles_b, settings.method, traj, clearances, avoidance)
 
 
-def place_demo(skill, start, goal, plane=None, mode=1, independent_axis=2):
+def place_demo(skill: Skill, start: ArrayLike, goal: ArrayLike,
+               plane: Optional[TaskPlane] = None, mode: int = 1,
+               independent_axis: int = 2) -> Array:
     """
     Return the demonstration (T, 3) turned and scaled so it runs from start to goal.
 
