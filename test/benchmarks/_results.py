@@ -13,6 +13,7 @@ given ``--no-docs`` (:func:`add_option`); test/unit/test_docs.py checks that eve
 
 from contextlib import contextmanager
 from datetime import date
+from functools import lru_cache
 import io
 import os
 from pathlib import Path
@@ -36,7 +37,9 @@ def _cpu_model():
     return platform.processor() or platform.machine()
 
 
+@lru_cache(maxsize=None)
 def _version():
+    # Once per run: the pages a run writes would make the tree "dirty" for its next block.
     from xml.etree import ElementTree
     version = ElementTree.parse(REPO / 'package.xml').getroot().findtext('version')
     try:

@@ -906,7 +906,8 @@ def main(argv=None):
           f'(wall time {wall:.0f} s)')
     if not args.no_docs:
         timing = (f'Medians (p90) of {args.repeats} calls per row ({args.batch_repeats} for the '
-                  'peer batch rows) after warm-up; demo: ' + demo_source + '.')
+                  'peer batch rows) after warm-up; demo: '
+                  + demo_source.replace(str(REPO_ROOT.parent), '..') + '.')
         run = command('core', argv)
         publish('core', f'{_table(rows)}\n\n{per_system}\n\n{timing}', run, load=load)
         publish('core-online', online.getvalue(), run, load=load)
