@@ -286,6 +286,8 @@ def bench_ros(rate, ur10, path, duration_margin=3.0):
     ok = idx < len(receipts)
     latency = receipts[idx[ok]] - js_receipts[ok]
     stamps = sorted(set(refs) & set(joints))
+    if not stamps:
+        raise TimeoutError('no reference received while tracking')
     ref = np.array([refs[s] for s in stamps])
     tool = np.array([ur10.frame_pose(joints[s][0])[0] for s in stamps])
     # Tracking phase: reference samples moving along the path (not the approach/hold).
