@@ -6,8 +6,8 @@ Benchmark of dmp_server's /generalize round trip against the floor of rclpy itse
 Starts, in one run and one isolated DDS domain:
 
 - the installed ``dmp_server`` (a colcon install: ``--install PREFIX``, or one built now into a
-  temporary folder), configured for a 5 s plan at 100 Hz (501 poses; with 2 obstacles tau is
-  5 / 1.5 s so that the obstacle margin gives the same 501 poses);
+  temporary folder), configured for a 5 s plan at 100 Hz (501 poses, with or without the 2
+  obstacles: the default avoidance, the detour, keeps the plan's duration);
 - the floor: a bare rclpy GetPlan server returning a precomputed 501-pose plan, once with
   ``rclpy.spin`` (single-threaded) and once with the MultiThreadedExecutor and a reentrant group
   that dmp_server uses (this isolates the executor's cost).
@@ -234,7 +234,7 @@ def _breakdown():
     plane = TaskPlane.create([0.75, 0.15, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.02)
     skill = learn(builtin_demo('G'))
     rows = {}
-    for n_obs, tau in ((0, DURATION), (2, DURATION / 1.5)):
+    for n_obs, tau in ((0, DURATION), (2, DURATION)):
         settings = PlanSettings(duration=tau, output_period=PERIOD)
         obstacles = _obstacles_on_path()[:n_obs]
         rows[f'plan_path (rollout + checks), {n_obs} obstacles'] = _median_ms(
@@ -333,7 +333,7 @@ def _run(args, tmp, env):
     services = ['/floor_single', '/floor_multi', '/generalize']
     caller = _Caller(services, 'bench_client')
     caller.wait()
-    # Without obstacles, then with 2 (tau 5/1.5 s so the plan keeps 501 poses).
+    # Without obstacles, then with 2 (the detour keeps the 501 poses).
     cases = {'floor: bare rclpy server (rclpy.spin)': '/floor_single',
              'floor: same, MultiThreadedExecutor': '/floor_multi',
              'dmp_server, 0 obstacles': '/generalize',
@@ -351,7 +351,7 @@ def _run(args, tmp, env):
             obstacles = case.endswith('2 obstacles')
             if service == '/generalize':
                 _publish_obstacles(caller, on_path if obstacles else np.zeros((0, 3)))
-                _set_parameters(caller, duration=DURATION / 1.5 if obstacles else DURATION)
+                _set_parameters(caller, duration=DURATION)
                 caller.call(service)
             for _ in range(per_round):
                 elapsed, poses = caller.call(service)
