@@ -29,9 +29,11 @@ import json
 import signal
 import socket
 import struct
+import subprocess
 import sys
 import time
 
+from etdmp_ros.ros import topics
 import numpy as np
 
 #: Snapshot header: stamp (ns, int64), simulated time (s, float64), obstacles in use (int32).
@@ -109,6 +111,54 @@ def command(fd, parameters, topics, node_name, namespace):
             '--ros-args', '-r', f'__node:={node_name}', '-r', f'__ns:={namespace}']
 
 
+class CameraProcess:
+    """
+    The camera process seen from the simulation's side: ``ur10_sim`` starts, feeds and stops it.
+
+    :meth:`offer` never blocks: a snapshot that does not fit the socket's buffer (the camera
+    process is stuck) is dropped (``stats['frames_dropped']``); one that the process is too
+    slow to render is skipped there (it logs how many when it stops).
+    """
+
+    def __init__(self, node):
+        """Start the camera process with the node's parameters and topic names."""
+        self._node = node
+        self._link, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self._link.setblocking(False)
+        parameters = {k: (list(v) if isinstance(v, tuple) else v)
+                      for k, v in node._parameter_values.items()}
+        argv = command(theirs.fileno(), parameters, topics.CAMERA,
+                       f'{node.get_name()}_camera', node.get_namespace())
+        self.process = subprocess.Popen(argv, pass_fds=(theirs.fileno(),))
+        theirs.close()
+        self._lost = False
+
+    def offer(self, state, stamp_ns):
+        """Send a camera state to be rendered (dropped if the process cannot take it now)."""
+        if self._lost:
+            return
+        try:
+            self._link.send(encode(state, stamp_ns))
+        except BlockingIOError:
+            self._node.stats['frames_dropped'] += 1
+        except OSError as exc:   # the camera process has gone
+            self._lost = True
+            self._node.get_logger().error(
+                f'camera process exited (code {self.process.poll()}): {exc}; no more camera '
+                'frames')
+        else:
+            self._node.stats['frames'] += 1
+
+    def stop(self):
+        """Close the socket (the process finishes its frame and exits); kill it if it hangs."""
+        self._link.close()
+        try:
+            self.process.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+
+
 def main(argv=None):
     """Render and publish the snapshots that arrive on the socket until it closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # ur10_sim stops this process
@@ -125,9 +175,12 @@ def main(argv=None):
     import rclpy
     from rclpy.node import Node
 
+    from etdmp_ros.ros.events import ERROR, EventPublisher
+
     init(ros_args)
     node = Node('camera', start_parameter_services=False)
     log = node.get_logger()
+    events = EventPublisher(node)
     published = skipped = early = 0       # early: snapshots sent while this process started
     try:
         sim = UR10Sim.from_parameters(json.loads(args.parameters))
@@ -156,10 +209,15 @@ def main(argv=None):
             published += 1
     except Exception as exc:   # noqa: B902 - say why the camera stopped, then exit
         log.error(f'camera stopped: {type(exc).__name__}: {exc}')
+        events.publish('failed', f'camera stopped: {type(exc).__name__}: {exc}', ERROR,
+                       reason=f'{type(exc).__name__}: {exc}')
         return 1
     finally:
-        log.info(f'camera stopped: {published} frames published, {skipped} skipped (rendering '
-                 f'slower than the camera rate), {early} sent before the camera was ready')
+        text = (f'camera stopped: {published} frames published, {skipped} skipped (rendering '
+                f'slower than the camera rate), {early} sent before the camera was ready')
+        log.info(text)
+        events.publish('stopped', text, frames=published, skipped=skipped, early=early)
+        events.flush()
         if 'sim' in locals():
             sim.close()
         node.destroy_node()

@@ -16,7 +16,9 @@ Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward 
 (nav_msgs/srv/GetPlan) and, for clients that must not share parameters with others,
 ``~/teach`` and ``~/generalize_with`` (rcl_interfaces/srv/SetParametersAtomically: the skill's
 name and settings in the request, described in etdmp_ros.ros.system); publishes
-``/etdmp/path`` (transient local) and ``/etdmp/markers``.
+``/etdmp/path`` (transient local) and ``/etdmp/markers``, and what it did as data on
+``/dmp_server/events`` (:mod:`etdmp_ros.ros.events`: a skill ``learned`` or ``refused``, a plan
+refused, a path published, a moved goal or obstacle ``followed``).
 
 Threads: the executor (``_spin.make_executor``) runs the input callbacks and parameters;
 /generalize is served by a thread of its own, first come first served, one call at a time
@@ -43,10 +45,11 @@ from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, UR10Model
 from etdmp_ros.robot._arm_check import arm_obstacle_violation, ArmGeometry
 from etdmp_ros.robot._timing import joint_timing_violation, plan_joints
-from etdmp_ros.ros import system
+from etdmp_ros.ros import qos, system, topics
 from etdmp_ros.ros.conversions import (cylinders_from_markers, joint_state_arrays, ns_to_stamp,
                                        path_from_cdr, path_from_numpy, point_to_numpy,
                                        points_from_numpy, pose_array_to_numpy, serialize_path)
+from etdmp_ros.ros.events import ERROR, EventPublisher, WARN
 from etdmp_ros.ros.parameters import (declared_settings, InvalidConfiguration, plain,
                                       values as parameter_values)
 from etdmp_ros.ros.queued_service import QueuedService
@@ -66,7 +69,7 @@ from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
-from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
@@ -75,8 +78,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 NODE_NAME = 'dmp_server'
 DESCRIPTION = system.node(NODE_NAME)
 TOOL_SOURCES = DESCRIPTION.parameter('tool_position_source').choices
-_LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _THROTTLE = 5.0   # s between repeated warnings about the same bad input
 #: Where a skill taught at runtime came from (its source in the library): it may be re-taught.
 _TAUGHT = 'taught on '
@@ -252,36 +253,37 @@ class DmpServer(Node):
         self._inputs = inputs
         self._tool_subscriptions = {}  # tool_position_source -> subscription (made on first use)
         self._subscribe_tool_source(settings.tool_position_source)
-        self.create_subscription(PointStamped, 'etdmp/goal', self._on_goal, 10,
+        self.create_subscription(PointStamped, topics.GOAL, self._on_goal, 10,
                                  callback_group=inputs)
-        self.create_subscription(PointStamped, 'etdmp/bottle', self._on_bottle, 10,
+        self.create_subscription(PointStamped, topics.BOTTLE, self._on_bottle, 10,
                                  callback_group=inputs)
-        self.create_subscription(PoseArray, 'etdmp/obstacles', self._on_obstacles, 10,
+        self.create_subscription(PoseArray, topics.OBSTACLES, self._on_obstacles, 10,
                                  callback_group=inputs)
-        self.create_subscription(MarkerArray, 'etdmp/obstacle_volumes', self._on_volumes, 10,
+        self.create_subscription(MarkerArray, topics.OBSTACLE_VOLUMES, self._on_volumes, 10,
                                  callback_group=inputs)
         # Raw: the size is checked before the bytes are decoded (numpy, not message objects).
         # One teaching at a time, from the topic or the service.
         teaching = MutuallyExclusiveCallbackGroup()
-        self.create_subscription(Path, 'etdmp/demonstrations', self._on_demonstration, 10,
+        self.create_subscription(Path, topics.DEMONSTRATIONS, self._on_demonstration, 10,
                                  callback_group=teaching, raw=True)
         # Requests that carry their skill and settings (docs/dmp_server.md): concurrent clients
         # cannot mix, and no parameter changes.
-        self.create_service(SetParametersAtomically, '~/teach', self._on_teach,
+        self.create_service(SetParametersAtomically, topics.TEACH, self._on_teach,
                             callback_group=teaching)
-        with_settings = self.create_service(SetParametersAtomically, '~/generalize_with',
+        with_settings = self.create_service(SetParametersAtomically, topics.GENERALIZE_WITH,
                                             self._on_generalize_with,
                                             callback_group=MutuallyExclusiveCallbackGroup())
         self._generalize_with_name = self.resolve_service_name(with_settings.srv_name)
-        self._path_pub = self.create_publisher(Path, 'etdmp/path', _LATCHED)
-        self._marker_pub = self.create_publisher(MarkerArray, 'etdmp/markers', _LATCHED)
+        self._path_pub = self.create_publisher(Path, topics.PATH, qos.LATCHED)
+        self._marker_pub = self.create_publisher(MarkerArray, topics.MARKERS, qos.LATCHED)
+        self.events = EventPublisher(self)
         self._pending_markers = None
         self._marker_thread = None   # builds markers after a call, off the service's path
         self._refused_busy, self._busy_log_time = 0, -float('inf')
         self._planned = 0   # requests answered with a plan
         self._follow_lock = threading.Lock()
         self._followed = None   # _Followed: the plan in execution, while it may still move
-        self._generalize = QueuedService(self, GetPlan, 'generalize', self._on_generalize,
+        self._generalize = QueuedService(self, GetPlan, topics.GENERALIZE, self._on_generalize,
                                          self._refuse_busy, _SERVICE_QOS,
                                          settings.max_request_wait, limits.MAX_QUEUED_REQUESTS)
         log.info(f'serving /generalize with skill {settings.skill!r} '
@@ -321,10 +323,10 @@ class DmpServer(Node):
         if source in self._tool_subscriptions:
             return
         if source == 'joint_states':
-            sub = self.create_subscription(JointState, 'joint_states', self._on_joint_state,
+            sub = self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state,
                                            qos_profile_sensor_data, callback_group=self._inputs)
         else:
-            sub = self.create_subscription(PoseStamped, 'etdmp/tool_pose', self._on_tool_pose,
+            sub = self.create_subscription(PoseStamped, topics.TOOL_POSE, self._on_tool_pose,
                                            qos_profile_sensor_data, callback_group=self._inputs)
         self._tool_subscriptions[source] = sub
 
@@ -459,13 +461,18 @@ class DmpServer(Node):
             return False, self._taught(name, err)
         log = self.get_logger()
         try:
-            saved = f'saved to {save_skill_demo(self._skills_dir, entry.demo)}'
+            file, save_error = str(save_skill_demo(self._skills_dir, entry.demo)), ''
+            saved = f'saved to {file}'
         except (OSError, ValueError) as err:
             saved = f'NOT saved (it is lost on restart): {err}'
+            file, save_error = '', str(err)
             log.error(f'taught skill {name!r} {saved}')
         text = (f'learned skill {name!r} ({demo.dim}D, {demo.n_samples} samples) from {where}, '
                 f'{saved}')
         log.info(text)
+        self.events.publish('learned', text, skill=name, dim=demo.dim, samples=demo.n_samples,
+                            duration_s=demo.duration, source=where, saved=file,
+                            save_error=save_error)
         return True, text
 
     def _taught(self, name, err):
@@ -476,6 +483,7 @@ class DmpServer(Node):
         text = (f'taught demonstration for skill {name!r} rejected: {_short(err)}{hint}; the '
                 'skills already learned are kept')
         self.get_logger().error(text)
+        self.events.publish('refused', text, ERROR, skill=name, reason=f'{_short(err)}{hint}')
         return text
 
     @staticmethod
@@ -736,6 +744,9 @@ class DmpServer(Node):
             skill, plan = self._plan(settings, start, goal, (q.x, q.y, q.z, q.w))
         except (ValueError, ArithmeticError) as err:   # PlanningError, UnknownSkillError, ...
             self.get_logger().error(f'/generalize with skill {settings.skill!r}: {_short(err)}')
+            self.events.publish('plan_refused', f'/generalize with skill {settings.skill!r}: '
+                                f'{_short(err)}', ERROR, service='/generalize',
+                                skill=settings.skill, reason=_short(err))
             response.plan = path_from_numpy(np.zeros((0, 3)), stamp=stamp)
             return response
         response.plan = path_from_numpy(plan.positions, plan.t, stamp, 'base_link',
@@ -765,6 +776,9 @@ class DmpServer(Node):
         except (ValueError, ArithmeticError) as err:
             reason = f'with skill {settings.skill!r}: {_short(err)}'
             self.get_logger().error(f'{self._generalize_with_name}: {reason}')
+            self.events.publish('plan_refused', f'{self._generalize_with_name}: {reason}', ERROR,
+                                service=self._generalize_with_name, skill=settings.skill,
+                                reason=_short(err))
             response.result.reason = reason
             return response
         self._execute(settings, skill, plan, stamp, 'goal' not in given,
@@ -811,6 +825,10 @@ class DmpServer(Node):
             # serializes the message in ~2).
             self._path_pub.publish(serialize_path(plan.positions, plan.t, stamp, 'base_link',
                                                   plan.orientation))
+            self.events.publish('path_published', f'{settings.skill} ({plan.method}): '
+                                f'{len(plan.t)} poses over {plan.t[-1]:.2f} s published',
+                                skill=settings.skill, method=plan.method, poses=len(plan.t),
+                                duration_s=plan.t[-1], stamp_ns=stamp)
             if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
                 self._request_markers((settings, skill, plan, header))
         self.get_logger().debug(f'planned {settings.skill} ({plan.method}), '
@@ -913,6 +931,9 @@ class DmpServer(Node):
                                        else None)
                 self.get_logger().error(f'the plan in execution does not follow: '
                                         f'{_short(err)}; it goes on as it was')
+                self.events.publish('follow_refused', f'the plan in execution does not follow: '
+                                    f'{_short(err)}', WARN, reason=_short(err),
+                                    stamp_ns=f.stamp)
                 return
             p = f.plan
             keep = p.index(max(0.0, tau_c - _FOLLOW_OVERLAP))
@@ -927,10 +948,15 @@ class DmpServer(Node):
                  if new_goal is not None else []) +
                 ([f'obstacles moved to {np.round(new_obstacles, 3).tolist()}']
                  if new_obstacles is not None else []))
-            self.get_logger().info(
-                f'following: {what}: re-planned from path time {p.t[first]:.2f} s (the '
-                f'controller at about {tau_c:.2f} s), {len(p.t) - keep} poses to '
-                f'{p.duration:.2f} s published in {took:.1f} ms (update {p.updates})')
+            text = (f'following: {what}: re-planned from path time {p.t[first]:.2f} s (the '
+                    f'controller at about {tau_c:.2f} s), {len(p.t) - keep} poses to '
+                    f'{p.duration:.2f} s published in {took:.1f} ms (update {p.updates})')
+            self.events.publish(
+                'followed', text, goal=[] if new_goal is None else new_goal,
+                obstacles=[] if new_obstacles is None else new_obstacles,
+                from_path_time_s=p.t[first], controller_path_time_s=tau_c, poses=len(p.t) - keep,
+                end_s=p.duration, took_ms=took, update=p.updates, stamp_ns=f.stamp)
+            self.get_logger().info(text)
             if settings.publish_markers and self._marker_pub.get_subscription_count() > 0:
                 shown = Plan(p.t, p.positions, p.velocities, p.orientation, f.start, p.goal,
                              p.obstacles, settings.plan.method, None)

@@ -415,10 +415,10 @@ def project(points, intrinsics, camera):
     """
     Return the pixels (m, 2) of base_link ``points`` (n, 3) in the camera image, as a list.
 
-    ``camera``: the optical frame's :class:`etdmp_ros.geometry.camera.CameraPose`; points behind the camera
-    (or within 1 cm of its plane) are left out, and so are points that are no place of the
-    workcell (NaN, inf or beyond MAX_REQUEST_COORDINATE: a received plan at 1e308 m overflowed
-    into infinite pixels, which JSON cannot carry to the page).
+    ``camera``: the optical frame's :class:`etdmp_ros.geometry.camera.CameraPose`; points
+    behind the camera (or within 1 cm of its plane) are left out, and so are points that are no
+    place of the workcell (NaN, inf or beyond MAX_REQUEST_COORDINATE: a received plan at 1e308
+    m overflowed into infinite pixels, which JSON cannot carry to the page).
     """
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     points = points[np.all(np.abs(points) <= limits.MAX_REQUEST_COORDINATE, axis=1)]

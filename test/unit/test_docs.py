@@ -216,7 +216,8 @@ def _instance_attributes(cls):
 
 
 def test_every_dotted_name_in_code_and_docs_names_something():
-    """Every ``etdmp_ros.x.y`` in code, docstrings, comments and pages resolves.
+    """
+    Every ``etdmp_ros.x.y`` in code, docstrings, comments and pages resolves.
 
     A module moved without its references is found here, not by a user's ImportError.
     """

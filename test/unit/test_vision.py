@@ -1,5 +1,5 @@
 """
-The ROS-free vision (etdmp_ros.perception.Detector) on frames rendered by the simulation in-process.
+The ROS-free vision (etdmp_ros.perception.Detector) on frames the simulation renders in-process.
 
 Ground truth is the simulation's: the centre of the goal marker's and of each obstacle's top
 face (UR10Sim.goal_position / obstacle_positions) and each obstacle's radius
