@@ -29,7 +29,7 @@ help:
 	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic"
+	@echo "                one of them: make bench-core|bench-demos|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic|bench-faults"
 	@echo "make bench-two-hosts  the system across two network namespaces (root): rates, latency, link cut"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
@@ -146,7 +146,7 @@ BENCHMARKS := core obstacles obstacle_volumes sim dmp_server controller percepti
 
 bench: $(addprefix bench-,$(BENCHMARKS))
 
-# Record a stir by hand, learn it, repeat it (issue 16; needs no peer library).
+# Record a stir by hand, learn it, repeat it (needs no peer library).
 bench-kinesthetic: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_kinesthetic.py $(BENCH_ARGS)
 
@@ -154,6 +154,11 @@ bench-kinesthetic: $(STAMP)
 # needs no peer library). BENCH_ARGS="--before REV" adds the code of git REV beside it.
 bench-rest: $(STAMP)
 	$(VENV_PY) test/benchmarks/bench_rest.py $(BENCH_ARGS)
+
+# The demo of every built-in skill with ET-DMP and the plain DMP; writes docs/demo.md's table and
+# the README's results (needs no peer library).
+bench-demos: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_demos.py $(BENCH_ARGS)
 
 # The closed loop as `make demo` runs it, idle and next to a busy core (needs no peer library).
 bench-system: $(STAMP)
@@ -164,12 +169,17 @@ bench-system: $(STAMP)
 bench-two-hosts: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_two_hosts.py $(BENCH_ARGS)
 
+# Restarts of ros2 launch in one domain after a crash, each node killed (the ros2 CLI;
+# docs/reliability.md; about 50 minutes, not in `make bench`).
+bench-faults: $(STAMP) ros-tools
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_faults.py $(BENCH_ARGS)
+
 # make bench-core, bench-obstacles, bench-sim, bench-dmp_server, bench-controller, bench-perception
 bench-%: $(BENCH_STAMP)
 	MUJOCO_GL=egl $(BENCH_VENV)/bin/python test/benchmarks/bench_$*.py $(BENCH_ARGS)
 
 clean:
-	rm -rf out build install log .pytest_cache *.egg-info
+	rm -rf out build install log .pytest_cache .mypy_cache *.egg-info
 	find . -path ./.git -prune -o -path './.venv*' -prune -o \
 	  \( -name __pycache__ -o -name '*.nbi' -o -name '*.nbc' \) -print0 | xargs -0 rm -rf
 

@@ -16,6 +16,7 @@ import sys
 from etdmp_ros.ros import processes, system
 from etdmp_ros.ros.processes import installed_argv, isolated_environment, sourced  # noqa: F401
 import pytest
+from support.leftovers import Leftovers
 import yaml
 
 REPO = Path(__file__).resolve().parents[1]
@@ -33,16 +34,45 @@ _DOMAIN_IDS = itertools.count(1 + os.getpid() % 50)
 #: ``support/`` (no tests), the benchmarks in ``benchmarks/`` (not collected).
 SUITES = ('unit', 'nodes', 'system')
 TEST_DIR = Path(__file__).resolve().parent
+#: The watch over what the suite starts (pytest_configure to pytest_sessionfinish).
+_LEFTOVERS = None
 
 
 def pytest_configure(config):
-    """Register the suite markers; every test module must sit in a suite's folder."""
+    """
+    Register the suite markers; every test module must sit in a suite's folder.
+
+    Also starts watching what the suite starts (:mod:`support.leftovers`): at the end a
+    process of the suite still running, or a Fast DDS shared-memory file of its processes
+    still in /dev/shm, fails the run (:func:`pytest_sessionfinish`).
+    """
+    global _LEFTOVERS
+    if _LEFTOVERS is None:
+        _LEFTOVERS = Leftovers()
     stray = sorted(str(path.relative_to(TEST_DIR)) for path in TEST_DIR.rglob('test_*.py')
                    if path.parent.name not in SUITES or path.parent.parent != TEST_DIR)
     if stray:
         raise pytest.UsageError(f"test modules outside the suites' folders {SUITES}: {stray}")
     for suite in SUITES:
         config.addinivalue_line('markers', f'{suite}: a test of the {suite} suite (test/{suite}/)')
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Fail the run if it left a process or a shared-memory file behind (and remove them)."""
+    global _LEFTOVERS
+    if _LEFTOVERS is None:
+        return
+    problems, _LEFTOVERS = _LEFTOVERS.finish(), None
+    if problems:
+        reporter = session.config.pluginmanager.get_plugin('terminalreporter')
+        text = ('the test suite left these behind (now killed and removed):\n  '
+                + '\n  '.join(problems))
+        if reporter is not None:
+            reporter.write_sep('=', 'leftovers', red=True)
+            reporter.write_line(text)
+        else:
+            print(text)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 def pytest_collection_modifyitems(config, items):

@@ -15,8 +15,7 @@ import argparse
 from pathlib import Path
 
 from etdmp_ros.apps.plotting import _equal_2d, _equal_3d, _figure, _save, _start_goal, DEMO_STYLE
-from etdmp_ros.dmp import builtin_demo, learn
-from etdmp_ros.dmp._online import compare_goal_jump, goal_jump_case, GOAL_JUMP_WAYS
+from etdmp_ros.dmp import builtin_demo, compare_goal_jump, goal_jump_case, GOAL_JUMP_WAYS, learn
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]

@@ -37,8 +37,10 @@ Typical use::
 from ._demos import (builtin_demo, builtin_demo_names, check_file_size, Demonstration, load_demo,
                      save_demo, unit_quaternions)
 from ._errors import DemonstrationError, GeneralizationError
+from ._goal_jump import compare_goal_jump, goal_jump_case, GOAL_JUMP_WAYS, GoalJump
 from ._obstacles import obstacle_coupling, ObstacleGains
-from ._online import OnlineGains, OnlineRun
+from ._online import OnlineRun, RunRows
+from ._online_gains import OnlineGains
 from ._orientation import ORIENTATION_MODES
 from ._similarity import clearance, nrmse, Similarity, similarity
 from ._skill import (AVOIDANCES, FORMULATIONS, learn, METHOD_LABELS, METHODS, OBSTACLE_MARGIN,
@@ -47,9 +49,10 @@ from ._transform import euclidean_transform, EuclideanTransform
 
 __all__ = [
     'AVOIDANCES', 'Demonstration', 'DemonstrationError', 'EuclideanTransform', 'FORMULATIONS',
-    'GeneralizationError', 'METHOD_LABELS', 'METHODS', 'OBSTACLE_MARGIN', 'ORIENTATION_MODES',
-    'ObstacleGains', 'OnlineGains', 'OnlineRun', 'Similarity', 'Skill', 'Trajectory',
-    'builtin_demo', 'builtin_demo_names', 'check_file_size', 'clearance', 'euclidean_transform',
-    'learn', 'load_demo', 'nrmse', 'obstacle_coupling', 'save_demo', 'similarity',
-    'unit_quaternions',
+    'GOAL_JUMP_WAYS', 'GeneralizationError', 'GoalJump', 'METHOD_LABELS', 'METHODS',
+    'OBSTACLE_MARGIN', 'ORIENTATION_MODES', 'ObstacleGains', 'OnlineGains', 'OnlineRun',
+    'RunRows', 'Similarity', 'Skill', 'Trajectory', 'builtin_demo', 'builtin_demo_names',
+    'check_file_size', 'clearance', 'compare_goal_jump', 'euclidean_transform',
+    'goal_jump_case', 'learn', 'load_demo', 'nrmse', 'obstacle_coupling', 'save_demo',
+    'similarity', 'unit_quaternions',
 ]

@@ -29,18 +29,24 @@ takes over, and a plan that would enter an obstacle is refused with the run left
 """
 
 import copy
-from dataclasses import dataclass
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Optional, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._detour import candidate_directions, keep_clear, Obstacles
-from ._errors import finite_array, GeneralizationError
+from ._errors import GeneralizationError
 from ._integrate import chain, discretize, MAX_SUBSTEP, numba, rollout
-from ._similarity import nrmse
+from ._obstacles import ObstacleGains
+from ._online_gains import OnlineGains
+from ._online_input import (check_goal_clear, check_goal_off_start, check_obstacle_set,
+                            check_online_request, check_point, check_radii)
 from ._transform import EPS
+from ..geometry.arrays import Array as FloatArray
 
+#: A float array (its shape in the docstrings).
+Array = FloatArray
 
 #: Length, in durations tau, of the forcing table that :meth:`OnlineRun.run` reads its rows
 #: from (a remainder reaching past it is computed instead).
@@ -50,66 +56,30 @@ RUN_TABLE_TAUS = 4.0
 MIN_RATE = 1e-9
 
 
-@dataclass(frozen=True)
-class OnlineGains:
+class RunRows(NamedTuple):
     """
-    Gains of the online rollout (docs/design.md#online-goal).
+    The next N samples of an :class:`OnlineRun` stepped with no input, with the state behind each.
 
-    ``alpha_goal``: rate of the goal filter, ``tau dg_f/dt = alpha_goal (g - g_f)``; ``inf``
-    turns the filter off (the goal jumps, as in the plain DMP's goal change). ``alpha_err``:
-    phase stopping, the rate of the whole system (phase and transformation system) is divided
-    by ``1 + alpha_err e^2`` with ``e`` the distance from the measured position to the plan
-    relative to the size ``l`` of the placed movement (its largest distance from the goal); 0
-    turns it off. ``done_tolerance``: the run is done when the phase has ended (phase time
-    ``>= tau``) and both ``|x - g|`` and the DMP's own ``|v|`` (``tau |dx/dt|`` at full rate)
-    are below this fraction of ``l``.
-
-    The defaults: alpha_goal = 25 = D makes the filter twice as fast as the critically damped
-    spring (whose rate is sqrt(K) = 12.5), so it adds little lag to the spring's own while it
-    spreads the acceleration of a goal jump over about tau / 25 (docs/design.md#online-goal has
-    the scan behind this choice); alpha_err = 1000 halves the rate at a tracking error of 3 % of
-    the movement's size and leaves it above 97 % below 0.5 %, and a plan waiting for a held
-    tool creeps ahead by at most ``(3 V T / (alpha_err l))^(1/3) l`` in a hold of ``T`` seconds
-    (V: the plan's top speed), 24 % of the letter G's size in 1 s.
+    Made by :meth:`OnlineRun.predict` (integrated) or :meth:`OnlineRun.replay` (from samples
+    computed elsewhere); :meth:`OnlineRun.restore` puts any of them in force, without
+    integrating again. ``t`` (N,): the time after each step (s); ``x``, ``v``, ``a`` (N, d): the
+    DMP's position, velocity dx/dt and acceleration (without the detour's displacement:
+    :meth:`OnlineRun.outputs` adds it); ``goal_f`` (N, d), ``R`` (N, d, d), ``A``, ``M``,
+    ``vstart`` (N, d), ``k`` (N,): the filtered goal and the placement in force after each
+    step; ``theta`` (N,): the phase time; ``n0``: the steps the run had made before the first.
     """
 
-    alpha_goal: float = 25.0
-    alpha_err: float = 1000.0
-    done_tolerance: float = 1e-3
-
-    def validate(self):
-        """Raise ValueError unless the gains are usable (alpha_goal may be inf)."""
-        values = {}
-        for name in ('alpha_goal', 'alpha_err', 'done_tolerance'):
-            try:
-                values[name] = float(getattr(self, name))
-            except (TypeError, ValueError):
-                raise ValueError(f'{name} must be a number, got {getattr(self, name)!r}') from None
-        if not values['alpha_goal'] > 0.0:      # also refuses NaN
-            raise ValueError(f'alpha_goal must be > 0 (inf: no goal filter), got '
-                             f'{self.alpha_goal!r}')
-        if not (math.isfinite(values['alpha_err']) and values['alpha_err'] >= 0.0):
-            raise ValueError(f'alpha_err must be finite and >= 0, got {self.alpha_err!r}')
-        tolerance = values['done_tolerance']
-        if not (math.isfinite(tolerance) and tolerance > 0.0):
-            raise ValueError(f'done_tolerance must be finite and > 0, got '
-                             f'{self.done_tolerance!r}')
-
-
-class _Rows(NamedTuple):
-    """Samples of :meth:`OnlineRun.run` with the state behind each (``n0``: steps before)."""
-
-    t: np.ndarray
-    x: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    goal_f: np.ndarray
-    R: np.ndarray
-    A: np.ndarray
-    M: np.ndarray
-    k: np.ndarray
-    vstart: np.ndarray
-    theta: np.ndarray
+    t: Array
+    x: Array
+    v: Array
+    a: Array
+    goal_f: Array
+    R: Array
+    A: Array
+    M: Array
+    k: Array
+    vstart: Array
+    theta: Array
     n0: int
 
 
@@ -123,22 +93,25 @@ class OnlineRun:
     measured position of the tool, for phase stopping. A bad argument raises GeneralizationError
     and leaves the run as it was. ``t``, ``phase`` (s), ``done``, ``x``, ``v``, ``a`` describe
     the current sample. Positions only: a skill's orientations are not rolled out online.
+
+    Without stepping: :meth:`take` puts a new input in force (the next step moves towards it);
+    :meth:`predict` gives the next samples as :meth:`run` would, without advancing, and
+    :meth:`replay` takes them from a rollout made elsewhere (the plan the run reproduces), as
+    :class:`RunRows`; :meth:`restore` puts one of those samples in force, so that a path
+    already published is continued from its own samples, not integrated again;
+    :meth:`outputs` gives the samples of rows as :meth:`run` returns them. :meth:`copy` makes a
+    what-if run.
     """
 
-    def __init__(self, skill, start, goal, obstacles, method, mode, independent_axis, dt, tau,
-                 gains, online, fast, obstacle_radii=None, avoidance=None):
-        online = OnlineGains() if online is None else online
-        if not isinstance(online, OnlineGains):
-            raise GeneralizationError(f'online must be an OnlineGains, got {online!r}')
-        try:
-            online.validate()
-        except ValueError as exc:
-            raise GeneralizationError(str(exc)) from None
+    def __init__(self, skill, start: ArrayLike, goal: ArrayLike, obstacles: ArrayLike,
+                 method: str, mode: int, independent_axis: int, dt: Optional[float],
+                 tau: Optional[float], gains: Optional[ObstacleGains],
+                 online: Optional[OnlineGains], fast: bool,
+                 obstacle_radii: Optional[ArrayLike] = None,
+                 avoidance: Optional[str] = None) -> None:
+        """Start a run (use :meth:`Skill.online`: it checks the request as generalize does)."""
+        online = check_online_request(online, start, goal, skill.dim)
         d = skill.dim
-        for name, value in (('start', start), ('goal', goal)):
-            if finite_array(value, name).shape != (d,):
-                raise GeneralizationError(f'an online run is one movement: {name} must have '
-                                          f'shape ({d},), got {np.shape(value)}')
         r = skill._check_request(start, goal, obstacles, method, dt, tau, 0.0, gains,
                                  obstacle_radii, avoidance)
         self._skill, self._method = skill, method
@@ -181,22 +154,22 @@ class OnlineRun:
     # -- state ------------------------------------------------------------------------------
 
     @property
-    def t(self):
+    def t(self) -> float:
         """Return the time since the start in seconds (``dt`` times the number of steps)."""
         return self._n * self.dt
 
     @property
-    def phase(self):
+    def phase(self) -> float:
         """Return the phase ``s`` (1 at the start, ``exp(-alpha)`` at t = tau without stopping)."""
         return math.exp(-self._skill.alpha * self._theta / self.tau)
 
     @property
-    def rate(self):
+    def rate(self) -> float:
         """Return the rate of the last step (1, or below 1 while phase stopping slowed it)."""
         return self._rate
 
     @property
-    def done(self):
+    def done(self) -> bool:
         """Return whether the phase has ended and the plan rests at the goal (done_tolerance)."""
         tol = self.online.done_tolerance * self._length(self._goal)
         return bool(self._theta >= self.tau * (1.0 - 1e-12)
@@ -205,17 +178,17 @@ class OnlineRun:
                     and np.linalg.norm(self._v) <= tol)
 
     @property
-    def x(self):
+    def x(self) -> Array:
         """Return the position of the current sample (d,)."""
         return self._sample()[0]
 
     @property
-    def v(self):
+    def v(self) -> Array:
         """Return the velocity dx/dt of the current sample (d,)."""
         return self._sample()[1]
 
     @property
-    def a(self):
+    def a(self) -> Array:
         """Return the acceleration d2x/dt2 of the current sample (d,)."""
         return self._sample()[2]
 
@@ -228,43 +201,45 @@ class OnlineRun:
         return self._x + delta, self._xd + rate * delta_v, self._a + rate * rate * delta_a
 
     @property
-    def start(self):
+    def start(self) -> Array:
         """Return the movement's start ``x0`` (fixed; the transform is taken from it)."""
         return self._x0.copy()
 
     @property
-    def goal(self):
+    def goal(self) -> Array:
         """Return the goal as last given."""
         return self._goal.copy()
 
     @property
-    def filtered_goal(self):
+    def filtered_goal(self) -> Array:
         """Return the filtered goal ``g_f`` the system is attracted to now."""
         return self._goal_f.copy()
 
     @property
-    def obstacles(self):
+    def obstacles(self) -> Array:
         """Return the obstacle points (centres) in force, (n_obs, d)."""
         return self._obstacles.copy()
 
     @property
-    def obstacle_radii(self):
+    def obstacle_radii(self) -> Array:
         """Return the obstacle radii in force, (n_obs,) (zeros for the paper's points)."""
         return self._radii.copy()
 
     @property
-    def rotation(self):
+    def rotation(self) -> Array:
         """Return the Euclidean transform R in force (the identity for the plain DMP)."""
         return self._R.copy()
 
     @property
-    def virtual_start(self):
+    def virtual_start(self) -> Array:
         """Return the virtual start ``x0' = R (x0 - g_f) + g_f`` of the transform in force."""
         return self._vstart.copy()
 
     # -- stepping ---------------------------------------------------------------------------
 
-    def step(self, goal=None, obstacles=None, actual=None, obstacle_radii=None):
+    def step(self, goal: Optional[ArrayLike] = None, obstacles: Optional[ArrayLike] = None,
+             actual: Optional[ArrayLike] = None, obstacle_radii: Optional[ArrayLike] = None
+             ) -> Tuple[Array, Array, Array]:
         """
         Advance by ``dt``; return ``(x, v, a)`` of the new sample.
 
@@ -277,8 +252,8 @@ class OnlineRun:
         the detour, for a goal or obstacles that the plan cannot keep its clearance from; the
         run is then as it was.
         """
-        measured = None if actual is None else self._point(actual, 'actual')
-        self._take(goal, obstacles, obstacle_radii)     # checked: from here on the run changes
+        measured = None if actual is None else check_point(actual, 'actual', self._skill.dim)
+        self.take(goal, obstacles, obstacle_radii)     # checked: from here on the run changes
         rate = 1.0
         if measured is not None:
             with np.errstate(over='ignore'):    # an absurd measurement: rate MIN_RATE
@@ -300,60 +275,43 @@ class OnlineRun:
         self._theta += rate * self.dt
         return self._sample()
 
-    def _take(self, goal=None, obstacles=None, obstacle_radii=None):
+    def take(self, goal: Optional[ArrayLike] = None, obstacles: Optional[ArrayLike] = None,
+             obstacle_radii: Optional[ArrayLike] = None) -> None:
         """
         Put a new goal and/or obstacle set in force, as :meth:`step` takes them, without a step.
 
-        Raises GeneralizationError, leaving the run as it was, for what :meth:`step` refuses.
-        The next step (or :meth:`run`) then moves the filtered goal towards the new goal. A
-        detour is planned again here (from the current state) when either changes.
+        ``goal`` (d,), ``obstacles`` (n, d) and ``obstacle_radii`` (n,) as :meth:`step` takes
+        them. Raises GeneralizationError, leaving the run as it was, for what :meth:`step`
+        refuses. The next step (or :meth:`run`) then moves the filtered goal towards the new
+        goal. A detour is planned again here (from the current state) when either changes.
         """
         skill = self._skill
-        target = self._goal if goal is None else self._point(goal, 'goal')
+        target = self._goal if goal is None else check_point(goal, 'goal', skill.dim)
         new_goal = not np.array_equal(target, self._goal)
         if obstacles is None:
             if obstacle_radii is not None:
                 raise GeneralizationError('obstacle_radii given without obstacles')
             obstacles, radii = self._obstacles, self._radii
         else:
-            obstacles = self._obstacle_set(obstacles)
-            radii = self._radii_for(obstacles, obstacle_radii)
+            obstacles = check_obstacle_set(obstacles, skill.dim)
+            radii = check_radii(skill, obstacles, obstacle_radii, self._radii, self._detours)
         if new_goal:
-            gap = np.linalg.norm(self._x0 - target)
-            if not gap > EPS * skill.size:
-                raise GeneralizationError(
-                    f"goal equals the movement's start (|x0 - g| = {gap:.3g}): the transform "
-                    'is undefined and there is no movement to make')
-            # Raises where the placement is undefined (the plain DMP's division by ~0). The
-            # ET-DMP's is defined wherever the goal is off the start (checked above; the
-            # demonstration's own |I_D| was checked when the run was made).
-            if self._method != 'etdmp':
-                skill._placement(self._x0[None], target[None], self._method, self._mode,
-                                 self._axis)
+            check_goal_off_start(skill, self._x0, target, self._method, self._mode, self._axis)
         moved = obstacles is not self._obstacles and not (
             np.array_equal(obstacles, self._obstacles) and np.array_equal(radii, self._radii))
         if len(obstacles) and (new_goal or moved):
-            if np.any(np.linalg.norm(obstacles - target, axis=1) <= EPS * skill.size):
-                raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
-            if self._detours:
-                gap = np.linalg.norm(obstacles - target, axis=1) - radii
-                if np.any(gap < 0.0):
-                    j = int(np.argmin(gap))
-                    raise GeneralizationError(
-                        f'the goal lies inside obstacle #{j} (radius {radii[j]:.4g}, '
-                        f'{gap[j] + radii[j]:.4g} from its centre): the plan cannot keep its '
-                        'clearance')
+            check_goal_clear(skill, target, obstacles, radii, self._detours)
         disp = self._disp
         if self._detours and (new_goal or moved) and (len(obstacles) or disp is not None):
             disp = self._plan_detour(target, obstacles, radii)     # raises: nothing changed
         self._goal, self._obstacles, self._radii = target, obstacles, radii
         self._disp = disp
 
-    def copy(self):
+    def copy(self) -> 'OnlineRun':
         """Return an independent copy of the run (for a what-if rollout; the skill is shared)."""
         return copy.copy(self)      # every step replaces the state arrays, never edits them
 
-    def run(self, t_max, fast=True):
+    def run(self, t_max: float, fast: bool = True) -> Tuple[Array, Array, Array, Array]:
         """
         Step with no new input until the run is done or ``t >= t_max``; return the samples.
 
@@ -365,7 +323,7 @@ class OnlineRun:
         millisecond, where N calls of :meth:`step` while the filter moves take ~0.2 ms each.
         """
         n_max = int(math.floor((t_max - self.t) / self.dt + 0.5))
-        rows = self._rows(n_max) if fast and numba is not None else None
+        rows = self.predict(n_max) if fast and numba is not None else None
         if rows is None:
             if n_max <= 0 or self.done:
                 d = self._skill.dim
@@ -373,29 +331,33 @@ class OnlineRun:
             return self._run_by_steps(n_max)
         n = len(rows.t)
         if n:
-            self._set_row(rows, n - 1)
-        return (rows.t,) + self._outputs(rows)
+            self.restore(rows, n - 1)
+        return (rows.t,) + self.outputs(rows)
 
-    def _outputs(self, rows):
-        """Return the samples (x, v, a) of ``rows``: the DMP's plus the detour's displacement."""
+    def outputs(self, rows: RunRows) -> Tuple[Array, Array, Array]:
+        """
+        Return the samples (x, v, a), each (N, d), of ``rows``: what :meth:`run` returns.
+
+        The DMP's samples of ``rows`` plus the displacement of the detour in force.
+        """
         if self._disp is None or not len(rows.t):
             return rows.x, rows.v, rows.a
         delta, delta_v, delta_a = self._disp(rows.theta)
         return rows.x + delta, rows.v + delta_v, rows.a + delta_a
 
-    def _rows(self, n_max):
+    def predict(self, n_max: int) -> Optional[RunRows]:
         """
         Return the samples of :meth:`run` for at most ``n_max`` steps; leave the run as it is.
 
-        Returns a :class:`_Rows` (possibly of no samples: ``n_max <= 0`` or done), which
-        :meth:`_set_row` puts any of in force, or None where only :meth:`step` can (the
-        filtered goal passes by the start).
+        Returns a :class:`RunRows` (possibly of no samples: ``n_max <= 0`` or done), any of which
+        :meth:`restore` puts in force, or None where only :meth:`step` can step (the filtered
+        goal passes by the start). The samples with the detour: :meth:`outputs`.
         """
         d = self._skill.dim
         if n_max <= 0 or self.done:
             empty = np.zeros((0, d))
-            return _Rows(np.zeros(0), empty, empty, empty, empty, np.zeros((0, d, d)), empty,
-                         empty, np.zeros(0), empty, np.zeros(0), self._n)
+            return RunRows(np.zeros(0), empty, empty, empty, empty, np.zeros((0, d, d)), empty,
+                           empty, np.zeros(0), empty, np.zeros(0), self._n)
         skill = self._skill
         g = self._goal
         keep = math.exp(-self.online.alpha_goal * self.dt / self.tau)
@@ -405,25 +367,10 @@ class OnlineRun:
         goal_f[snapped] = g
         moving = 0 if np.array_equal(self._goal_f, g) else \
             int(np.argmax(snapped)) + 1 if snapped.any() else n_max
-        R = np.empty((n_max, d, d))
-        A, M, vstart = np.empty((n_max, d)), np.empty((n_max, d)), np.empty((n_max, d))
-        k = np.empty(n_max)
-        if moving:
-            try:
-                transform, vstart_m, A_m, M_m = skill._placement(
-                    np.broadcast_to(self._x0, (moving, d)), goal_f[:moving],
-                    self._method, self._mode, self._axis)
-            except GeneralizationError:     # g_f passes by x0: step() keeps the old placement
-                return None
-            R[:moving], A[:moving], M[:moving] = transform.R, A_m, M_m
-            R[moving:], A[moving:], M[moving:] = transform.R[-1], A_m[-1], M_m[-1]
-            vstart[:moving], vstart[moving:] = vstart_m, vstart_m[-1]
-            length = np.linalg.norm(self._x0 - goal_f, axis=1)
-            k[:] = self.gains.k if self.gains.k is not None else \
-                self.gains.k_relative / np.maximum(length, 1e-300)
-        else:
-            R[:], A[:], M[:], vstart[:], k[:] = self._R, self._A, self._M, self._vstart, self._k
-        sub = self._substeps
+        placements = self._placements(goal_f, moving)
+        if placements is None:
+            return None
+        R, A, M, vstart, k = placements
         theta = self._theta + self.dt * np.arange(n_max)
         s_mid, f_mid, s_out, f_out = self._forcing_rows(n_max)
         step = self._steps.get(self.tau)
@@ -432,7 +379,7 @@ class OnlineRun:
         X, V, Acc = chain(self._x, self._xd, goal_f, A, M, R, k, s_mid, f_mid, s_out, f_out,
                           self._coupled(),
                           (self.gains.gamma, self.gains.beta, self.gains.gamma2, None),
-                          skill.K, skill.D, self.tau, self._h, sub, step=step)
+                          skill.K, skill.D, self.tau, self._h, self._substeps, step=step)
         # Where step() would have said done: the phase ended and at rest at the goal.
         tol = self.online.done_tolerance * self._length(g)
         ended = theta + self.dt >= self.tau * (1.0 - 1e-12)
@@ -443,32 +390,68 @@ class OnlineRun:
         done = np.flatnonzero(ended & rest)
         n = int(done[0]) + 1 if len(done) else n_max
         t = self.t + self.dt * np.arange(1, n + 1)
-        return _Rows(t, X[:n], V[:n], Acc[:n], goal_f[:n], R[:n], A[:n], M[:n], k[:n],
-                     vstart[:n], theta[:n] + self.dt, self._n)
+        return RunRows(t, X[:n], V[:n], Acc[:n], goal_f[:n], R[:n], A[:n], M[:n], k[:n],
+                       vstart[:n], theta[:n] + self.dt, self._n)
 
-    def _replayed(self, x, v, a):
+    def _placements(self, goal_f, moving):
+        """
+        Return the placements (R, A, M, vstart, k) of the steps to the filtered goals ``goal_f``.
+
+        ``goal_f`` (n, d): the filtered goal after each step; it moves in the first ``moving``
+        steps and rests after them. None where the placement is undefined (g_f passes by x0:
+        :meth:`step` keeps the old placement there, only it can step).
+        """
+        n, d = goal_f.shape
+        R = np.empty((n, d, d))
+        A, M, vstart, k = np.empty((n, d)), np.empty((n, d)), np.empty((n, d)), np.empty(n)
+        if not moving:
+            R[:], A[:], M[:], vstart[:], k[:] = self._R, self._A, self._M, self._vstart, self._k
+            return R, A, M, vstart, k
+        try:
+            transform, vstart_m, A_m, M_m = self._skill._placement(
+                np.broadcast_to(self._x0, (moving, d)), goal_f[:moving],
+                self._method, self._mode, self._axis)
+        except GeneralizationError:
+            return None
+        R[:moving], A[:moving], M[:moving] = transform.R, A_m, M_m
+        R[moving:], A[moving:], M[moving:] = transform.R[-1], A_m[-1], M_m[-1]
+        vstart[:moving], vstart[moving:] = vstart_m, vstart_m[-1]
+        length = np.linalg.norm(self._x0 - goal_f, axis=1)
+        k[:] = self.gains.k if self.gains.k is not None else \
+            self.gains.k_relative / np.maximum(length, 1e-300)
+        return R, A, M, vstart, k
+
+    def replay(self, x: ArrayLike, v: ArrayLike, a: ArrayLike) -> Optional[RunRows]:
         """
         Return the rows of this run stepped with no input, from samples computed elsewhere.
 
         ``x``, ``v``, ``a`` (N, d): the samples after each of the next N steps, as the offline
-        rollout that the run reproduces computed them (the plan it follows); the placement in
-        force stays. Only while the goal filter rests (``g_f = g``); None otherwise.
+        rollout that the run reproduces computed them (the plan it follows, with the detour's
+        displacement: it is taken out); the placement in force stays. Only while the goal
+        filter rests (``g_f = g``); None otherwise. :meth:`restore` puts any of them in force
+        without integrating again.
         """
         if not np.array_equal(self._goal_f, self._goal):
             return None
-        n, d = np.shape(x)
+        x, v, a = (np.asarray(c, dtype=float) for c in (x, v, a))
+        n, d = x.shape
         steps = np.arange(1, n + 1)
         if self._disp is not None:      # the plan's samples carry the detour; rows do not
             delta, delta_v, delta_a = self._disp(self._theta + self.dt * steps)
             x, v, a = x - delta, v - delta_v, a - delta_a
-        return _Rows(self.t + self.dt * steps, x, v, a,
-                     np.broadcast_to(self._goal_f, (n, d)), np.broadcast_to(self._R, (n, d, d)),
-                     np.broadcast_to(self._A, (n, d)), np.broadcast_to(self._M, (n, d)),
-                     np.full(n, self._k), np.broadcast_to(self._vstart, (n, d)),
-                     self._theta + self.dt * steps, self._n)
+        return RunRows(self.t + self.dt * steps, x, v, a,
+                       np.broadcast_to(self._goal_f, (n, d)), np.broadcast_to(self._R, (n, d, d)),
+                       np.broadcast_to(self._A, (n, d)), np.broadcast_to(self._M, (n, d)),
+                       np.full(n, self._k), np.broadcast_to(self._vstart, (n, d)),
+                       self._theta + self.dt * steps, self._n)
 
-    def _set_row(self, rows, i):
-        """Put sample ``i`` of ``rows`` (from :meth:`_rows` of this run's state) in force."""
+    def restore(self, rows: RunRows, i: int) -> None:
+        """
+        Put sample ``i`` of ``rows`` in force: the run as it is after that step.
+
+        ``rows`` from :meth:`predict` or :meth:`replay` of this run in the state it had then
+        (or of a copy of it); the detour in force is kept.
+        """
         self._goal_f = rows.goal_f[i].copy()
         self._R, self._A, self._M = rows.R[i].copy(), rows.A[i].copy(), rows.M[i].copy()
         self._k = float(rows.k[i])
@@ -501,7 +484,7 @@ class OnlineRun:
         term = skill.forcing.phase_term     # Hoffmann's phase term, as in the skill's table
         return term(s_mid), skill.forcing(s_mid), term(s_out), skill.forcing(s_out)
 
-    def warm(self):
+    def warm(self) -> None:
         """Build the forcing table :meth:`run` reads (~10 ms once per timing), so it is fast."""
         self._forcing_rows(1)
         if self.tau not in self._steps:
@@ -518,38 +501,6 @@ class OnlineRun:
         x, v, a = (np.array([r[i] for r in rows]) for i in range(3))
         return t, x, v, a
 
-    def _point(self, value, name):
-        """Check one point (d,) given to :meth:`step`."""
-        d = self._skill.dim
-        arr = finite_array(value, name)
-        if arr.shape != (d,):
-            raise GeneralizationError(f'{name} must have shape ({d},), got {arr.shape}')
-        return arr.copy()
-
-    def _obstacle_set(self, value):
-        """Check an obstacle set (n, d) given to :meth:`step`; return it as (n, d)."""
-        d = self._skill.dim
-        obs = finite_array(value, 'obstacles')
-        if obs.size == 0:
-            return np.zeros((0, d))
-        if obs.ndim > 2 or obs.shape[-1] != d:
-            raise GeneralizationError(f'obstacles must have shape (n, {d}), got {obs.shape}')
-        if d not in (2, 3):
-            raise GeneralizationError(f'obstacle avoidance needs 2 or 3 dimensions, skill has {d}')
-        return obs.reshape(-1, d).copy()
-
-    def _radii_for(self, obstacles, obstacle_radii):
-        """Check the radii of a new obstacle set; None keeps those in force (same count)."""
-        if obstacle_radii is None:
-            if not self._detours:
-                return np.zeros(len(obstacles))
-            if len(obstacles) != len(self._radii):
-                raise GeneralizationError(
-                    f'{len(obstacles)} obstacles given without obstacle_radii, and there were '
-                    f'{len(self._radii)}: give their radii')
-            return self._radii
-        return self._skill._check_radii(obstacle_radii, len(obstacles))
-
     def _coupled(self):
         """Return the obstacles the integrator couples to (the paper's), (n, d)."""
         return self._obstacles if not self._detours else self._obstacles[:0]
@@ -559,7 +510,7 @@ class OnlineRun:
         Plan the detour's displacement for the remainder with ``goal`` and ``obstacles``.
 
         The remainder of the DMP is predicted from the current state with no further input
-        (:meth:`_rows`, or stepped by the reference), over the phase time up to
+        (:meth:`predict`, or stepped by the reference), over the phase time up to
         ``max(tau, theta + tau / 2)``; the displacement in force is carried and blended out.
         Returns the new :class:`Displacement` (or None: nothing to avoid, nothing to carry).
         Raises GeneralizationError when the clearance cannot be kept; the run is unchanged.
@@ -568,7 +519,7 @@ class OnlineRun:
         trial._goal, trial._disp = goal, None
         horizon = max(self.tau, self._theta + 0.5 * self.tau)
         n_max = max(1, int(math.ceil((horizon - self._theta) / self.dt - 1e-9)))
-        rows = trial._rows(n_max) if self._fast and numba is not None else None
+        rows = trial.predict(n_max) if self._fast and numba is not None else None
         if rows is not None:
             theta = np.concatenate([[self._theta], rows.theta])
             x = np.vstack([self._x[None], rows.x])
@@ -643,127 +594,3 @@ class OnlineRun:
         self._x, self._xd = X[0, -1], V[0, -1]
         self._v = self._xd * tau
         return Acc[0, -1]
-
-
-# -- comparison of ways to handle a goal that jumps ----------------------------------------------
-
-#: The three ways :func:`compare_goal_jump` compares, in its order, with their labels.
-GOAL_JUMP_WAYS = {'online': '(a) online ET-DMP', 'replan': '(b) re-plan from rest',
-                  'dmp': '(c) plain DMP goal change'}
-
-
-class GoalJump(NamedTuple):
-    """
-    One way of handling a goal jump (:func:`compare_goal_jump`).
-
-    ``t``, ``x``, ``v``, ``a``: the executed movement from the start until ``end_time`` (its
-    own nominal end: tau, or for the re-plan the switch plus tau). ``velocity_step`` and
-    ``acceleration_step``: the largest change over one sample, in the samples just after the
-    switch, beyond what the same movement without a goal change did over that sample (units/s
-    and units/s^2); the acceleration is the one the samples imply, ``(v_(k+1) - v_k) / dt``, so
-    a velocity jump counts as the impulse it is. ``final_distance``: ``|x - g_new|`` at
-    ``end_time``. ``shape_nrmse``: the conventional nRMSE (:func:`nrmse`, Eq. 15-16) of the part
-    after the switch against the same phases of the demonstration placed at the new goal (the
-    ET-DMP from the start to the new goal). ``shape_error``: the RMS distance between the two,
-    by phase and without nRMSE's alignment, divided by the size of the placed demonstration.
-    """
-
-    t: np.ndarray
-    x: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    velocity_step: float
-    acceleration_step: float
-    final_distance: float
-    shape_nrmse: float
-    shape_error: float
-    end_time: float
-
-
-#: Samples after a switch in which :func:`compare_goal_jump` looks for the largest step.
-STEP_WINDOW = 3
-
-
-def _step_excess(series, nominal, k):
-    """Largest |change over one sample - the nominal change| over the STEP_WINDOW samples."""
-    ds = np.diff(series[k:k + STEP_WINDOW + 1], axis=0)
-    dn = np.diff(nominal[k:k + STEP_WINDOW + 1], axis=0)
-    return float(np.max(np.linalg.norm(ds - dn, axis=1)))
-
-
-def _by_phase(y, n):
-    """Resample (m, d) samples to n by linear interpolation in the sample index."""
-    src, dst = np.linspace(0.0, 1.0, len(y)), np.linspace(0.0, 1.0, n)
-    return np.stack([np.interp(dst, src, y[:, i]) for i in range(y.shape[1])], axis=1)
-
-
-def compare_goal_jump(skill, start, goal, new_goal, switch=0.4, dt=None, tau=None, mode=1,
-                      online=None):
-    """
-    Compare three ways to handle a goal that jumps at ``switch`` of the movement's duration.
-
-    (a) ``'online'``: the online ET-DMP (:class:`OnlineRun`, gains ``online``) told the new
-    goal; (b) ``'replan'``: a fresh ET-DMP from the position at the switch, at rest, to the new
-    goal; (c) ``'dmp'``: the plain DMP's goal change (the goal of Eq. 1 replaced at once, no
-    filter). Returns ``(results, reference)``: a dict of :class:`GoalJump` keyed as
-    :data:`GOAL_JUMP_WAYS`, and the demonstration placed at the new goal (the
-    :class:`Trajectory` of the ET-DMP from ``start`` to ``new_goal``).
-    """
-    online = OnlineGains() if online is None else online
-    base = skill.generalize(start, goal, method='etdmp', mode=mode, dt=dt, tau=tau)
-    plain = skill.generalize(start, goal, method='dmp', mode=mode, dt=dt, tau=tau)
-    reference = skill.generalize(start, new_goal, method='etdmp', mode=mode, dt=dt, tau=tau)
-    dt = base.t[1] - base.t[0]
-    n = len(base.t) - 1                     # samples to tau
-    k = int(round(switch * n))
-    ref_rest = reference.x[k:]
-    ref_size = float(np.max(np.linalg.norm(reference.x - reference.x[-1], axis=1)))
-    results = {}
-    for way in GOAL_JUMP_WAYS:
-        if way == 'replan':
-            fresh = skill.generalize(base.x[k], new_goal, method='etdmp', mode=mode, dt=dt,
-                                     tau=tau)
-            x, v, a = (np.concatenate([getattr(base, name)[:k + 1], getattr(fresh, name)[1:]])
-                       for name in ('x', 'v', 'a'))
-            nominal = base
-        else:
-            method = 'etdmp' if way == 'online' else 'dmp'
-            gains = online if way == 'online' else OnlineGains(alpha_goal=math.inf)
-            run = skill.online(start, goal, method=method, mode=mode, dt=dt, tau=tau,
-                               online=gains)
-            samples = [(run.x, run.v, run.a)]
-            for i in range(n):
-                samples.append(run.step(goal=new_goal if i == k else None))
-            x, v, a = (np.array(column) for column in zip(*samples))
-            nominal = base if way == 'online' else plain
-        t = np.arange(len(x)) * dt
-        implied, implied_nominal = np.diff(v, axis=0) / dt, np.diff(nominal.v, axis=0) / dt
-        rest = _by_phase(x[k:], len(ref_rest))
-        error = np.sqrt(np.mean(np.sum((rest - ref_rest) ** 2, axis=1))) / ref_size
-        results[way] = GoalJump(
-            t, x, v, a, _step_excess(v, nominal.v, k),
-            _step_excess(implied, implied_nominal, k - 1),
-            float(np.linalg.norm(x[-1] - new_goal)), float(nrmse(x[k:], ref_rest)),
-            float(error), float(t[-1]))
-    return results, reference
-
-
-def goal_jump_case(skill, turn=np.radians(25.0), distance=1.2, jump=0.3):
-    """
-    Return ``(start, goal, new_goal)``: the goal-jump scenario of docs/design.md#online-goal.
-
-    The goal is the demonstration's; the start is the demonstration's start turned about the
-    goal by ``turn`` (about z in 3D) and moved to ``distance`` times its distance; the new goal
-    lies ``jump`` times ``|start - goal|`` from the goal, perpendicular to ``start - goal`` (in
-    the x-y plane). 2D and 3D skills only.
-    """
-    if skill.dim not in (2, 3):
-        raise ValueError(f'the goal-jump scenario needs a 2D or 3D skill, got d={skill.dim}')
-    c, s = np.cos(turn), np.sin(turn)
-    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])[:skill.dim, :skill.dim]
-    goal = skill.goal.copy()
-    offset = distance * rotation @ (skill.start - skill.goal)
-    side = np.zeros(skill.dim)
-    side[:2] = -offset[1], offset[0]
-    side /= np.linalg.norm(side)
-    return goal + offset, goal, goal + jump * np.linalg.norm(offset) * side

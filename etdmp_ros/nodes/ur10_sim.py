@@ -119,7 +119,6 @@ class UR10SimNode(Node):
         self._watchdog_was_active = self.sim.watchdog_active
         self._next_camera_time = 0.0
         self._next_truth_time = 0.0
-        self._stall_said = -float('inf')    # time.monotonic() of the last stall reported
         self._camera = None   # the camera process, once started
         # CPU seconds per part; publish_tf (the /tf messages) is a part of publish_state.
         self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
@@ -127,6 +126,8 @@ class UR10SimNode(Node):
                       'frames_dropped': 0, 'max_tick_gap': 0.0, 'late_ticks': 0,
                       'waits': 0, 'waits_expired': 0, 'wait_time': 0.0,
                       'contact_ticks': 0, 'contact_pairs': set()}
+        self._unreported_stall = (0.0, 0.0)     # (gap, simulated time) not reported yet
+        self._last_stall_warning = -1.0
         self._create_topics()
         if p['teach_script']:
             self._guide_name = p['teach_script']
@@ -372,22 +373,31 @@ class UR10SimNode(Node):
         self._answered_ticks = self._answered_ticks + 1 if answered else 0
 
     def _note_gap(self, gap):
-        """Keep the largest wall-clock gap between ticks; warn about one over LATE_TICKS."""
+        """
+        Keep the largest wall-clock gap between ticks; warn about those over LATE_TICKS.
+
+        At most one warning a second, naming the largest stall since the previous one (a
+        throttled log would show the first and hide a longer one right after it).
+        """
         stats = self.stats
         stats['max_tick_gap'] = max(stats['max_tick_gap'], gap)
         rtf = self.real_time_factor
         if rtf > 0 and gap > LATE_TICKS * self.tick_period / rtf:
             stats['late_ticks'] += 1
-            # Said at most once a second, as the log line: a reliable event publisher whose
-            # reader is starved too would block this loop once its history is full.
-            now = time.monotonic()
-            if now - self._stall_said >= STALL_REPORT_PERIOD:
-                self._stall_said = now
-                text = (f'simulation loop stalled: {gap * 1e3:.0f} ms between two ticks at t = '
-                        f'{self.sim.time:.3f} s (the machine is overloaded?)')
-                self.get_logger().warning(text)
-                self.events.publish('stalled', text, WARN, gap_ms=gap * 1e3, t_s=self.sim.time,
-                                    late_ticks=stats['late_ticks'])
+            if gap > self._unreported_stall[0]:
+                self._unreported_stall = (gap, self.sim.time)
+        # Said at most once a second, in the log and as an event: a reliable event publisher
+        # whose reader is starved too would block this loop once its history is full.
+        now = time.monotonic()
+        if (self._unreported_stall[0] > 0.0
+                and now - self._last_stall_warning >= STALL_REPORT_PERIOD):
+            gap, at = self._unreported_stall
+            self._unreported_stall, self._last_stall_warning = (0.0, 0.0), now
+            text = (f'simulation loop stalled: {gap * 1e3:.0f} ms between two ticks at t = '
+                    f'{at:.3f} s (the machine is overloaded?)')
+            self.get_logger().warning(text)
+            self.events.publish('stalled', text, WARN, gap_ms=gap * 1e3, t_s=at,
+                                late_ticks=stats['late_ticks'])
 
     def run_for(self, duration):
         """Run ``duration`` s of simulated time in the calling thread, unpaced (benchmarks)."""

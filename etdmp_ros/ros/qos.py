@@ -9,7 +9,7 @@ are: a late subscriber gets the state at once instead of waiting for the next ch
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 
-def latched(depth=1):
+def latched(depth: int = 1) -> QoSProfile:
     """Return a reliable, transient-local QoS profile keeping the last ``depth`` messages."""
     return QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)

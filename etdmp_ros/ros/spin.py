@@ -19,15 +19,26 @@ MultiThreadedExecutor is never used: next to the simulation's 125 Hz topics it k
 (rclpy issues #1223, #1452).
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping, Sequence
+import contextlib
 import gc
 import os
+from pathlib import Path
 import signal
 import threading
+from types import FrameType
+from typing import Any
 
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.context import Context
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
+EventsExecutor: Any
 try:
     from rclpy.experimental import EventsExecutor
 except ImportError:   # rclpy before 7.1.4
@@ -43,7 +54,7 @@ EXECUTOR_VARIABLE = 'ETDMP_EXECUTOR'
 DDS_PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
 
 
-def make_executor(context=None):
+def make_executor(context: Context | None = None) -> Executor:
     """Return the executor every node program and tool of this package spins with (above)."""
     choice = os.environ.get(EXECUTOR_VARIABLE, 'events')
     if choice not in ('events', 'single'):
@@ -53,32 +64,116 @@ def make_executor(context=None):
     return SingleThreadedExecutor(context=context)
 
 
-def use_dds_profile():
-    """
-    Have Fast DDS load the package's config/fastdds.xml, unless a profile file is set already.
+#: Set beside them to the same file when the file is this package's choice, so that a process
+#: started from this one (the camera of ur10_sim) chooses again for itself.
+DDS_PROFILE_MARK = 'ETDMP_DDS_PROFILE'
+#: The package's Fast DDS profiles in config/ by (shared memory, localhost-only discovery).
+DDS_PROFILES = {(True, False): 'fastdds.xml', (False, False): 'fastdds_udp.xml',
+                (True, True): 'fastdds_localhost.xml',
+                (False, True): 'fastdds_udp_localhost.xml'}
+DISCOVERY_RANGE = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 
-    Call before the process's first rclpy context; a no-op for another RMW implementation.
-    The profile gives the shared-memory transport segments big enough for camera frames (the
-    file says why and what it measured).
+
+def _localhost_only(environ: Mapping[str, str]) -> bool:
+    """Return whether rcl will use localhost-only discovery without static peers."""
+    if environ.get('ROS_LOCALHOST_ONLY') == '1':
+        return True     # rcl then ignores ROS_STATIC_PEERS
+    return (environ.get(DISCOVERY_RANGE) == 'LOCALHOST'
+            and not environ.get('ROS_STATIC_PEERS', '').strip(';'))
+
+
+def dds_profile(shared_memory: bool = True, environ: Mapping[str, str] | None = None
+                ) -> Path | None:
     """
-    if not os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp').startswith('rmw_fastrtps'):
-        return
-    if any(os.environ.get(name) for name in DDS_PROFILE_VARIABLES):
-        return
+    Return the package's Fast DDS profile file for a process (a Path), None to keep another.
+
+    ``shared_memory``: the process receives or sends camera images (perception, the camera,
+    teach, tools recording them); the others (ur10_sim, controller, dmp_server) talk UDP only,
+    so that no send of theirs can wait for another process (docs/reliability.md). None when
+    FASTRTPS_DEFAULT_PROFILES_FILE (or FASTDDS_...) names a file that is not the package's
+    choice, when the RMW is not Fast DDS, or when the package has no config/ folder.
+    """
+    environ = os.environ if environ is None else environ
+    if not environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp').startswith('rmw_fastrtps'):
+        return None
+    mark = environ.get(DDS_PROFILE_MARK)
+    if any(environ.get(name) and environ.get(name) != mark for name in DDS_PROFILE_VARIABLES):
+        return None
     from etdmp_ros.ros.paths import config_path
     try:
-        os.environ[DDS_PROFILE_VARIABLES[0]] = str(config_path('fastdds.xml'))
+        return config_path(DDS_PROFILES[bool(shared_memory), _localhost_only(environ)])
     except FileNotFoundError:   # a bare copy of the modules: Fast DDS's defaults
-        pass
+        return None
 
 
-def init(args=None):
-    """Initialise rclpy (with the package's DDS profile) without its signal handlers."""
-    use_dds_profile()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+def use_dds_profile(shared_memory: bool = True) -> Path | None:
+    """
+    Have Fast DDS load the package's profile (:func:`dds_profile`); return its path or None.
+
+    Call before the process's first rclpy context; a no-op for another RMW implementation or
+    when the user names a profile file. The profiles give the shared-memory transport segments
+    big enough for camera frames, or leave shared memory out (the files say why).
+    """
+    path = dds_profile(shared_memory)
+    if path is not None:
+        for name in DDS_PROFILE_VARIABLES:
+            os.environ.pop(name, None)
+        os.environ[DDS_PROFILE_VARIABLES[0]] = os.environ[DDS_PROFILE_MARK] = str(path)
+    return path
 
 
-def spin_until_signal(nodes, stop=None):
+@contextlib.contextmanager
+def dds_settings(shared_memory: bool = True) -> Iterator[list[str]]:
+    """
+    Prepare the middleware for an rclpy.init inside: the DDS profile, /dev/shm cleaned.
+
+    Removes the shared-memory files of processes that died without cleaning up
+    (:func:`etdmp_ros.ros.fastdds_files.clean`) and loads the package's profile
+    (:func:`use_dds_profile`). Under localhost-only discovery rmw_fastrtps would add a
+    shared-memory transport of its own to the profile's, so the profile carries the localhost
+    discovery itself (config/fastdds*_localhost.xml) and rcl sees SYSTEM_DEFAULT inside this
+    block; the environment is as before after it. Yields the names of the files removed.
+    """
+    removed: list[str] = []
+    if os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp').startswith('rmw_fastrtps'):
+        from etdmp_ros.ros import fastdds_files
+        removed = fastdds_files.clean()
+    path = use_dds_profile(shared_memory)
+    translate = path is not None and path.name.endswith('_localhost.xml')
+    saved = {name: os.environ.get(name) for name in (DISCOVERY_RANGE, 'ROS_LOCALHOST_ONLY')}
+    if translate:
+        os.environ[DISCOVERY_RANGE] = 'SYSTEM_DEFAULT'
+        os.environ.pop('ROS_LOCALHOST_ONLY', None)
+    try:
+        yield removed
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+def cleaned_message(removed: Sequence[str]) -> str:
+    """Return the log line about the files :func:`dds_settings` removed ('' if none)."""
+    if not removed:
+        return ''
+    return (f'removed {len(removed)} Fast DDS shared-memory files that processes killed '
+            'earlier had left in /dev/shm (docs/reliability.md)')
+
+
+def init(args: list[str] | None = None, shared_memory: bool = True) -> list[str]:
+    """
+    Initialise rclpy (with the package's DDS profile) without its signal handlers.
+
+    Returns the names of the stale shared-memory files removed first (:func:`dds_settings`).
+    """
+    with dds_settings(shared_memory) as removed:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    return removed
+
+
+def spin_until_signal(nodes: Sequence[Node], stop: threading.Event | None = None) -> None:
     """
     Spin ``nodes`` on one executor (:func:`make_executor`) until SIGINT or SIGTERM.
 
@@ -86,10 +181,10 @@ def spin_until_signal(nodes, stop=None):
     set. On return, further SIGINT/SIGTERM are ignored, so a second Ctrl-C cannot interrupt the
     caller's clean-up (stopping the simulation, sending zero velocity, destroying the nodes).
     """
-    stop = threading.Event() if stop is None else stop
+    event = threading.Event() if stop is None else stop
 
-    def request_stop(signum, frame):
-        stop.set()
+    def request_stop(signum: int, frame: FrameType | None) -> None:
+        event.set()
 
     for signum in SIGNALS:
         signal.signal(signum, request_stop)
@@ -97,7 +192,7 @@ def spin_until_signal(nodes, stop=None):
     try:
         for node in nodes:
             executor.add_node(node)
-        while not stop.is_set() and executor.context.ok():
+        while not event.is_set() and executor.context.ok():
             executor.spin_once(timeout_sec=SLICE)
     finally:
         for signum in SIGNALS:
@@ -106,7 +201,7 @@ def spin_until_signal(nodes, stop=None):
             executor.remove_node(node)
 
 
-def freeze_heap():
+def freeze_heap() -> None:
     """
     Collect garbage once, then exempt every object alive now from Python's cycle collector.
 
@@ -127,7 +222,7 @@ def freeze_heap():
 HISTORY_SECONDS = 1.0
 
 
-def rate_qos(rate):
+def rate_qos(rate: float) -> QoSProfile:
     """
     Return the QoS of a reliable publisher at ``rate`` Hz: a history of :data:`HISTORY_SECONDS`.
 
@@ -139,11 +234,10 @@ def rate_qos(rate):
     0.1 s watchdog. A second of history leaves a slow reader that much time; the samples are
     a few hundred bytes.
     """
-    from rclpy.qos import QoSProfile
     return QoSProfile(depth=max(10, int(round(rate * HISTORY_SECONDS))))
 
 
-def set_realtime_priority(priority):
+def set_realtime_priority(priority: int) -> str:
     """
     Put the calling thread under SCHED_FIFO at ``priority`` (1-99); 0 changes nothing.
 
@@ -166,13 +260,15 @@ def set_realtime_priority(priority):
     return ''
 
 
-def normal_scheduling():
+def normal_scheduling() -> None:
     """Return the calling thread to normal scheduling (SCHED_OTHER), e.g. a worker thread."""
     if hasattr(os, 'sched_getscheduler') and os.sched_getscheduler(0) != os.SCHED_OTHER:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
-def run(make_nodes, name, args=None, startup_errors=()):
+def run(make_nodes: Callable[[list[Node]], None], name: str, args: list[str] | None = None,
+        startup_errors: tuple[type[Exception], ...] = (), shared_memory: bool | None = None
+        ) -> int:
     """
     Run a node program: init, create the nodes, spin until a signal, stop them in order.
 
@@ -182,10 +278,22 @@ def run(make_nodes, name, args=None, startup_errors=()):
     (the simulation's thread), in reverse order, then is destroyed. A ValueError or
     ParameterException (or one of ``startup_errors``) while creating the nodes is a bad
     configuration: logged as FATAL without a traceback, exit code 1. Returns the exit code.
+    ``shared_memory``: see :func:`dds_profile`; None: as the system description says of the
+    node called ``name`` (:attr:`etdmp_ros.ros.system.NodeSpec.shared_memory`; True for others).
     """
     from rclpy.exceptions import ParameterException
-    init(args)
-    nodes = []
+    bad_configuration: tuple[type[Exception], ...] = (ValueError, ParameterException,
+                                                      *startup_errors)
+    if shared_memory is None:
+        from etdmp_ros.ros import system
+        try:
+            shared_memory = system.node(name).shared_memory
+        except KeyError:
+            shared_memory = True
+    removed = init(args, shared_memory)
+    if removed:
+        rclpy.logging.get_logger(name).info(cleaned_message(removed))
+    nodes: list[Node] = []
     code = 0
     # A signal during start-up is remembered, not raised: a KeyboardInterrupt raised inside a
     # library callback (numba compiling the controller's kernels calls back from C) is printed
@@ -199,7 +307,7 @@ def run(make_nodes, name, args=None, startup_errors=()):
         spin_until_signal(nodes, stop)
     except KeyboardInterrupt:   # Ctrl-C before our handler was installed (during start-up)
         pass
-    except (ValueError, ParameterException, *startup_errors) as exc:
+    except bad_configuration as exc:
         rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
         code = 1
     finally:

@@ -34,14 +34,20 @@ ET-DMP core and map the result back.
 """
 
 from dataclasses import dataclass, field, replace
-import math
+from typing import Optional, Tuple, Union
 
 from etdmp_ros import limits
 from etdmp_ros.dmp import (AVOIDANCES, euclidean_transform, GeneralizationError, METHODS,
-                           ObstacleGains)
+                           ObstacleGains, Skill, Trajectory)
+from etdmp_ros.geometry.arrays import Array as FloatArray
 from etdmp_ros.geometry.quaternion import unit_and_norm
-from etdmp_ros.robot._scene import PEN_RADIUS
+from etdmp_ros.geometry.task_plane import TaskPlane
+from etdmp_ros.robot import PEN_RADIUS
 import numpy as np
+from numpy.typing import ArrayLike
+
+#: A float array (its shape in the docstrings).
+Array = FloatArray
 
 #: Tool orientation (x, y, z, w) in base_link that points the tool's z axis down (-z of
 #: base_link), as at the scene's initial joint positions: the pen/stirrer points at the table.
@@ -76,13 +82,13 @@ class Workspace:
     joint limits).
     """
 
-    shoulder: tuple = (0.0, 0.0, 0.1273)
+    shoulder: Tuple[float, float, float] = (0.0, 0.0, 0.1273)
     reach: float = 1.3
     margin: float = 0.15
     min_radius: float = 0.2
     min_height: float = -0.005
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate the numbers."""
         shoulder = np.asarray(self.shoulder, dtype=float)
         if shoulder.shape != (3,) or not np.all(np.isfinite(shoulder)):
@@ -94,7 +100,7 @@ class Workspace:
             raise ValueError(f'workspace needs reach - margin > min_radius >= 0, got reach '
                              f'{self.reach}, margin {self.margin}, min_radius {self.min_radius}')
 
-    def violation(self, points):
+    def violation(self, points: ArrayLike) -> Optional[Tuple[int, str]]:
         """
         Return (index, reason) of the first point (n, 3) outside the workspace, or None.
 
@@ -154,13 +160,13 @@ class PlanSettings:
     avoidance: str = ''
     goal_clearance: float = 0.02
     min_distance: float = 0.005
-    orientation: tuple = TOOL_DOWN
+    orientation: Tuple[float, float, float, float] = TOOL_DOWN
     orientation_mode: str = 'demo'
     workspace: Workspace = field(default_factory=Workspace)
     tool_radius: float = PEN_RADIUS
     obstacle_clearance: float = 0.008
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate and normalise."""
         if self.method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {self.method!r}')
@@ -185,6 +191,12 @@ class PlanSettings:
         self.gains.validate()
         object.__setattr__(self, 'orientation', _quaternion(self.orientation))
 
+    def skill_gains(self, scale: float) -> ObstacleGains:
+        """Return the obstacle gains for a skill of ``scale`` metres per unit (obstacle_k)."""
+        if self.obstacle_k > 0.0:   # 1/m → 1/skill unit: exp(-k d) with d = d_units * scale
+            return replace(self.gains, k=self.obstacle_k * scale)
+        return self.gains
+
 
 @dataclass(frozen=True, eq=False)
 class Plan:
@@ -201,32 +213,37 @@ class Plan:
     radii; ``avoidance`` as used.
     """
 
-    t: np.ndarray
-    positions: np.ndarray
-    velocities: np.ndarray
-    orientation: tuple
-    start: np.ndarray
-    goal: np.ndarray
-    obstacles: np.ndarray
+    t: Array
+    positions: Array
+    velocities: Array
+    orientation: Union[Tuple[float, ...], Array]
+    start: Array
+    goal: Array
+    obstacles: Array
     method: str
-    trajectory: object
-    obstacle_radii: np.ndarray = None
+    trajectory: Optional[Trajectory]
+    obstacle_radii: Optional[Array] = None
     avoidance: str = 'paper'
 
     @property
-    def orientations(self):
+    def orientations(self) -> Array:
         """Return the orientation of every pose (n, 4), (x, y, z, w) in base_link."""
         return pose_orientations(self.orientation, len(self.t))
 
 
-def pose_orientations(orientation, n):
+def pose_orientations(orientation: Union[Tuple[float, ...], ArrayLike], n: int) -> Array:
     """Return ``orientation`` (a (4,) tuple or an (n, 4) array) as an (n, 4) array."""
     if isinstance(orientation, tuple):
         return np.tile(np.asarray(orientation, dtype=float), (n, 1))
     return np.asarray(orientation, dtype=float)
 
 
-def _points(value, what, shape):
+def checked_points(value: ArrayLike, what: str, shape: Optional[Tuple[int, ...]]) -> Array:
+    """
+    Return a request's point (``shape`` (3,)) or points (else: (m, 3)), checked (:func:`bounded`).
+
+    Raises PlanningError saying ``what`` is wrong.
+    """
     try:
         array = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -238,7 +255,7 @@ def _points(value, what, shape):
     return bounded(array, what)
 
 
-def bounded(points, what):
+def bounded(points: ArrayLike, what: str) -> Array:
     """
     Return ``points`` (any shape, base_link metres) as a float array, checked as a request's.
 
@@ -263,10 +280,17 @@ def _avoidance(settings, radii):
     return settings.avoidance or ('paper' if radii is None else 'detour')
 
 
-class _Space:
-    """The skill's coordinates: demo units in the task plane (2D) or base_link metres (3D)."""
+class SkillSpace:
+    """
+    The skill's coordinates: demo units in the task plane (2D) or base_link metres (3D).
 
-    def __init__(self, skill, plane):
+    ``plane``: the TaskPlane of a 2D skill (None, and ignored, for a 3D one); ``scale``: metres
+    per skill unit (1 in 3D). Points and vectors are (..., 3) in base_link and (..., d) in the
+    skill's space; orientations (..., 4), (x, y, z, w).
+    """
+
+    def __init__(self, skill: Skill, plane: Optional[TaskPlane]) -> None:
+        """Take the space of ``skill``; raise PlanningError for a 2D skill without a plane."""
         if skill.dim == 2:
             if plane is None:
                 raise PlanningError('a 2D skill needs a task plane')
@@ -276,23 +300,29 @@ class _Space:
         else:
             raise PlanningError(f'a skill must have 2 or 3 coordinates, this one has {skill.dim}')
 
-    def inward(self, points):
+    def inward(self, points: Array) -> Array:
+        """Return base_link points in the skill's space (projected onto the plane, 2D)."""
         return points if self.plane is None else self.plane.to_plane(points)
 
-    def outward(self, points):
+    def outward(self, points: Array) -> Array:
+        """Return points of the skill's space in base_link."""
         return points if self.plane is None else self.plane.from_plane(points)
 
-    def outward_vectors(self, vectors):
+    def outward_vectors(self, vectors: Array) -> Array:
+        """Return vectors (velocities) of the skill's space in base_link (metres)."""
         return vectors if self.plane is None else (self.scale * vectors) @ self.plane.axes
 
-    def inward_orientations(self, q):
+    def inward_orientations(self, q: Array) -> Array:
+        """Return base_link orientations in the skill's frame (the task plane's, 2D)."""
         return q if self.plane is None else self.plane.orientation_to_plane(q)
 
-    def outward_orientations(self, q):
+    def outward_orientations(self, q: Array) -> Array:
+        """Return orientations of the skill's frame in base_link."""
         return q if self.plane is None else self.plane.orientation_from_plane(q)
 
 
-def goal_orientation_of(skill, value, settings):
+def goal_orientation_of(skill: Skill, value: Optional[ArrayLike],
+                        settings: PlanSettings) -> Optional[Array]:
     """
     Return the requested goal orientation (4,) as the plan uses it, or None for none.
 
@@ -320,7 +350,7 @@ def goal_orientation_of(skill, value, settings):
     unit, norm = unit_and_norm(q)
     if abs(norm - 1.0) > GOAL_ORIENTATION_NORM_TOLERANCE:
         # (1e308, 1e308, 0, 1) was refused as "overflow encountered in dot" before.
-        raise PlanningError(f'goal orientation {_fmt(q)} is not a unit quaternion (norm '
+        raise PlanningError(f'goal orientation {format_point(q)} is not a unit quaternion (norm '
                             f'{norm:.4g}); send a unit one, or all zeros for no goal '
                             'orientation')
     if not skill.has_orientation:
@@ -336,11 +366,13 @@ def goal_orientation_of(skill, value, settings):
 GOAL_ORIENTATION_NORM_TOLERANCE = 1e-3
 
 
-def _fmt(point):
+def format_point(point: ArrayLike) -> str:
+    """Return a point as ``(x, y, z)`` in millimetre figures (metres), for a message."""
     return '(' + ', '.join(f'{c:.3f}' if abs(c) < 1e6 else f'{c:.3g}' for c in point) + ')'
 
 
-def obstacle_clearances(radii, settings, count):
+def obstacle_clearances(radii: Optional[ArrayLike], settings: PlanSettings,
+                        count: int) -> Optional[Array]:
     """
     Return the clearance (count,) a plan keeps from each obstacle's centre (m), or None.
 
@@ -361,14 +393,35 @@ def obstacle_clearances(radii, settings, count):
     return radii + settings.tool_radius + settings.obstacle_clearance
 
 
-def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
-              goal_orientation=None, obstacle_radii=None):
+def _check_request(start, goal, obstacles, settings, where):
+    """Refuse a goal out of reach, on the start or on an obstacle (base_link points)."""
+    outside = settings.workspace.violation(goal)
+    if outside is not None:
+        raise PlanningError(f"goal {format_point(goal)}{where} is out of the UR10's reach: "
+                            f'{outside[1]}')
+    gap = float(np.linalg.norm(start - goal))
+    if gap < settings.min_distance:
+        raise PlanningError(f'start equals goal{where}: they are {gap * 1000:.1f} mm apart, less '
+                            f'than min_distance {settings.min_distance * 1000:g} mm; there is no '
+                            'movement to make')
+    if len(obstacles):
+        to_goal = np.linalg.norm(obstacles - goal, axis=1)
+        i = int(np.argmin(to_goal))
+        if to_goal[i] < settings.goal_clearance:
+            raise PlanningError(f'obstacle {format_point(obstacles[i])}{where} lies on the goal: '
+                                f'{to_goal[i] * 1000:.1f} mm from it, less than goal_clearance '
+                                f'{settings.goal_clearance * 1000:g} mm')
+
+
+def plan_path(skill: Skill, start: ArrayLike, goal: ArrayLike, obstacles: ArrayLike = (),
+              settings: Optional[PlanSettings] = None, plane: Optional[TaskPlane] = None,
+              goal_orientation: Optional[ArrayLike] = None,
+              obstacle_radii: Optional[ArrayLike] = None) -> Plan:
     """
     Plan ``skill`` (an ``etdmp_ros.dmp.Skill``) from ``start`` to ``goal`` around ``obstacles``.
 
     ``start``, ``goal``: base_link points (3,); ``obstacles``: (m, 3) base_link points (the
-    centres); ``obstacle_radii``: None or (m,) metres, the clearance to keep from each centre;
-    ``settings``: PlanSettings; ``plane``: the TaskPlane (needed for 2D skills);
+    centres); ``settings``: PlanSettings; ``plane``: the TaskPlane (needed for 2D skills);
     ``goal_orientation``: None or (x, y, z, w) in base_link (see :func:`goal_orientation_of`:
     all zeros for none); ``obstacle_radii``: (m,) each obstacle's radius in metres (0: a point),
     None for obstacles of unknown size. Returns a Plan; raises PlanningError with the reason
@@ -376,45 +429,25 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
     """
     settings = PlanSettings() if settings is None else settings
     goal_q = goal_orientation_of(skill, goal_orientation, settings)
-    start = _points(start, 'start', (3,))
-    goal = _points(goal, 'goal', (3,))
-    obstacles = _points(obstacles, 'obstacles', None)
+    start = checked_points(start, 'start', (3,))
+    goal = checked_points(goal, 'goal', (3,))
+    obstacles = checked_points(obstacles, 'obstacles', None)
     avoidance = _avoidance(settings, obstacle_radii)
     clearances = obstacle_clearances(obstacle_radii, settings, len(obstacles))
     if clearances is None and avoidance == 'detour':   # points of unknown size: the tool's
         clearances = obstacle_clearances(np.zeros(len(obstacles)), settings, len(obstacles))
-    space = _Space(skill, plane)
+    space = SkillSpace(skill, plane)
     start_s, goal_s, obstacles_s = (space.inward(p) for p in (start, goal, obstacles))
     start_b, goal_b, obstacles_b = (space.outward(p) for p in (start_s, goal_s, obstacles_s))
-    where = ' (projected onto the task plane)' if space.plane is not None else ''
-
-    outside = settings.workspace.violation(goal_b)
-    if outside is not None:
-        raise PlanningError(f"goal {_fmt(goal_b)}{where} is out of the UR10's reach: "
-                            f'{outside[1]}')
-    gap = float(np.linalg.norm(start_b - goal_b))
-    if gap < settings.min_distance:
-        raise PlanningError(f'start equals goal{where}: they are {gap * 1000:.1f} mm apart, less '
-                            f'than min_distance {settings.min_distance * 1000:g} mm; there is no '
-                            'movement to make')
-    if len(obstacles_b):
-        to_goal = np.linalg.norm(obstacles_b - goal_b, axis=1)
-        i = int(np.argmin(to_goal))
-        if to_goal[i] < settings.goal_clearance:
-            raise PlanningError(f'obstacle {_fmt(obstacles_b[i])}{where} lies on the goal: '
-                                f'{to_goal[i] * 1000:.1f} mm from it, less than goal_clearance '
-                                f'{settings.goal_clearance * 1000:g} mm')
-
-    gains = settings.gains
-    if settings.obstacle_k > 0.0:   # 1/m → 1/skill unit: exp(-k d) with d = d_units * scale
-        gains = replace(gains, k=settings.obstacle_k * space.scale)
+    _check_request(start_b, goal_b, obstacles_b, settings,
+                   ' (projected onto the task plane)' if space.plane is not None else '')
     try:
         traj = skill.generalize(
             start_s, goal_s, obstacles_s, method=settings.method, mode=settings.mode,
             independent_axis=settings.independent_axis, dt=settings.output_period,
             tau=settings.duration or None,
             margin=settings.obstacle_margin if len(obstacles_s) and avoidance == 'paper' else 0.0,
-            gains=gains, avoidance=avoidance,
+            gains=settings.skill_gains(space.scale), avoidance=avoidance,
             obstacle_radii=None if clearances is None else clearances / space.scale,
             goal_orientation=None if goal_q is None else space.inward_orientations(goal_q))
     except GeneralizationError as err:
@@ -429,12 +462,14 @@ def plan_path(skill, start, goal, obstacles=(), settings=None, plane=None,
     if outside is not None:
         i, reason = outside
         raise PlanningError(f"the plan leaves the UR10's reach at t = {traj.t[i]:.2f} s, "
-                            f'{_fmt(positions[i])}: {reason}')
+                            f'{format_point(positions[i])}: {reason}')
     return Plan(traj.t, positions, space.outward_vectors(traj.v), orientation,
                 start_b, goal_b, obstacles_b, settings.method, traj, clearances, avoidance)
 
 
-def place_demo(skill, start, goal, plane=None, mode=1, independent_axis=2):
+def place_demo(skill: Skill, start: ArrayLike, goal: ArrayLike,
+               plane: Optional[TaskPlane] = None, mode: int = 1,
+               independent_axis: int = 2) -> Array:
     """
     Return the demonstration (T, 3) turned and scaled so it runs from start to goal.
 
@@ -442,9 +477,9 @@ def place_demo(skill, start, goal, plane=None, mode=1, independent_axis=2):
     display. ``start``, ``goal``: base_link points; ``plane`` for 2D skills; ``mode``,
     ``independent_axis``: a 3D skill's transform (mode 2 scales each block by its own ratio).
     """
-    space = _Space(skill, plane)
-    start_s, goal_s = space.inward(_points(start, 'start', (3,))), space.inward(
-        _points(goal, 'goal', (3,)))
+    space = SkillSpace(skill, plane)
+    start_s, goal_s = space.inward(checked_points(start, 'start', (3,))), space.inward(
+        checked_points(goal, 'goal', (3,)))
     i_demo = skill.start - skill.goal
     i_current = start_s - goal_s
     try:
@@ -454,191 +489,3 @@ def place_demo(skill, start, goal, plane=None, mode=1, independent_axis=2):
         raise PlanningError(str(err)) from None
     # Row-vector form of x = g + R^T (scale * (y - g_D)).
     return space.outward(goal_s + (transform.scale * (skill.demo - skill.goal)) @ transform.R)
-
-
-#: Consecutive perception messages that must agree on a moved goal or obstacle set before a
-#: plan in execution follows it (dmp_server): a frame rendered while the marker moved can show
-#: it in between, or an obstacle hidden by the arm (about 0.1 s at the camera's 30 Hz).
-FOLLOW_CONFIRMATIONS = 3
-
-
-class FollowedPlan:
-    """
-    A plan being executed whose goal and obstacles may still move (online ET-DMP, issue 14).
-
-    Made from the :class:`Plan` that :func:`plan_path` returned, with the same arguments. It
-    keeps the skill's online rollout (:meth:`etdmp_ros.dmp.Skill.online`) in step with the
-    plan: the online run reproduces the plan while nothing moves. :meth:`update` changes the
-    goal or the obstacles from path time ``t_switch`` on and returns the new remainder; each
-    update starts from the state the previous ones left, so the path stays continuous in
-    position and velocity however often it changes (the goal filter keeps the acceleration
-    bounded). ``t`` and ``positions`` are the whole path as it stands (the plan's own time base).
-
-    Orientation: ``orientation`` is the plan's one tuple (mode ``tool``) or an (n, 4) array
-    matching ``t``. The online rollout does not carry orientations, so a re-planned remainder
-    takes the plan's orientation at the same path time, which is the same phase (the phase
-    depends on time only, not on the goal or obstacles), and the plan's last orientation after
-    the plan's end: the tool keeps the orientation pattern it was given (and reaches a requested
-    goal orientation) even when the goal moves; it is not turned again with the moved goal.
-    """
-
-    def __init__(self, skill, plan, settings=None, plane=None):
-        """Start following ``plan`` (planned for ``skill`` with ``settings`` and ``plane``)."""
-        settings = PlanSettings() if settings is None else settings
-        self.skill, self.settings = skill, settings
-        self._space = _Space(skill, plane)
-        space = self._space
-        gains = settings.gains
-        if settings.obstacle_k > 0.0:
-            gains = replace(gains, k=settings.obstacle_k * space.scale)
-        radii = np.zeros(len(plan.obstacles)) if plan.obstacle_radii is None else \
-            plan.obstacle_radii
-        try:
-            self._run = skill.online(
-                space.inward(plan.start), space.inward(plan.goal), space.inward(plan.obstacles),
-                method=settings.method, mode=settings.mode,
-                independent_axis=settings.independent_axis, dt=settings.output_period,
-                tau=settings.duration or None, gains=gains,
-                obstacle_radii=radii / space.scale, avoidance=plan.avoidance)
-        except GeneralizationError as err:
-            raise PlanningError(str(err)) from None
-        self.t, self.positions = plan.t.copy(), plan.positions.copy()
-        self.velocities = plan.velocities.copy()
-        self.goal, self.obstacles = plan.goal.copy(), plan.obstacles.copy()
-        self.obstacle_radii = np.array(radii, dtype=float)
-        #: Each obstacle's own radius (m): the clearance less the tool's and the margin.
-        added = settings.tool_radius + settings.obstacle_clearance
-        self.obstacle_sizes = np.zeros(len(plan.obstacles)) if plan.obstacle_radii is None else \
-            np.maximum(0.0, plan.obstacle_radii - added)
-        self.orientation = plan.orientation
-        self._plan_t, self._plan_orientation = plan.t, plan.orientation
-        self.updates = 0
-        self._run.warm()
-        # The samples the run will step through while nothing moves, and the run they start
-        # from: at first the plan's own (the offline rollout that the run reproduces), then
-        # those of the last update; update() takes its state at the switch from them.
-        self._base, self._rows = self._run, None
-        traj = plan.trajectory
-        if traj is not None and len(traj.t) == len(plan.t) and len(traj.t) > 1:
-            self._rows = self._run._replayed(traj.x[1:], traj.v[1:], traj.a[1:])
-
-    def placed(self, points):
-        """Return base_link ``points`` (..., 3) as the plan uses them (on the task plane, 2D)."""
-        points = np.asarray(points, dtype=float)
-        return self._space.outward(self._space.inward(points.reshape(-1, 3))).reshape(
-            points.shape)
-
-    @property
-    def duration(self):
-        """Path time (s) of the path's last pose."""
-        return float(self.t[-1])
-
-    def index(self, t):
-        """Return the index of the pose at path time ``t`` (the last one at or before it)."""
-        return int(np.clip(np.searchsorted(self.t, t + 1e-9) - 1, 0, len(self.t) - 1))
-
-    def orientations_at(self, t):
-        """Return the plan's orientations (len(t), 4) at path times ``t`` (its last after it)."""
-        i = np.clip(np.searchsorted(self._plan_t, np.asarray(t) + 1e-9) - 1, 0,
-                    len(self._plan_t) - 1)
-        return pose_orientations(self._plan_orientation, len(self._plan_t))[i]
-
-    def _at(self, t):
-        """
-        Return the online run at path time ``t`` (at or after the run's own time).
-
-        A sample of the rows kept, where ``t`` is one of theirs (no integration: the sample is
-        the one the path holds), else the run advanced to ``t``.
-        """
-        base, rows = self._base, self._rows
-        if rows is not None:
-            i = int(round((t - base.t) / base.dt)) - 1
-            if -1 <= i < len(rows.t):
-                run = base.copy()
-                if i >= 0:
-                    run._set_row(rows, i)
-                return run
-        self._run.run(t)
-        return self._run
-
-    def update(self, t_switch, goal=None, obstacles=None, t_max=None, obstacle_radii=None):
-        """
-        Move the goal to ``goal`` and/or the obstacles to ``obstacles`` from ``t_switch`` on.
-
-        ``goal`` (3,) and ``obstacles`` (m, 3) are base_link points (projected onto the task
-        plane for 2D skills), None for unchanged; ``obstacle_radii`` (m,) each obstacle's radius
-        in metres (the tool's radius and ``obstacle_clearance`` are added, as in
-        :func:`plan_path`), None for those in force (the same number of obstacles) or, for the
-        paper's points, none. Return
-        the index of the first changed pose: the path from there on (``t``, ``positions``,
-        ``velocities``) is new; before it, it is as it was. The new path runs until the online
-        run is done or ``t_max`` (default: the old end plus the skill's duration). Raises
-        PlanningError, leaving the path as it was, for a goal out of reach or on the start, an
-        obstacle on the goal, a new path that leaves the workspace or, for the detour, a
-        clearance it cannot keep.
-        """
-        space, settings = self._space, self.settings
-        goal_s = None if goal is None else space.inward(_points(goal, 'goal', (3,)))
-        obstacles_s = None if obstacles is None else space.inward(
-            _points(obstacles, 'obstacles', None))
-        radii = None if obstacle_radii is None or obstacles_s is None else \
-            obstacle_clearances(obstacle_radii, settings, len(obstacles_s))
-        if goal_s is not None:
-            goal_b = space.outward(goal_s)
-            outside = settings.workspace.violation(goal_b)
-            if outside is not None:
-                raise PlanningError(f"goal {_fmt(goal_b)} is out of the UR10's reach: "
-                                    f'{outside[1]}')
-        k = self.index(max(t_switch, self._run.t))
-        run = self._at(self.t[k])   # in step with the path as it stands
-        t_max = self.duration + self._run.tau if t_max is None else t_max
-        trial = run.copy()      # what-if: the run itself changes only on success
-        try:
-            with np.errstate(over='raise', invalid='raise', divide='raise'):
-                # The step that takes the new input and the rest of the movement in one
-                # call of the numba loop (what a step() and a run() give, to rounding).
-                trial._take(goal=goal_s, obstacles=obstacles_s,
-                            obstacle_radii=None if radii is None else radii / space.scale)
-                rows = trial._rows(int(math.floor((t_max - trial.t) / trial.dt + 0.5)))
-                if rows is not None and len(rows.t):
-                    after = trial.copy()
-                    after._set_row(rows, 0)
-                    xs, vs, _ = trial._outputs(rows)
-                    kept = trial, rows
-                else:           # only step() can (the filtered goal passes by the start)
-                    kept = None, None
-                    trial = run.copy()
-                    x, v, _ = trial.step(
-                        goal=goal_s, obstacles=obstacles_s,
-                        obstacle_radii=None if radii is None else radii / space.scale)
-                    after = trial.copy()
-                    _, xs, vs, _ = trial.run(t_max)
-                    xs, vs = np.vstack([x[None], xs]), np.vstack([v[None], vs])
-        except (GeneralizationError, ArithmeticError) as err:
-            raise PlanningError(str(err)) from None
-        positions = space.outward(xs)
-        outside = settings.workspace.violation(positions)
-        if outside is not None:
-            i, reason = outside
-            raise PlanningError(f"the new path leaves the UR10's reach at "
-                                f'{_fmt(positions[i])}: {reason}')
-        t_new = run.t + run.dt * np.arange(1, len(xs) + 1)
-        keep = k + 1
-        self.t = np.concatenate([self.t[:keep], t_new])
-        self.positions = np.concatenate([self.positions[:keep], positions])
-        self.velocities = np.concatenate([self.velocities[:keep],
-                                          space.outward_vectors(vs)])
-        if not isinstance(self.orientation, tuple):
-            self.orientation = np.concatenate([self.orientation[:keep],
-                                               self.orientations_at(t_new)])
-        self._run = after
-        self._base, self._rows = kept
-        if goal_s is not None:
-            self.goal = space.outward(goal_s)
-        if obstacles_s is not None:
-            self.obstacles = space.outward(obstacles_s)
-            self.obstacle_radii = self._run.obstacle_radii * space.scale
-            if obstacle_radii is not None:
-                self.obstacle_sizes = np.asarray(obstacle_radii, dtype=float).reshape(-1)
-        self.updates += 1
-        return keep

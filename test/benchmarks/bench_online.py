@@ -1,5 +1,5 @@
 """
-Online ET-DMP benchmark (issue 14): the cost of one online update, core and end to end.
+Online ET-DMP benchmark: the cost of one online update, core and end to end.
 
 A script, not a pytest test; it needs no peer library. Run from the repository root::
 
@@ -7,11 +7,11 @@ A script, not a pytest test; it needs no peer library. Run from the repository r
         [--skills G W stir] [--demo-skill G] [--load idle] [--json out/bench_online.json]
         [--no-demo] [--from out/demo_move ...]
 
-Core: ``etdmp_ros.skills.planning.FollowedPlan.update``, what dmp_server calls when a followed goal
-moved (advance the online rollout to the switch, step it with the new goal, roll the remainder
-out to its end, map it to base_link and check the workspace), on G, W and stir planned as the
-demo plans them (the skill's layout, the tool at the simulation's initial joints, the scene's
-obstacles, dmp_server's configured settings). Each of ``--updates`` samples starts a fresh
+Core: ``etdmp_ros.skills.following.FollowedPlan.update``, what dmp_server calls when a followed
+goal moved (advance the online rollout to the switch, step it with the new goal, roll the
+remainder out to its end, map it to base_link and check the workspace), on G, W and stir planned
+as the demo plans them (the skill's layout, the tool at the simulation's initial joints, the
+scene's obstacles, dmp_server's configured settings). Each of ``--updates`` samples starts a fresh
 FollowedPlan of that plan (not timed) and moves its goal at a random path time (uniform over
 5-95 % of the plan) by a random 3-5 cm along the task plane (stir: 2 cm horizontally, as the
 issue's bottle); also timed, apart: building the nav_msgs/Path of the remainder that
@@ -61,8 +61,9 @@ from etdmp_ros.robot import UR10Model  # noqa: E402
 from etdmp_ros.ros import system  # noqa: E402
 from etdmp_ros.ros.conversions import path_from_numpy, serialize_path  # noqa: E402
 from etdmp_ros.ros.processes import isolated_environment  # noqa: E402
+from etdmp_ros.skills.following import FollowedPlan  # noqa: E402
 from etdmp_ros.skills.library import SkillLibrary  # noqa: E402
-from etdmp_ros.skills.planning import FollowedPlan, plan_path, PlanningError  # noqa: E402
+from etdmp_ros.skills.planning import plan_path, PlanningError  # noqa: E402
 import numpy as np  # noqa: E402
 
 CORE_TARGET_MS = 2.0

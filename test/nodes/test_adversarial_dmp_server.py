@@ -1,5 +1,5 @@
 """
-dmp_server under attack (issue 13): the installed node, attacked as a user on the machine can.
+dmp_server under attack: the installed node, attacked as a user on the machine can.
 
 Each row of ATTACKS does what ``ros2 service call``, ``ros2 param set`` or ``ros2 topic pub`` (or
 a file put in ``demo_files`` / ``skills_dir``) would, and then checks, for every row: the node
@@ -430,7 +430,7 @@ class Meddler:
         while not self._stop.is_set():
             assert all(r.successful for r in self.client.set_parameters(**next(self._values)))
             self.sets += 1
-            time.sleep(0.01)
+            time.sleep(0.01)    # the subject: a client setting them over and over
 
     def __enter__(self):
         assert self.client.parameters.wait_for_service(timeout_sec=TIMEOUT)

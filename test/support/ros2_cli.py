@@ -18,11 +18,12 @@ import shlex
 import signal
 import subprocess
 import sys
-import time
 
+from etdmp_ros.ros import fastdds_files
 from etdmp_ros.ros.processes import isolated_environment, NodeProcess, sourced
 from etdmp_ros.ros.spin import DDS_PROFILE_VARIABLES
 import numpy as np
+from support import waiting
 
 REPO = Path(__file__).resolve().parents[2]
 README = REPO / 'README.md'
@@ -62,17 +63,15 @@ class Ros2:
         env.update(ROS_HOME=str(self.home / 'ros_home'), PYTHONUNBUFFERED='1',
                    RCUTILS_COLORIZED_OUTPUT='0', MUJOCO_GL='egl',
                    RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
-        # The many short-lived ros2 processes talk UDP only, no shared memory. Each one
-        # leaves a shared-memory port behind when it exits. The next writer to find it then
-        # runs Fast DDS's port health check while holding the port mutex that every process
-        # on the host shares. Twice in three fresh-clone runs, every node froze for 2.0 s this
-        # way, and ros2 param then timed out. The nodes, started by ros2 launch with this
-        # environment, keep their profile (config/fastdds.xml: shared memory between them).
-        # The package's profile would bring shared memory back (its transports are the
-        # profile's, whatever FASTDDS_BUILTIN_TRANSPORTS says): this test process has it set
-        # once a BackgroundNode ran here, and a fresh clone's CLI tests then printed
-        # "RTPS_TRANSPORT_SHM Error ... open_and_lock_file failed" into ros2 param's output.
-        # The nodes set it again themselves (etdmp_ros.ros.spin.use_dds_profile).
+        # The many short-lived ros2 processes were meant to talk UDP only, no shared memory
+        # (each one leaves a port behind when it exits, and the next writer to find it ran
+        # Fast DDS's port health check while holding the port's mutex: docs/reliability.md).
+        # Under ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, as here, rmw_fastrtps ignores
+        # FASTDDS_BUILTIN_TRANSPORTS and adds shared memory anyway; the package's profile would
+        # bring it back too (its transports are the profile's), and this test process has it set
+        # once a BackgroundNode ran here (a fresh clone's CLI tests then printed
+        # "RTPS_TRANSPORT_SHM Error ... open_and_lock_file failed" into ros2 param's output):
+        # it is not passed on. The nodes choose their own (etdmp_ros.ros.spin.dds_profile).
         env['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
         for name in DDS_PROFILE_VARIABLES:
             env.pop(name, None)
@@ -134,13 +133,18 @@ class Background(NodeProcess):
             self._signal(signal.SIGINT, group)
 
     def wait(self, timeout=10.0):
-        """Wait for the exit, then kill the group (stragglers too); return the exit code."""
+        """
+        Wait for the exit, then kill the group (stragglers too); return the exit code.
+
+        The Fast DDS shared-memory files of what was killed are removed.
+        """
         try:
             self.process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             pass
         self._signal(signal.SIGKILL)
         self.process.wait()
+        fastdds_files.clean()
         self._log.close()
         return self.process.returncode
 
@@ -151,17 +155,8 @@ class Background(NodeProcess):
 
 
 def wait_for(predicate, timeout, what, processes=()):
-    """Poll ``predicate`` until true; fail naming ``what`` (and a process that died) if not."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        for process in processes:
-            assert process.returncode is None, (
-                f'{what}: a process exited with {process.returncode}:\n{process.log()[-3000:]}')
-        time.sleep(0.2)
-    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+    """Wait as :func:`support.waiting.wait_for` does, polling every 0.2 s (ros2 commands)."""
+    return waiting.wait_for(predicate, timeout, what, processes, period=0.2)
 
 
 # ----------------------------------------------------------------------- what the CLI prints

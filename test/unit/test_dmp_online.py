@@ -10,8 +10,8 @@ stands still); phase stopping lets the plan wait for a held tool and then finish
 
 import math
 
-from etdmp_ros.dmp import builtin_demo, GeneralizationError, learn, nrmse, OnlineGains, OnlineRun
-from etdmp_ros.dmp._online import compare_goal_jump, goal_jump_case, GOAL_JUMP_WAYS
+from etdmp_ros.dmp import (builtin_demo, compare_goal_jump, GeneralizationError, goal_jump_case,
+                           GOAL_JUMP_WAYS, learn, nrmse, OnlineGains, OnlineRun)
 import numpy as np
 import pytest
 
@@ -462,3 +462,60 @@ def test_run_is_the_steps_in_one_call(skills, name, mode, obstacles, hold):
     # ... and both go on alike.
     np.testing.assert_allclose(a.step(goal=skill.goal)[0], b.step(goal=skill.goal)[0],
                                atol=1e-9 * skill.size)
+
+
+@pytest.mark.parametrize('name, obstacles', [('G', False), ('G', True), ('stir', True)])
+def test_take_predict_restore_and_replay_are_step_and_run_without_stepping(
+        skills, name, obstacles):
+    # The what-if API a plan in execution uses (following.FollowedPlan): take() is step()'s
+    # input without the step, predict() is run() without advancing, restore() puts one of its
+    # samples in force, replay() makes such samples from a rollout computed elsewhere.
+    skill = skills[name]
+    start = skill.start + 0.1 * skill.size * np.ones(skill.dim)
+    jump = 0.15 * skill.size * np.eye(skill.dim)[0]
+    obs = [0.5 * (start + skill.goal) + 0.05 * skill.size] if obstacles else ()
+    radii = [0.02 * skill.size] if obstacles else None
+    run = skill.online(start, skill.goal, obs, dt=0.01, obstacle_radii=radii)
+    # replay: the run's own samples (with the detour's displacement) give the rows back.
+    rows = run.predict(40)
+    x, v, a = run.outputs(rows)
+    replayed = run.replay(x, v, a)
+    for field in ('t', 'x', 'v', 'a', 'goal_f', 'R', 'theta'):
+        np.testing.assert_allclose(getattr(replayed, field), getattr(rows, field),
+                                   atol=1e-12 * skill.size)
+    for _ in range(30):
+        run.step()
+    # take: the new goal in force, nothing stepped; the next step is step(goal=...)'s.
+    t0, x0 = run.t, run.x
+    taken, stepped = run.copy(), run.copy()
+    taken.take(goal=skill.goal + jump)
+    assert taken.t == t0 and np.array_equal(taken.x, x0)
+    np.testing.assert_array_equal(taken.goal, skill.goal + jump)
+    np.testing.assert_array_equal(taken.filtered_goal, skill.goal)
+    np.testing.assert_array_equal(taken.step()[0], stepped.step(goal=skill.goal + jump)[0])
+    with pytest.raises(GeneralizationError, match='NaN|finite'):
+        taken.take(goal=np.full(skill.dim, np.nan))
+    with pytest.raises(GeneralizationError, match='obstacle_radii given without obstacles'):
+        taken.take(obstacle_radii=[0.1])
+    assert taken.t == stepped.t and np.array_equal(taken.x, stepped.x)
+    # The filter moves now: no replay; predict is run without advancing.
+    assert taken.replay(x[:3], v[:3], a[:3]) is None
+    before = (taken.t, taken.x.copy(), taken.filtered_goal)
+    rows = taken.predict(int(2 * taken.tau / taken.dt))
+    assert taken.t == before[0]
+    np.testing.assert_array_equal(taken.x, before[1])
+    np.testing.assert_array_equal(taken.filtered_goal, before[2])
+    ran = taken.copy()
+    t, xs, vs, accs = ran.run(taken.t + 2 * taken.tau)
+    np.testing.assert_array_equal(rows.t, t)
+    for got, want in zip(taken.outputs(rows), (xs, vs, accs)):
+        np.testing.assert_array_equal(got, want)
+    # restore: the run as the steps left it at sample i, going on alike.
+    i = len(rows.t) // 3
+    restored, reference = taken.copy(), taken.copy()
+    restored.restore(rows, i)
+    for _ in range(i + 1):
+        reference.step()
+    assert restored.t == pytest.approx(reference.t) and restored.t == pytest.approx(rows.t[i])
+    assert np.abs(restored.x - reference.x).max() <= 1e-9 * skill.size
+    assert np.abs(restored.step()[0] - reference.step()[0]).max() <= 1e-9 * skill.size

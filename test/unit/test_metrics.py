@@ -8,8 +8,8 @@ from etdmp_ros.demo.metrics import (compute_metrics, contact_figures, cylinder_g
                                     system_figures)
 from etdmp_ros.demo.scenario import Scenario
 from etdmp_ros.geometry.task_plane import quadrant
-from etdmp_ros.nodes import dmp_server
 from etdmp_ros.ros.events import Event, WALL_CLOCK
+from etdmp_ros.skills import following
 import numpy as np
 import pytest
 
@@ -89,7 +89,7 @@ class _NoMonitor:
         return None
 
 
-# ------------------------------------------------------------------------- a goal that moves
+# ------------------------------------------------------------------ a goal that moves
 
 
 PERIOD = 0.01
@@ -184,7 +184,7 @@ def test_goal_seen_after_move_confirms_as_dmp_server_does():
     seen = _seen_rows([g0] * 5 + [0.5 * (g0 + g1), g1, g1, g1, g1])
     assert goal_seen_after_move(scene, seen, placed, 0, 0.005) == (5, 8)
     assert goal_seen_after_move(scene, _seen_rows([g0] * 6), placed, 0, 0.005) == (None, None)
-    assert FOLLOW_CONFIRMATIONS == dmp_server.FOLLOW_CONFIRMATIONS
+    assert FOLLOW_CONFIRMATIONS == following.FOLLOW_CONFIRMATIONS
 
 
 def _moved_run(follow=True):

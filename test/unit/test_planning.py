@@ -7,8 +7,9 @@ from etdmp_ros.dmp import (builtin_demo, Demonstration, learn, nrmse, ObstacleGa
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.robot import PEN_RADIUS, UR10Model
-from etdmp_ros.skills.planning import (FollowedPlan, place_demo, plan_path, PlanningError,
-                                       PlanSettings, TOOL_DOWN, Workspace)
+from etdmp_ros.skills.following import FollowedPlan
+from etdmp_ros.skills.planning import (place_demo, plan_path, PlanningError, PlanSettings,
+                                       TOOL_DOWN, Workspace)
 import numpy as np
 import pytest
 
@@ -301,7 +302,7 @@ def test_a_followed_plan_moves_its_goal_without_a_jump():
     np.testing.assert_array_equal(followed.positions, before)
 
 
-# -- orientation (issue 15) ----------------------------------------------------------------------
+# -- orientation ----------------------------------------------------------------------
 
 @pytest.fixture(scope='module')
 def stir_skill():

@@ -33,7 +33,7 @@ from etdmp_ros.demo.metrics._run import format_nrmse, MeasurementError, Run
 from etdmp_ros.demo.metrics._system import system_figures
 from etdmp_ros.demo.metrics._trace import (executed_plan, fit_tracking_start, nrmse_over_tau,
                                            switch_index, tracking_errors)
-from etdmp_ros.skills.planning import FOLLOW_CONFIRMATIONS
+from etdmp_ros.skills.following import FOLLOW_CONFIRMATIONS
 
 __all__ = [
     'DEFINITIONS', 'FOLLOW_CONFIRMATIONS', 'MOVE_DEFINITIONS', 'MeasurementError', 'Run',

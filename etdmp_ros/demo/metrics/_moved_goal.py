@@ -12,7 +12,7 @@ from etdmp_ros.demo.metrics._clearance import clearance_mm, obstacle_radii
 from etdmp_ros.demo.metrics._definitions import SLOW_PLAN, SWITCH_WINDOW
 from etdmp_ros.demo.metrics._trace import nrmse_over_tau
 from etdmp_ros.ros import events as ev
-from etdmp_ros.skills.planning import FOLLOW_CONFIRMATIONS
+from etdmp_ros.skills.following import FOLLOW_CONFIRMATIONS, goal_moved, MovedInput
 import numpy as np
 
 
@@ -75,19 +75,14 @@ def goal_seen_after_move(scene, goal_seen, plan_goal, since_ns, threshold,
     """
     rows = np.flatnonzero(goal_seen[:, 0] >= since_ns) if len(goal_seen) else []
     placed = _placed(scene, goal_seen[:, 3:6]) if len(goal_seen) else np.zeros((0, 3))
-    first = confirming = None
-    candidate, count = None, 0
+    first = None
+    decision = MovedInput(goal_moved, confirmations)    # dmp_server's own (Following)
     for i in rows:
-        moved = bool(np.linalg.norm(placed[i] - plan_goal) > threshold)
-        if first is None and moved:
+        if first is None and goal_moved(plan_goal, placed[i], threshold):
             first = int(i)
-        if candidate is None or np.linalg.norm(placed[i] - candidate) > threshold:
-            count = 0
-        candidate, count = placed[i], count + 1
-        if count >= confirmations and moved:
-            confirming = int(i)
-            break
-    return first, confirming
+        if decision.see(placed[i], plan_goal, threshold):
+            return first, int(i)
+    return first, None
 
 
 def perceived_goal_rows(run):
