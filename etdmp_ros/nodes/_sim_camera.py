@@ -159,6 +159,28 @@ class CameraProcess:
             self.process.wait()
 
 
+def _newest(link):
+    """
+    Wait for a snapshot on ``link``; return the newest one waiting and how many it replaced.
+
+    Returns (b'', 0) when ur10_sim closed its end.
+    """
+    data, older = link.recv(65536), 0
+    if not data:
+        return data, 0
+    link.setblocking(False)
+    try:
+        while True:
+            newer = link.recv(65536)
+            if not newer:
+                break
+            data, older = newer, older + 1
+    except BlockingIOError:
+        pass
+    link.setblocking(True)
+    return data, older
+
+
 def main(argv=None):
     """Render and publish the snapshots that arrive on the socket until it closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # ur10_sim stops this process
@@ -187,23 +209,13 @@ def main(argv=None):
         camera = CameraPublishers(node, json.loads(args.topics), sim.intrinsics)
         nq, nmocap = sim.model.nq, sim.model.nmocap
         while rclpy.ok():
-            data = link.recv(65536)
+            data, older = _newest(link)
             if not data:
                 break                        # ur10_sim closed its end: done
-            link.setblocking(False)          # take the newest snapshot waiting, skip the rest
-            try:
-                while True:
-                    newer = link.recv(65536)
-                    if not newer:
-                        break
-                    data = newer
-                    if published:
-                        skipped += 1
-                    else:
-                        early += 1
-            except BlockingIOError:
-                pass
-            link.setblocking(True)
+            if published:
+                skipped += older
+            else:
+                early += older
             state, stamp_ns = decode(data, nq, nmocap, MAX_OBSTACLES)
             camera.publish(sim, state, ns_to_stamp(stamp_ns))
             published += 1
