@@ -5,8 +5,9 @@ Recording a closed-loop run: a node in the caller's process that records the who
 nodes start (``ros2 bag record --all`` does the same), and keeps each message as the
 serialized bytes its raw subscription hands over, stamped with the time it arrived; a few
 topics it also reads at once to drive the demo (the pen tip, perception's output, the
-controller's status, the camera frames kept for the pictures). It calls ``/generalize`` and
-sets dmp_server's parameters as a user would (``ros2 service call``, ``ros2 param set``).
+controller's status, the nodes' events, the camera frames kept for the pictures). It calls
+``/generalize`` and sets dmp_server's parameters as a user would (``ros2 service call``,
+``ros2 param set``).
 
 After the run :func:`write_bag` writes it all to a rosbag2-compatible MCAP file
 (:mod:`etdmp_ros.skills.recordings`), the camera images as sensor_msgs/CompressedImage on
@@ -21,6 +22,8 @@ import heapq
 import threading
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
+from etdmp_ros.ros import events, qos, topics
 from etdmp_ros.ros.background import BackgroundNode
 from etdmp_ros.ros.conversions import (compress_image_cdr, COMPRESSED_IMAGE_TYPE,
                                        COMPRESSED_SUFFIX, contacts_from_markers,
@@ -33,7 +36,6 @@ from geometry_msgs.msg import PointStamped, PoseArray, PoseStamped
 from nav_msgs.msg import Path as PathMessage
 from nav_msgs.srv import GetPlan
 import numpy as np
-from rcl_interfaces.msg import Log
 from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -44,36 +46,39 @@ from visualization_msgs.msg import MarkerArray
 
 #: Keep every n-th camera frame for the animation (30 Hz camera: 15 frames per second).
 FRAME_EVERY = 2
-LATCHED = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STREAM = QoSProfile(depth=1000)
 # Reliable, as perception subscribes: a lost fragment is resent instead of the frame lost.
 IMAGES = QoSProfile(depth=2)
 #: How often the graph is looked at for new topics (s; ros2 bag record: 0.1 s).
 DISCOVERY_PERIOD = 0.2
 IMAGE_TYPE = 'sensor_msgs/msg/Image'
-TIP_TOPIC = '/ur10_sim/ground_truth/tool_tip'
-COMMAND_TOPIC = '/forward_velocity_controller/commands'
-REFERENCE_TOPIC = '/etdmp/controller/reference'
-STATUS_TOPIC = '/etdmp/controller/status'
-COLOR_TOPIC = '/camera/camera/color/image_raw'
-DEPTH_TOPIC = '/camera/camera/aligned_depth_to_color/image_raw'
-PATH_TOPIC = '/etdmp/path'
-GOAL_SEEN_TOPIC = '/etdmp/goal'
-BOTTLE_SEEN_TOPIC = '/etdmp/bottle'
-ROSOUT_TOPIC = '/rosout'
-JOINTS_TOPIC = '/joint_states'
-CONTACTS_TOPIC = '/ur10_sim/ground_truth/contacts'
+SIM = 'ur10_sim'
+TIP_TOPIC = topics.absolute(topics.GROUND_TRUTH_TOOL_TIP, SIM)
+COMMAND_TOPIC = topics.absolute(topics.COMMANDS)
+REFERENCE_TOPIC = topics.absolute(topics.REFERENCE)
+STATUS_TOPIC = topics.absolute(topics.CONTROLLER_STATUS)
+COLOR_TOPIC = topics.absolute(topics.COLOR)
+DEPTH_TOPIC = topics.absolute(topics.DEPTH)
+PATH_TOPIC = topics.absolute(topics.PATH)
+GOAL_SEEN_TOPIC = topics.absolute(topics.GOAL)
+BOTTLE_SEEN_TOPIC = topics.absolute(topics.BOTTLE)
+JOINTS_TOPIC = topics.absolute(topics.JOINT_STATES)
+CONTACTS_TOPIC = topics.absolute(topics.GROUND_TRUTH_CONTACTS, SIM)
+#: The nodes whose ``~/events`` the metrics read (etdmp_ros.ros.events), by topic.
+EVENT_TOPICS = {topics.absolute(topics.EVENTS, node): node
+                for node in (SIM, f'{SIM}_camera', 'controller', 'dmp_server')}
 #: Topics left out of the recording, with the reason (metrics.json ``recording.not_recorded``).
 NOT_RECORDED = {
-    '/etdmp/detections/image': 'a view of the recorded camera images that perception draws '
-                               'only while someone subscribes (recording it costs the drawing)',
+    topics.absolute(topics.DETECTIONS_IMAGE):
+        'a view of the recorded camera images that perception draws only while someone '
+        'subscribes (recording it costs the drawing)',
 }
 #: Why the images are not in a recording made without them (``Recorder(images=False)``).
 IMAGES_LEFT_OUT = 'camera images left out of this recording (no pictures)'
 #: The streams :func:`read_streams` returns for the metrics.
 MEASURED_TOPICS = (TIP_TOPIC, COMMAND_TOPIC, REFERENCE_TOPIC, STATUS_TOPIC, PATH_TOPIC,
-                   GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC, ROSOUT_TOPIC, JOINTS_TOPIC,
-                   CONTACTS_TOPIC)
+                   GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC, JOINTS_TOPIC, CONTACTS_TOPIC,
+                   *EVENT_TOPICS)
 
 
 class Stream:
@@ -124,6 +129,7 @@ class Recorder(BackgroundNode):
         self.streams = {}             # topic -> Stream
         self.unrecorded = {}          # topic -> why not
         self.status = []              # (sim ns at receipt, text)
+        self.events = []              # the nodes' events (etdmp_ros.ros.events.Event)
         self.goal_truth = self.obstacles_truth = self.bottle_truth = None
         self.goal_seen = self.obstacles_seen = None
         self.goal_seen_stamp = 0
@@ -152,23 +158,27 @@ class Recorder(BackgroundNode):
 
     def _subscribe(self):
         """Subscribe the topics the demo acts on (before their publishers exist)."""
-        for topic, msg_type, qos, handler in (
+        truth = {name: topics.absolute(name, SIM) for name in (
+            topics.GROUND_TRUTH_GOAL, topics.GROUND_TRUTH_OBSTACLES, topics.GROUND_TRUTH_BOTTLE)}
+        for topic, msg_type, profile, handler in (
                 (TIP_TOPIC, PointStamped, STREAM, self._on_tip),
-                ('/ur10_sim/ground_truth/goal', PointStamped, 10, self._on_goal_truth),
-                ('/ur10_sim/ground_truth/obstacles', PoseArray, 10, self._on_obstacles_truth),
-                ('/ur10_sim/ground_truth/bottle', PointStamped, 10, self._on_bottle_truth),
+                (truth[topics.GROUND_TRUTH_GOAL], PointStamped, 10, self._on_goal_truth),
+                (truth[topics.GROUND_TRUTH_OBSTACLES], PoseArray, 10, self._on_obstacles_truth),
+                (truth[topics.GROUND_TRUTH_BOTTLE], PointStamped, 10, self._on_bottle_truth),
                 (BOTTLE_SEEN_TOPIC, PointStamped, 10, None),
                 (GOAL_SEEN_TOPIC, PointStamped, 10, self._on_goal_seen),
-                ('/etdmp/obstacles', PoseArray, 10, self._on_obstacles_seen),
+                (topics.absolute(topics.OBSTACLES), PoseArray, 10, self._on_obstacles_seen),
                 (COMMAND_TOPIC, Float64MultiArray, STREAM, None),
-                (STATUS_TOPIC, String, LATCHED, self._on_status),
+                (STATUS_TOPIC, String, qos.latched(10), self._on_status),
                 (REFERENCE_TOPIC, PoseStamped, STREAM, None),
-                ('/camera/camera/color/camera_info', CameraInfo, 10, self._on_camera_info),
+                (topics.absolute(topics.COLOR_INFO), CameraInfo, 10, self._on_camera_info),
                 (COLOR_TOPIC, Image, IMAGES, self._on_color),
-                (DEPTH_TOPIC, Image, IMAGES, self._on_depth)):
+                (DEPTH_TOPIC, Image, IMAGES, self._on_depth),
+                *((topic, DiagnosticArray, qos.latched(events.HISTORY), self._on_event)
+                  for topic in EVENT_TOPICS)):
             if msg_type is Image and not self.images:
                 continue
-            self._record(topic, msg_type, qos, handler)
+            self._record(topic, msg_type, profile, handler)
 
     def _record(self, topic, msg_type, qos, handler=None):
         module, name = msg_type.__module__.split('.')[0], msg_type.__name__
@@ -253,6 +263,11 @@ class Recorder(BackgroundNode):
         with self.lock:
             self.status.append((self.sim_ns, text))
 
+    def _on_event(self, raw):
+        found = events.from_message(deserialize_message(raw, DiagnosticArray))
+        with self.lock:
+            self.events.extend(found)
+
     def _on_camera_info(self, raw):
         if self.camera_info is None:
             self.camera_info = intrinsics_from_camera_info(deserialize_message(raw, CameraInfo))
@@ -314,6 +329,21 @@ class Recorder(BackgroundNode):
         """Keep the first camera frame stamped at or after ``not_before_ns`` as ``name``."""
         with self.lock:
             self._requests[name] = int(not_before_ns)
+
+    def events_of(self, node, kind):
+        """Return the events of ``kind`` that ``node`` published so far, in order."""
+        with self.lock:
+            return events.of_kind(self.events, node, kind)
+
+    def wait_for_event(self, node, kind, since=0, timeout=1.0):
+        """Return the first event of ``kind`` from ``node`` after the first ``since`` (None)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            found = self.events_of(node, kind)
+            if len(found) > since:
+                return found[since]
+            time.sleep(0.01)
+        return None
 
     def state(self, since=0):
         """Return the status messages received after the first ``since`` ones."""
@@ -418,70 +448,107 @@ def read_streams(path):
     ``status``: [(simulated ns at receipt, text)]. Also, in order of arrival: ``paths``, every
     /etdmp/path as (simulated ns at receipt, receipt ns, header stamp ns, pose stamps ns (n,),
     positions (n, 3)); ``goal_seen``: /etdmp/goal as (m, 6) rows of simulated ns at receipt,
-    receipt ns, header stamp ns, x, y, z; ``bottle_seen``: /etdmp/bottle as those; ``logs``:
-    /rosout as [(stamp ns, node, text)] (the nodes stamp their log lines with the wall clock,
-    the clock of the receipt times); ``contacts``: the simulation's contact ground truth as
-    [(stamp ns, [(part, item, depth m), ...])], one entry per message (an empty list: none).
+    receipt ns, header stamp ns, x, y, z; ``bottle_seen``: /etdmp/bottle as those; ``events``:
+    the nodes' events (:class:`etdmp_ros.ros.events.Event`, :data:`EVENT_TOPICS`; each carries
+    the wall clock when it happened, the clock of the receipt times); ``contacts``: the
+    simulation's contact ground truth as [(stamp ns, [(part, item, depth m), ...])], one entry
+    per message (an empty list: none).
     """
-    tip, reference, commands, command_time, wall, status = [], [], [], [], [], []
-    joints, contacts = [], []
-    paths, goal_seen, bottle_seen, logs = [], [], [], []
-    sim_ns = 0
+    reader = _StreamReader()
     for topic, _, log_ns, data in bag.read_messages(path, MEASURED_TOPICS):
-        if topic == TIP_TOPIC:
-            msg = deserialize_message(data, PointStamped)
-            stamp = stamp_to_ns(msg.header.stamp)
-            sim_ns = max(sim_ns, stamp)
-            tip.append((stamp, msg.point.x, msg.point.y, msg.point.z))
-        elif topic == REFERENCE_TOPIC:
-            msg = deserialize_message(data, PoseStamped)
-            p, o = msg.pose.position, msg.pose.orientation
-            reference.append((stamp_to_ns(msg.header.stamp), p.x, p.y, p.z, o.x, o.y, o.z,
-                              o.w))
-        elif topic == JOINTS_TOPIC:
-            msg = deserialize_message(data, JointState)
-            try:
-                positions, _ = joint_state_arrays(msg)
-            except ValueError:
-                continue
-            joints.append((stamp_to_ns(msg.header.stamp), *positions))
-        elif topic == COMMAND_TOPIC:
-            commands.append(deserialize_message(data, Float64MultiArray).data)
-            command_time.append(sim_ns)
-            wall.append(log_ns * 1e-9)
-        elif topic == STATUS_TOPIC:
-            status.append((sim_ns, deserialize_message(data, String).data))
-        elif topic == PATH_TOPIC:
-            msg = deserialize_message(data, PathMessage)
-            _, positions, _ = path_to_numpy(msg)
-            stamps = np.array([stamp_to_ns(p.header.stamp) for p in msg.poses], dtype=np.int64)
-            paths.append((sim_ns, log_ns, stamp_to_ns(msg.header.stamp), stamps, positions))
-        elif topic == CONTACTS_TOPIC:
-            msg = deserialize_message(data, MarkerArray)
-            stamp = stamp_to_ns(msg.markers[0].header.stamp) if msg.markers else sim_ns
-            contacts.append((stamp, contacts_from_markers(msg)))
-        elif topic in (GOAL_SEEN_TOPIC, BOTTLE_SEEN_TOPIC):
-            msg = deserialize_message(data, PointStamped)
-            rows = goal_seen if topic == GOAL_SEEN_TOPIC else bottle_seen
-            rows.append((sim_ns, log_ns, stamp_to_ns(msg.header.stamp), msg.point.x,
-                         msg.point.y, msg.point.z))
-        else:
-            msg = deserialize_message(data, Log)
-            logs.append((stamp_to_ns(msg.stamp), msg.name, msg.msg))
-    tip, reference = np.array(tip).reshape(-1, 4), np.array(reference).reshape(-1, 8)
-    reference = reference[np.argsort(reference[:, 0], kind='stable')]
-    joints = np.array(joints, dtype=float).reshape(-1, 7)
-    return {'tip': tip[np.argsort(tip[:, 0], kind='stable')],
-            'reference': reference[:, :4], 'reference_q': reference[:, 4:],
-            'joints': joints[np.argsort(joints[:, 0], kind='stable')],
-            'command_time': np.array(command_time, dtype=float),
-            'command_wall_time': np.array(wall, dtype=float),
-            'commands': np.array(commands, dtype=float).reshape(-1, 6),
-            'status': status,
-            'paths': paths,
-            'goal_seen': np.array(goal_seen, dtype=float).reshape(-1, 6),
-            'bottle_seen': np.array(bottle_seen, dtype=float).reshape(-1, 6),
-            'logs': logs, 'contacts': contacts}
+        reader.read(topic, log_ns, data)
+    return reader.streams()
+
+
+class _StreamReader:
+    """The measured topics of a recording, read message by message (:func:`read_streams`)."""
+
+    def __init__(self):
+        self.tip, self.reference, self.joints, self.contacts = [], [], [], []
+        self.commands, self.command_time, self.wall, self.status = [], [], [], []
+        self.paths, self.goal_seen, self.bottle_seen, self.events = [], [], [], []
+        self.sim_ns = 0     # the latest pen tip's stamp: the simulated time of receipt
+        self._readers = {TIP_TOPIC: self._tip, REFERENCE_TOPIC: self._reference,
+                         JOINTS_TOPIC: self._joints, COMMAND_TOPIC: self._command,
+                         STATUS_TOPIC: self._status, PATH_TOPIC: self._path,
+                         CONTACTS_TOPIC: self._contacts, GOAL_SEEN_TOPIC: self._goal_seen,
+                         BOTTLE_SEEN_TOPIC: self._bottle_seen,
+                         **dict.fromkeys(EVENT_TOPICS, self._event)}
+
+    def read(self, topic, log_ns, data):
+        """Take one message of ``topic`` received at ``log_ns`` (CDR bytes ``data``)."""
+        self._readers[topic](log_ns, data)
+
+    def _tip(self, log_ns, data):
+        msg = deserialize_message(data, PointStamped)
+        stamp = stamp_to_ns(msg.header.stamp)
+        self.sim_ns = max(self.sim_ns, stamp)
+        self.tip.append((stamp, msg.point.x, msg.point.y, msg.point.z))
+
+    def _reference(self, log_ns, data):
+        msg = deserialize_message(data, PoseStamped)
+        p, o = msg.pose.position, msg.pose.orientation
+        self.reference.append((stamp_to_ns(msg.header.stamp), p.x, p.y, p.z, o.x, o.y, o.z,
+                               o.w))
+
+    def _joints(self, log_ns, data):
+        msg = deserialize_message(data, JointState)
+        try:
+            positions, _ = joint_state_arrays(msg)
+        except ValueError:
+            return
+        self.joints.append((stamp_to_ns(msg.header.stamp), *positions))
+
+    def _command(self, log_ns, data):
+        self.commands.append(deserialize_message(data, Float64MultiArray).data)
+        self.command_time.append(self.sim_ns)
+        self.wall.append(log_ns * 1e-9)
+
+    def _status(self, log_ns, data):
+        self.status.append((self.sim_ns, deserialize_message(data, String).data))
+
+    def _path(self, log_ns, data):
+        msg = deserialize_message(data, PathMessage)
+        _, positions, _ = path_to_numpy(msg)
+        stamps = np.array([stamp_to_ns(p.header.stamp) for p in msg.poses], dtype=np.int64)
+        self.paths.append((self.sim_ns, log_ns, stamp_to_ns(msg.header.stamp), stamps,
+                           positions))
+
+    def _contacts(self, log_ns, data):
+        msg = deserialize_message(data, MarkerArray)
+        stamp = stamp_to_ns(msg.markers[0].header.stamp) if msg.markers else self.sim_ns
+        self.contacts.append((stamp, contacts_from_markers(msg)))
+
+    def _point_row(self, log_ns, data):
+        msg = deserialize_message(data, PointStamped)
+        return (self.sim_ns, log_ns, stamp_to_ns(msg.header.stamp), msg.point.x, msg.point.y,
+                msg.point.z)
+
+    def _goal_seen(self, log_ns, data):
+        self.goal_seen.append(self._point_row(log_ns, data))
+
+    def _bottle_seen(self, log_ns, data):
+        self.bottle_seen.append(self._point_row(log_ns, data))
+
+    def _event(self, log_ns, data):
+        self.events.extend(events.from_message(deserialize_message(data, DiagnosticArray)))
+
+    def streams(self):
+        """Return the streams read (:func:`read_streams`)."""
+        tip = np.array(self.tip).reshape(-1, 4)
+        reference = np.array(self.reference).reshape(-1, 8)
+        reference = reference[np.argsort(reference[:, 0], kind='stable')]
+        joints = np.array(self.joints, dtype=float).reshape(-1, 7)
+        return {'tip': tip[np.argsort(tip[:, 0], kind='stable')],
+                'reference': reference[:, :4], 'reference_q': reference[:, 4:],
+                'joints': joints[np.argsort(joints[:, 0], kind='stable')],
+                'command_time': np.array(self.command_time, dtype=float),
+                'command_wall_time': np.array(self.wall, dtype=float),
+                'commands': np.array(self.commands, dtype=float).reshape(-1, 6),
+                'status': self.status, 'paths': self.paths,
+                'goal_seen': np.array(self.goal_seen, dtype=float).reshape(-1, 6),
+                'bottle_seen': np.array(self.bottle_seen, dtype=float).reshape(-1, 6),
+                'events': self.events, 'contacts': self.contacts}
 
 
 def save_recording(path, rec, plan, other, tracking_start, executed=None):

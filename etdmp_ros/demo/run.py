@@ -19,8 +19,8 @@ simulation's time; the others stamp with their inputs' stamps). Then it
    the camera frames for the pictures;
 4. stops the nodes with SIGINT (Ctrl-C), writes the recording, ``demo.mcap`` (rosbag2 MCAP,
    camera images as CompressedImage; ``metadata.yaml`` beside it), measures from it
-   (:mod:`etdmp_ros.demo.metrics`, which defines the numbers; the controller's own tracking error
-   comes from the summary it logs) and writes ``plot.png``, ``camera_start.png``,
+   (:mod:`etdmp_ros.demo.metrics`, which defines the numbers; the nodes' own figures come
+   from their events in it) and writes ``plot.png``, ``camera_start.png``,
    ``camera_middle.png``, ``camera_end.png``, ``animation.gif`` (:mod:`etdmp_ros.demo.pictures`),
    ``metrics.json`` and ``recording.npz`` to the output folder, node logs to ``<out>/logs/``;
 5. fails (exit code 1, after writing all of it) when the simulation saw the arm or the tool
@@ -148,7 +148,7 @@ def _wait_until(predicate, timeout, what, nodes):
         time.sleep(0.05)
 
 
-def _generalize(recorder, nodes, goal, attempts=20):
+def _generalize(recorder, goal, attempts=20):
     """
     Call /generalize; return (stamp, t, positions, quaternions, reason if refused).
 
@@ -156,13 +156,15 @@ def _generalize(recorder, nodes, goal, attempts=20):
     subscriptions match after its service is offered): such a refusal is retried.
     """
     for _ in range(attempts):
+        seen = len(recorder.events_of('dmp_server', 'plan_refused'))
         stamp, t, positions, quaternions = recorder.call_generalize(goal)
         if len(positions):
             return stamp, t, positions, quaternions, ''
-        time.sleep(0.2)     # the node's ERROR line reaches its log file
-        reason = nodes.last_error('dmp_server')
-        if reason and ' yet' not in reason:
+        refused = recorder.wait_for_event('dmp_server', 'plan_refused', seen, timeout=1.0)
+        reason = refused.values['reason'] if refused is not None else 'no plan_refused event'
+        if refused is not None and ' yet' not in reason:
             break
+        time.sleep(0.2)
     return stamp, t, positions, quaternions, reason
 
 
@@ -195,7 +197,7 @@ def _wait_for_the_system(recorder, nodes, scenario, live, progress):
 def _plan_for_comparison(recorder, nodes, scenario, other, live, progress):
     """Plan with the other method first, not executed, from the same start to the same goal."""
     recorder.set_server_parameters(method=other, execute=False)
-    _, o_t, o_x, _, reason = _generalize(recorder, nodes, scenario.request_goal)
+    _, o_t, o_x, _, reason = _generalize(recorder, scenario.request_goal)
     if len(o_x):
         progress(f'{METHOD_LABELS[other]} plan (not executed): {len(o_x)} poses over '
                  f'{o_t[-1]:.2f} s')
@@ -212,7 +214,7 @@ def _plan_and_execute(recorder, nodes, scenario, method, live, progress):
     live.start = recorder.latest_tip()
     live.call_ns = recorder.sim_ns
     recorder.request_snapshot('start', live.call_ns)
-    live.stamp, p_t, p_x, p_q, reason = _generalize(recorder, nodes, scenario.request_goal)
+    live.stamp, p_t, p_x, p_q, reason = _generalize(recorder, scenario.request_goal)
     if not len(p_x):
         raise DemoError(f'/generalize returned no plan: {reason}')
     # The plan starts where dmp_server saw the tool (projected onto the task plane for 2D
@@ -335,15 +337,15 @@ def _measure(scenario, options, live, rec, status, out):
     return run, metrics, extra
 
 
-def _add_system_figures(metrics, live, codes, monitor, rec, nodes):
+def _add_system_figures(metrics, live, codes, monitor, rec):
     metrics['node_exit_codes'] = codes
     metrics['perceived_goal_stamp_age_s'] = live.goal_stamp_lag
     metrics['controller_failure'] = live.failure
     if live.before_plans is not None:
         metrics['before_plans'] = live.before_plans
-    metrics['system'] = system_figures(monitor, rec, live.call_ns, live.end_ns, nodes)
+    metrics['system'] = system_figures(monitor, rec, live.call_ns, live.end_ns)
     # The controller's own tracking error (reference minus its forward kinematics), from the
-    # summary it logs at the end of the path.
+    # event it publishes at the end of the path.
     metrics['controller_reported_tracking_max_mm'] = (
         metrics['system'].get('controller', {}).get('tracking_max_mm'))
 
@@ -426,7 +428,7 @@ def _run_demo(options, env):
     rec = read_streams(out / BAG_NAME)
     status = rec['status'][live.n_status:]
     run, metrics, extra = _measure(scenario, options, live, rec, status, out)
-    _add_system_figures(metrics, live, codes, monitor, rec, nodes)
+    _add_system_figures(metrics, live, codes, monitor, rec)
     metrics['recording'] = bag_figures
     written = _write_outputs(out, run, metrics, extra, recorder, rec, options)
     metrics['wall_time_s'] = time.monotonic() - wall

@@ -16,19 +16,19 @@ next time. No ROS here: processes only.
 
 import argparse
 from pathlib import Path
-import re
 import signal
+import socket
 import sys
 import tempfile
 import time
+import urllib.error
+import urllib.request
 
 from etdmp_ros.ros import system
 from etdmp_ros.ros.processes import isolated_environment, module_argv, NodeExited, NodeProcess
 from etdmp_ros.ros.processes import SystemProcesses
 import yaml
 
-#: What the teach node logs once its page is served (with the address).
-READY = re.compile(r'teaching page on (http://\S+)')
 #: What each node of the system logs once it serves (dmp_server answers only after it).
 SYSTEM_READY = {'ur10_sim': 'UR10 workcell ready', 'perception': 'perception ready',
                 'dmp_server': 'serving /generalize', 'controller': 'following '}
@@ -60,6 +60,13 @@ class TeachSession:
             overrides['ur10_sim']['obstacle_positions'] = []
         for name, values in (parameters or {}).items():
             overrides[system.node(name).name].update(values)
+        teach = {**system.defaults('teach'), **overrides['teach']}
+        if not teach['port']:    # any free port: chosen here, so that the address is known
+            overrides['teach']['port'] = teach['port'] = free_port(teach['address'])
+        host = 'localhost' if teach['address'] in ('127.0.0.1', '::1', 'localhost') \
+            else teach['address']
+        self.page = f'http://[{host}]:{teach["port"]}/' if ':' in host else \
+            f'http://{host}:{teach["port"]}/'
 
         def param_files(name, directory):
             files = system.parameter_files(name, config_dir)
@@ -82,11 +89,11 @@ class TeachSession:
         deadline = time.monotonic() + timeout
         while True:
             self.check_alive()
-            found = READY.search(self.teach.log())
             waiting = [name for name, line in SYSTEM_READY.items()
-                       if line not in self.system.log(name)] + ([] if found else ['teach'])
+                       if line not in self.system.log(name)] + \
+                ([] if page_answers(self.page + 'api/config') else ['teach'])
             if not waiting:
-                return found.group(1)
+                return self.page
             if time.monotonic() > deadline:
                 raise TimeoutError(f'not ready within {timeout:g} s: {", ".join(waiting)}')
             time.sleep(0.1)
@@ -104,6 +111,23 @@ class TeachSession:
         codes = {'teach': self.teach.wait(timeout)}
         codes.update(self.system.stop(timeout, interrupted))
         return codes
+
+
+def free_port(address):
+    """Return a TCP port free on ``address`` now (the system's choice)."""
+    family = socket.AF_INET6 if ':' in address else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.bind((address, 0))
+        return probe.getsockname()[1]
+
+
+def page_answers(url):
+    """Return True if the teaching page answers ``url`` (it is served)."""
+    try:
+        with urllib.request.urlopen(url, timeout=1.0) as answer:
+            return answer.status == 200
+    except (urllib.error.URLError, OSError):
+        return False
 
 
 class _Terminated(Exception):

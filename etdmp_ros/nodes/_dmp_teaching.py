@@ -12,6 +12,7 @@ import pathlib
 from etdmp_ros import limits
 from etdmp_ros.ros import system
 from etdmp_ros.ros.conversions import path_from_cdr
+from etdmp_ros.ros.events import ERROR
 from etdmp_ros.ros.parameters import plain
 from etdmp_ros.skills.library import (BASE_FRAMES, check_skill_name, recorded_orientations,
                                       recorded_path_demo, save_skill_demo)
@@ -46,10 +47,14 @@ def service_values(service, request):
 class Teaching:
     """Learn taught demonstrations into ``library`` and save them to ``skills_dir``."""
 
-    def __init__(self, library, skills_dir, logger, node_name):
-        """Teach into ``library``; log with ``logger``; ``node_name`` names ~/teach."""
+    def __init__(self, library, skills_dir, logger, node_name, events):
+        """
+        Teach into ``library``; log with ``logger``; ``node_name`` names ~/teach.
+
+        ``events``: the node's EventPublisher (a skill ``learned`` or ``refused``, as data).
+        """
         self._library, self._skills_dir = library, skills_dir
-        self._logger, self._node_name = logger, node_name
+        self._logger, self._node_name, self._events = logger, node_name, events
 
     def _protected_sources(self, name, settings):
         """Return the sources a taught skill ``name`` must not replace (teach_overwrite)."""
@@ -134,13 +139,18 @@ class Teaching:
             return False, self._taught(name, err)
         log = self._logger
         try:
-            saved = f'saved to {save_skill_demo(self._skills_dir, entry.demo)}'
+            file, save_error = str(save_skill_demo(self._skills_dir, entry.demo)), ''
+            saved = f'saved to {file}'
         except (OSError, ValueError) as err:
             saved = f'NOT saved (it is lost on restart): {err}'
+            file, save_error = '', str(err)
             log.error(f'taught skill {name!r} {saved}')
         text = (f'learned skill {name!r} ({demo.dim}D, {demo.n_samples} samples) from {where}, '
                 f'{saved}')
         log.info(text)
+        self._events.publish('learned', text, skill=name, dim=demo.dim, samples=demo.n_samples,
+                             duration_s=demo.duration, source=where, saved=file,
+                             save_error=save_error)
         return True, text
 
     def _taught(self, name, err):
@@ -151,4 +161,5 @@ class Teaching:
         text = (f'taught demonstration for skill {name!r} rejected: {short(err)}{hint}; the '
                 'skills already learned are kept')
         self._logger.error(text)
+        self._events.publish('refused', text, ERROR, skill=name, reason=f'{short(err)}{hint}')
         return text

@@ -29,9 +29,11 @@ import json
 import signal
 import socket
 import struct
+import subprocess
 import sys
 import time
 
+from etdmp_ros.ros import topics
 import numpy as np
 
 #: Snapshot header: stamp (ns, int64), simulated time (s, float64), obstacles in use (int32).
@@ -109,6 +111,76 @@ def command(fd, parameters, topics, node_name, namespace):
             '--ros-args', '-r', f'__node:={node_name}', '-r', f'__ns:={namespace}']
 
 
+class CameraProcess:
+    """
+    The camera process seen from the simulation's side: ``ur10_sim`` starts, feeds and stops it.
+
+    :meth:`offer` never blocks: a snapshot that does not fit the socket's buffer (the camera
+    process is stuck) is dropped (``stats['frames_dropped']``); one that the process is too
+    slow to render is skipped there (it logs how many when it stops).
+    """
+
+    def __init__(self, node):
+        """Start the camera process with the node's parameters and topic names."""
+        self._node = node
+        self._link, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self._link.setblocking(False)
+        parameters = {k: (list(v) if isinstance(v, tuple) else v)
+                      for k, v in node._parameter_values.items()}
+        argv = command(theirs.fileno(), parameters, topics.CAMERA,
+                       f'{node.get_name()}_camera', node.get_namespace())
+        self.process = subprocess.Popen(argv, pass_fds=(theirs.fileno(),))
+        theirs.close()
+        self._lost = False
+
+    def offer(self, state, stamp_ns):
+        """Send a camera state to be rendered (dropped if the process cannot take it now)."""
+        if self._lost:
+            return
+        try:
+            self._link.send(encode(state, stamp_ns))
+        except BlockingIOError:
+            self._node.stats['frames_dropped'] += 1
+        except OSError as exc:   # the camera process has gone
+            self._lost = True
+            self._node.get_logger().error(
+                f'camera process exited (code {self.process.poll()}): {exc}; no more camera '
+                'frames')
+        else:
+            self._node.stats['frames'] += 1
+
+    def stop(self):
+        """Close the socket (the process finishes its frame and exits); kill it if it hangs."""
+        self._link.close()
+        try:
+            self.process.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+
+
+def _newest(link):
+    """
+    Wait for a snapshot on ``link``; return the newest one waiting and how many it replaced.
+
+    Returns (b'', 0) when ur10_sim closed its end.
+    """
+    data, older = link.recv(65536), 0
+    if not data:
+        return data, 0
+    link.setblocking(False)
+    try:
+        while True:
+            newer = link.recv(65536)
+            if not newer:
+                break
+            data, older = newer, older + 1
+    except BlockingIOError:
+        pass
+    link.setblocking(True)
+    return data, older
+
+
 def main(argv=None):
     """Render and publish the snapshots that arrive on the socket until it closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # ur10_sim stops this process
@@ -125,41 +197,39 @@ def main(argv=None):
     import rclpy
     from rclpy.node import Node
 
+    from etdmp_ros.ros.events import ERROR, EventPublisher
+
     init(ros_args)
     node = Node('camera', start_parameter_services=False)
     log = node.get_logger()
+    events = EventPublisher(node)
     published = skipped = early = 0       # early: snapshots sent while this process started
     try:
         sim = UR10Sim.from_parameters(json.loads(args.parameters))
         camera = CameraPublishers(node, json.loads(args.topics), sim.intrinsics)
         nq, nmocap = sim.model.nq, sim.model.nmocap
         while rclpy.ok():
-            data = link.recv(65536)
+            data, older = _newest(link)
             if not data:
                 break                        # ur10_sim closed its end: done
-            link.setblocking(False)          # take the newest snapshot waiting, skip the rest
-            try:
-                while True:
-                    newer = link.recv(65536)
-                    if not newer:
-                        break
-                    data = newer
-                    if published:
-                        skipped += 1
-                    else:
-                        early += 1
-            except BlockingIOError:
-                pass
-            link.setblocking(True)
+            if published:
+                skipped += older
+            else:
+                early += older
             state, stamp_ns = decode(data, nq, nmocap, MAX_OBSTACLES)
             camera.publish(sim, state, ns_to_stamp(stamp_ns))
             published += 1
     except Exception as exc:   # noqa: B902 - say why the camera stopped, then exit
         log.error(f'camera stopped: {type(exc).__name__}: {exc}')
+        events.publish('failed', f'camera stopped: {type(exc).__name__}: {exc}', ERROR,
+                       reason=f'{type(exc).__name__}: {exc}')
         return 1
     finally:
-        log.info(f'camera stopped: {published} frames published, {skipped} skipped (rendering '
-                 f'slower than the camera rate), {early} sent before the camera was ready')
+        text = (f'camera stopped: {published} frames published, {skipped} skipped (rendering '
+                f'slower than the camera rate), {early} sent before the camera was ready')
+        log.info(text)
+        events.publish('stopped', text, frames=published, skipped=skipped, early=early)
+        events.flush()
         if 'sim' in locals():
             sim.close()
         node.destroy_node()

@@ -10,7 +10,9 @@ the tool should be, while following a reference), ``/etdmp/controller/tracking_e
 the joint state they belong to) and ``/etdmp/controller/status`` (std_msgs/String,
 transient local, on change: ``<state>`` or ``<state>: <reason>``, the states of
 :data:`etdmp_ros.robot.STATUSES`). Service ``/controller/pause`` (std_srvs/SetBool): true pauses
-(zero command at once), false resumes the path where it was paused.
+(zero command at once), false resumes the path where it was paused. What it did, as data:
+``/controller/events`` (:mod:`etdmp_ros.ros.events`: ``path_accepted``, ``path_ignored``,
+``path_tracked`` with its tracking figures, ``halted``).
 
 Timing. A control step runs when a joint state arrives, at most ``control_rate`` times per
 second (in step with the robot, as a ros2_control controller is), on the joint state's stamp
@@ -42,11 +44,13 @@ import time
 
 from etdmp_ros import limits
 from etdmp_ros.geometry import quaternion as quat
-from etdmp_ros.robot import (ControllerConfig, trajectory_from_path, TrajectoryController,
-                             TrajectoryError, UR10Model)
-from etdmp_ros.ros import system
+from etdmp_ros.robot import (ControllerConfig, InputWatch, TrackingSummary,
+                             trajectory_from_path, TrajectoryController, TrajectoryError,
+                             UR10Model)
+from etdmp_ros.ros import qos, system, topics
 from etdmp_ros.ros.conversions import (joint_state_from_cdr, ns_to_stamp, path_from_cdr,
                                        velocity_command_msg)
+from etdmp_ros.ros.events import ERROR, EventPublisher
 from etdmp_ros.ros.parameters import declare
 from etdmp_ros.ros.spin import normal_scheduling, rate_qos, run, set_realtime_priority
 from geometry_msgs.msg import PoseStamped
@@ -57,20 +61,15 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool
 
 
 NODE_NAME = 'controller'
-JOINT_STATES_TOPIC = 'joint_states'
-PATH_TOPIC = 'etdmp/path'
-COMMAND_TOPIC = 'forward_velocity_controller/commands'
-TOOL_POSE_TOPIC = 'etdmp/tool_pose'
-STATUS_TOPIC = 'etdmp/controller/status'
-ERROR_TOPIC = 'etdmp/controller/tracking_error'
-REFERENCE_TOPIC = 'etdmp/controller/reference'
+JOINT_STATES_TOPIC = topics.JOINT_STATES
+PATH_TOPIC = topics.PATH
 FRAMES = ('', 'base_link')
 #: Zero commands sent on exit, a few ms apart (a lost one would leave the arm moving).
 EXIT_ZEROS = 3
@@ -84,156 +83,6 @@ DESCRIPTION = system.node(NODE_NAME)
 PARAMETERS = frozenset(p.name for p in DESCRIPTION.parameters)
 # Node parameters that are fields of ControllerConfig under another name.
 CONFIG_NAMES = {'control_rate': 'rate', 'joint_acceleration_limits': 'acceleration_limits'}
-
-
-class TrackingSummary:
-    """
-    What the log line at the end of a tracked path reports (and the benchmarks read).
-
-    The tracking error (metres, the controller's own: reference minus forward kinematics), the
-    control steps against the control periods the path spanned (from the joint states' stamps),
-    the joint states received and the largest wall-clock gap between two of them.
-    """
-
-    def __init__(self, period):
-        """Start empty; ``period`` is the control period (s)."""
-        self.period = period
-        self.steps = 0
-        self.received = 0
-        self.max_gap = 0.0
-        self._sum_sq = 0.0
-        self._max_error = 0.0
-        self._first = self._last = None
-        self._max_gap_at = None
-
-    def joint_state(self, gap, t):
-        """Count a joint state received while tracking (stamp ``t``), ``gap`` s after the last."""
-        self.received += 1
-        if gap > self.max_gap:
-            self.max_gap, self._max_gap_at = gap, t
-
-    def step(self, t, error):
-        """Count a control step at stamp ``t`` (s) with tracking error ``error`` (m)."""
-        self.steps += 1
-        self._sum_sq += error * error
-        self._max_error = max(self._max_error, error)
-        self._first = t if self._first is None else self._first
-        self._last = t
-
-    @property
-    def periods(self):
-        """Control periods from the first to the last step, both included."""
-        return 0 if self._first is None else round((self._last - self._first) / self.period) + 1
-
-    def summary(self):
-        """Return the figures as one line of text."""
-        rms = math.sqrt(self._sum_sq / max(self.steps, 1))
-        return (f'error RMS {rms * 1e3:.3f} mm, max {self._max_error * 1e3:.3f} mm; '
-                f'{self.steps} control steps in {self.periods} periods '
-                f'({self.received} joint states received, largest gap '
-                f'{self.max_gap * 1e3:.1f} ms'
-                + (f' at t = {self._max_gap_at:.3f} s)' if self._max_gap_at is not None else ')'))
-
-
-class InputWatch:
-    """
-    When the joint states count as lost: no new one for ``timeout`` of the robot's time.
-
-    The robot's time is the time in which it moves. A real robot's is the wall clock (steady
-    here: the system clock may jump). A simulated robot's is the simulation's /clock
-    (``use_sim_time``): when the simulation stalls (its process not scheduled on a busy
-    machine), its time and its joint states stop together and the arm does not move, so nothing
-    is stale; the clock going on without joint states is. A simulation whose clock and joint
-    states both stop for ``stall_timeout`` of wall time counts as gone. Receipt times are used,
-    never the messages' stamps, which a wrong publisher can set to anything.
-    """
-
-    def __init__(self, timeout, stall_timeout):
-        """Timeouts in seconds (``stall_timeout`` applies only to simulated time)."""
-        self.timeout = timeout
-        self.stall_timeout = stall_timeout
-        self._robot = None      # robot time (ns) of the latest receipt
-        self._wall = None       # steady time (ns) of the latest receipt
-        self._stamp = None      # stamp (ns) of the latest joint state accepted
-        self._arrived = None    # stamp (ns) of the latest plausible joint state to arrive
-        self._simulated = False
-
-    def received(self, robot_ns, wall_ns, simulated, stamp_ns=None):
-        """Note a joint state (stamped ``stamp_ns``) received at these robot and steady times."""
-        if simulated != self._simulated:
-            self._stamp = self._arrived = None
-        self._robot, self._wall, self._simulated = robot_ns, wall_ns, simulated
-        if stamp_ns is not None:
-            self._stamp = stamp_ns
-
-    def implausible(self, stamp_ns, robot_ns, simulated, wall_ns=None):
-        """
-        Return why a joint state stamped ``stamp_ns`` cannot be the robot's ('' if it can).
-
-        Its stamp must have advanced from the last accepted one's as the robot's time did, to
-        within ``timeout``: a stamp far in the future would end the path at once (the
-        controller's time is the stamps'), one far in the past would read as a restart. On a
-        starved machine this process's view of the robot's clock (its /clock messages) and the
-        joint states arrive out of step, both ways, so:
-
-        - one that advanced, but less than the clock, is late, not false: this process was not
-          scheduled while the robot's clock went on (its /clock messages taken first), or the
-          transport held it back; refusing it stopped the arm as stale-input ("its stamp is
-          -0.104 s off the robot clock") on a machine loaded 9 times over;
-        - one ahead of the clock is the clock lagging (its /clock messages still queued) when
-          its stamp advanced no more than the wall clock (``wall_ns``, steady) did since the last
-          one was taken, plus ``timeout``: refusing it stopped the G next to a busy core ("+0.104
-          s off ... advanced 0.176 s ... while the clock advanced 0.072 s"). A stamp 100 s ahead
-          still is no stamp of the robot's.
-
-        The controller goes on from such a joint state; its missed steps re-synchronise the
-        path (etdmp_ros.robot._controller).
-        """
-        if self._stamp is None or simulated != self._simulated:
-            return ''
-        advance = (stamp_ns - self._stamp) * 1e-9
-        skew = advance - (robot_ns - self._robot) * 1e-9
-        if abs(skew) <= self.timeout or (skew < 0.0 and advance > 0.0):
-            return ''
-        if skew > 0.0 and wall_ns is not None and \
-                advance <= (wall_ns - self._wall) * 1e-9 + self.timeout:
-            return ''
-        return (f'its stamp is {skew:+.3f} s off the robot clock (advanced '
-                f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '
-                f'clock advanced {(robot_ns - self._robot) * 1e-9:.3f} s), not from the robot')
-
-    def gap(self, stamp_ns, simulated):
-        """
-        Return why the joint states before this one (stamped ``stamp_ns``) were lost, or ''.
-
-        The robot's time advanced more than ``timeout`` between two joint states that arrived
-        one after the other: the ones between never came (a network link that was down), even
-        if nothing noticed meanwhile, the robot's /clock having stopped reaching this node with
-        them. Joint states that only queued behind a busy process all arrive, a period apart.
-        """
-        previous, self._arrived = self._arrived, stamp_ns
-        if previous is None or (stamp_ns - previous) * 1e-9 <= self.timeout:
-            return ''
-        clock = 'simulated' if simulated else 'wall-clock'
-        return (f'none for {(stamp_ns - previous) * 1e-9:.3f} s of {clock} time: those '
-                'between the last two never came')
-
-    def lost(self, robot_ns, wall_ns, simulated):
-        """Return why the joint states count as lost at these times ('' if they do not)."""
-        if self._wall is None:
-            return 'never received'
-        if simulated != self._simulated:        # use_sim_time switched: start afresh
-            self.received(robot_ns, wall_ns, simulated)
-            return ''
-        age = (robot_ns - self._robot) * 1e-9
-        if age > self.timeout:
-            clock = 'simulated' if simulated else 'wall-clock'
-            return f'none for {age:.3f} s of {clock} time'
-        silent = (wall_ns - self._wall) * 1e-9
-        if simulated and silent > self.stall_timeout:
-            return (f'none for {silent:.3f} s of wall-clock time, and the simulation clock '
-                    'stopped with them (simulation_stall_timeout)')
-        return ''
 
 
 class ControllerNode(Node):
@@ -268,12 +117,12 @@ class ControllerNode(Node):
 
         # A second of history: a slow reader must never block a control step's publish().
         rate = rate_qos(self.config.rate)
-        self._command_pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, rate)
-        self._pose_pub = self.create_publisher(PoseStamped, TOOL_POSE_TOPIC, rate)
-        self._error_pub = self.create_publisher(Float64, ERROR_TOPIC, rate)
-        self._reference_pub = self.create_publisher(PoseStamped, REFERENCE_TOPIC, rate)
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self._status_pub = self.create_publisher(String, STATUS_TOPIC, latched)
+        self._command_pub = self.create_publisher(Float64MultiArray, topics.COMMANDS, rate)
+        self._pose_pub = self.create_publisher(PoseStamped, topics.TOOL_POSE, rate)
+        self._error_pub = self.create_publisher(Float64, topics.TRACKING_ERROR, rate)
+        self._reference_pub = self.create_publisher(PoseStamped, topics.REFERENCE, rate)
+        self._status_pub = self.create_publisher(String, topics.CONTROLLER_STATUS, qos.LATCHED)
+        self.events = EventPublisher(self)
         # Raw bytes, read with numpy (joint_state_from_cdr): a flood of joint states for other
         # joints is refused in microseconds. A deep history, not depth 1: such a flood must
         # not overwrite the robot's own before they are read. Best effort: a reliable reader
@@ -283,8 +132,8 @@ class ControllerNode(Node):
             JointState, JOINT_STATES_TOPIC, self._on_joint_state,
             QoSProfile(depth=limits.JOINT_STATE_QUEUE, reliability=ReliabilityPolicy.BEST_EFFORT),
             raw=True)
-        self.create_subscription(Path, PATH_TOPIC, self._on_path, latched, raw=True)
-        self.create_service(SetBool, '~/pause', self._on_pause)
+        self.create_subscription(Path, PATH_TOPIC, self._on_path, qos.LATCHED, raw=True)
+        self.create_service(SetBool, topics.PAUSE, self._on_pause)
         self.create_timer(self.period, self._watchdog,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -455,8 +304,11 @@ class ControllerNode(Node):
         if command.status == 'tracking':
             self._tracked.step(t, command.tracking_error)
         elif self._tracked.steps:
-            self.get_logger().info(f'path tracked: {self._tracked.summary()}; actuation delay '
-                                   f'estimate {self.controller.delay * 1e3:.1f} ms')
+            text = (f'path tracked: {self._tracked.summary()}; actuation delay estimate '
+                    f'{self.controller.delay * 1e3:.1f} ms')
+            self.get_logger().info(text)
+            self.events.publish('path_tracked', text, **self._tracked.figures(),
+                                delay_ms=self.controller.delay * 1e3)
             self._tracked = TrackingSummary(self.period)
 
     def _input_times(self):
@@ -488,6 +340,8 @@ class ControllerNode(Node):
             self.controller.input_lost(reason)
             if self._last_receipt is not None:
                 self.get_logger().error(f'{reason}: zero velocity command')
+                self.events.publish('halted', f'{reason}: zero velocity command', ERROR,
+                                    status='stale-input', reason=reason)
         self._publish_command(np.zeros(6))
         self._publish_status()
 
@@ -517,6 +371,8 @@ class ControllerNode(Node):
         self._status_pub.publish(String(data=text))
         if status in ('halted-singularity', 'halted-joint-limit', 'unreachable'):
             self.get_logger().error(f'{status}: {reason}; zero velocity command')
+            self.events.publish('halted', f'{status}: {reason}; zero velocity command', ERROR,
+                                status=status, reason=reason)
         else:
             self.get_logger().info(f'status: {text}')
 
@@ -526,12 +382,12 @@ class ControllerNode(Node):
             frame, pose_frames, stamps, positions, quaternions = path_from_cdr(
                 data, self.max_path_poses)
         except ValueError as exc:
-            self.get_logger().error(f'path ignored: {exc}')
+            self._ignore_path(str(exc))
             return
         bad = ({frame} | pose_frames) - set(FRAMES)
         if bad:
-            self.get_logger().error(f'path ignored: frame {sorted(bad)[0]!r} is not base_link '
-                                    '(no TF here: send paths in base_link)')
+            self._ignore_path(f'frame {sorted(bad)[0]!r} is not base_link (no TF here: send '
+                              'paths in base_link)')
             return
         with self._lock:
             self._path_generation += 1
@@ -549,21 +405,36 @@ class ControllerNode(Node):
         try:
             self._take_path(generation, stamps, positions, quaternions)
         except Exception as exc:   # noqa: B902 - a path the checks missed: said, never a traceback
-            self.get_logger().error(f'path ignored: it could not be checked: '
-                                    f'{type(exc).__name__}: {str(exc)[:limits.MAX_REASON_CHARS]}')
+            self._ignore_path(f'it could not be checked: {type(exc).__name__}: '
+                              f'{str(exc)[:limits.MAX_REASON_CHARS]}')
+
+    def _ignore_path(self, reason):
+        """Say (log line and ``path_ignored`` event) why a received path is not followed."""
+        self.get_logger().error(f'path ignored: {reason}')
+        self.events.publish('path_ignored', f'path ignored: {reason}', ERROR, reason=reason)
+
+    def _accepted(self, poses, duration, continued):
+        """Say (log line and ``path_accepted`` event) that a path is followed from now on."""
+        text = (f'path continued: {poses} poses over {duration:.2f} s (taken over at once, '
+                'checked while followed)' if continued else
+                f'new path: {poses} poses over {duration:.2f} s')
+        # The event first: its wall clock is when the path was accepted (a log call under load
+        # takes milliseconds).
+        self.events.publish('path_accepted', text, poses=poses, duration_s=duration,
+                            continued=continued)
+        self.get_logger().info(text)
 
     def _take_path(self, generation, stamps, positions, quaternions):
         q, rotation = self._wait_for_robot()
         if q is None:
-            self.get_logger().error(f'path ignored: no joint states for {WAIT_FOR_JOINT_STATES:g}'
-                                    f' s, the robot pose is unknown (is {JOINT_STATES_TOPIC} '
-                                    'published?)')
+            self._ignore_path(f'no joint states for {WAIT_FOR_JOINT_STATES:g} s, the robot pose '
+                              f'is unknown (is {JOINT_STATES_TOPIC} published?)')
             return
         try:
             path = trajectory_from_path(stamps, positions, quaternions, rotation,
                                         *self.untimed_speed)
         except TrajectoryError as exc:
-            self.get_logger().error(f'path ignored: {exc}')
+            self._ignore_path(str(exc))
             return
         # Timed poses: the first one's stamp lets a re-planned remainder be spliced in.
         timed = len(stamps) > 1 and stamps[-1] != stamps[0]
@@ -577,9 +448,7 @@ class ControllerNode(Node):
             spliced = self.controller.continues(path, stamp)
             if spliced:
                 self.controller.follow(path, stamp)
-                self.get_logger().info(f'path continued: {len(stamps)} poses over '
-                                       f'{path.duration:.2f} s (taken over at once, checked '
-                                       'while followed)')
+                self._accepted(len(stamps), path.duration, continued=True)
         with self._check_lock:      # one check at a time: the checker has one model
             reason = self.controller.check(path, q) if self.check_paths else ''
         with self._lock:
@@ -589,8 +458,7 @@ class ControllerNode(Node):
                 self.controller.reject(reason)
             elif not spliced:
                 self.controller.follow(path, stamp)
-                self.get_logger().info(f'new path: {len(stamps)} poses over '
-                                       f'{path.duration:.2f} s')
+                self._accepted(len(stamps), path.duration, continued=False)
             self._publish_status()
 
     def _wait_for_robot(self):

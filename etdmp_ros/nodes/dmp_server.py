@@ -19,7 +19,9 @@ Topics: subscribes ``/joint_states`` (tool position by the UR10 model's forward 
 (nav_msgs/srv/GetPlan) and, for clients that must not share parameters with others,
 ``~/teach`` and ``~/generalize_with`` (rcl_interfaces/srv/SetParametersAtomically: the skill's
 name and settings in the request, described in etdmp_ros.ros.system); publishes
-``/etdmp/path`` (transient local) and ``/etdmp/markers``.
+``/etdmp/path`` (transient local) and ``/etdmp/markers``, and what it did as data on
+``/dmp_server/events`` (:mod:`etdmp_ros.ros.events`: a skill ``learned`` or ``refused``, a plan
+refused, a path published, a moved goal or obstacle ``followed``).
 
 Threads: the executor (``_spin.make_executor``) runs the input callbacks and parameters;
 /generalize is served by a thread of its own, first come first served, one call at a time
@@ -45,10 +47,11 @@ from etdmp_ros.nodes._dmp_markers import PlanMarkers
 from etdmp_ros.nodes._dmp_settings import Settings
 from etdmp_ros.nodes._dmp_teaching import service_values, short, Teaching
 from etdmp_ros.robot import UR10Model
-from etdmp_ros.ros import system
+from etdmp_ros.ros import qos, system, topics
 from etdmp_ros.ros.conversions import (cylinders_from_markers, joint_state_arrays, ns_to_stamp,
                                        path_from_numpy, point_to_numpy, pose_array_to_numpy,
                                        serialize_path)
+from etdmp_ros.ros.events import ERROR, EventPublisher, WARN
 from etdmp_ros.ros.parameters import (declared_settings, InvalidConfiguration,
                                       values as parameter_values)
 from etdmp_ros.ros.queued_service import QueuedService
@@ -67,7 +70,7 @@ from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
@@ -75,8 +78,6 @@ from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'dmp_server'
 DESCRIPTION = system.node(NODE_NAME)
-_LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _THROTTLE = 5.0   # s between repeated warnings about the same bad input
 #: Seconds between two reports of requests refused as busy (each report counts them).
 BUSY_LOG_PERIOD = 2.0
@@ -106,7 +107,9 @@ class DmpServer(Node):
         skills_dir = self.get_parameter('skills_dir').value
         self._skills_dir = skills_dir or str(default_skills_dir())
         self._library = SkillLibrary(settings.formulation, settings.n_basis)
-        self._teaching = Teaching(self._library, self._skills_dir, log, self.get_name())
+        self.events = EventPublisher(self)   # what it did, as data (etdmp_ros.ros.events)
+        self._teaching = Teaching(self._library, self._skills_dir, log, self.get_name(),
+                                  self.events)
         self._learn_skills(settings)
         self._warm_up()
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -116,7 +119,7 @@ class DmpServer(Node):
         self._planned = 0   # requests answered with a plan
         self._follow_lock = threading.Lock()
         self._followed = None   # Following: the plan in execution, while it may still move
-        self._generalize = QueuedService(self, GetPlan, 'generalize', self._on_generalize,
+        self._generalize = QueuedService(self, GetPlan, topics.GENERALIZE, self._on_generalize,
                                          self._refuse_busy, _SERVICE_QOS,
                                          settings.max_request_wait, limits.MAX_QUEUED_REQUESTS)
         log.info(f'serving /generalize with skill {settings.skill!r} '
@@ -128,34 +131,34 @@ class DmpServer(Node):
         self._input_group = inputs
         self._tool_subscriptions = {}  # tool_position_source -> subscription (made on first use)
         self._subscribe_tool_source(settings.tool_position_source)
-        self.create_subscription(PointStamped, 'etdmp/goal', self._on_goal, 10,
+        self.create_subscription(PointStamped, topics.GOAL, self._on_goal, 10,
                                  callback_group=inputs)
-        self.create_subscription(PointStamped, 'etdmp/bottle', self._on_bottle, 10,
+        self.create_subscription(PointStamped, topics.BOTTLE, self._on_bottle, 10,
                                  callback_group=inputs)
-        self.create_subscription(PoseArray, 'etdmp/obstacles', self._on_obstacles, 10,
+        self.create_subscription(PoseArray, topics.OBSTACLES, self._on_obstacles, 10,
                                  callback_group=inputs)
-        self.create_subscription(MarkerArray, 'etdmp/obstacle_volumes', self._on_volumes, 10,
+        self.create_subscription(MarkerArray, topics.OBSTACLE_VOLUMES, self._on_volumes, 10,
                                  callback_group=inputs)
         # Raw: the size is checked before the bytes are decoded (numpy, not message objects).
         # One teaching at a time, from the topic or the service.
         teaching = MutuallyExclusiveCallbackGroup()
         self.create_subscription(
-            Path, 'etdmp/demonstrations',
+            Path, topics.DEMONSTRATIONS,
             lambda data: self._teaching.on_demonstration(data, self._settings), 10,
             callback_group=teaching, raw=True)
         # Requests that carry their skill and settings (docs/dmp_server.md): concurrent clients
         # cannot mix, and no parameter changes.
-        self.create_service(SetParametersAtomically, '~/teach',
+        self.create_service(SetParametersAtomically, topics.TEACH,
                             lambda request, response: self._teaching.on_teach(
                                 request, response, self._settings),
                             callback_group=teaching)
-        with_settings = self.create_service(SetParametersAtomically, '~/generalize_with',
+        with_settings = self.create_service(SetParametersAtomically, topics.GENERALIZE_WITH,
                                             self._on_generalize_with,
                                             callback_group=MutuallyExclusiveCallbackGroup())
         self._generalize_with_name = self.resolve_service_name(with_settings.srv_name)
-        self._path_pub = self.create_publisher(Path, 'etdmp/path', _LATCHED)
-        self._markers = PlanMarkers(self.create_publisher(MarkerArray, 'etdmp/markers',
-                                                          _LATCHED),
+        self._path_pub = self.create_publisher(Path, topics.PATH, qos.LATCHED)
+        self._markers = PlanMarkers(self.create_publisher(MarkerArray, topics.MARKERS,
+                                                          qos.LATCHED),
                                     self._core_lock, self.get_logger())
 
     # -- parameters -------------------------------------------------------------------------------
@@ -193,10 +196,10 @@ class DmpServer(Node):
             return
         group = self._input_group
         if source == 'joint_states':
-            sub = self.create_subscription(JointState, 'joint_states', self._on_joint_state,
+            sub = self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state,
                                            qos_profile_sensor_data, callback_group=group)
         else:
-            sub = self.create_subscription(PoseStamped, 'etdmp/tool_pose', self._on_tool_pose,
+            sub = self.create_subscription(PoseStamped, topics.TOOL_POSE, self._on_tool_pose,
                                            qos_profile_sensor_data, callback_group=group)
         self._tool_subscriptions[source] = sub
 
@@ -374,6 +377,9 @@ class DmpServer(Node):
             skill, plan = self._plan(settings, start, goal, (q.x, q.y, q.z, q.w))
         except (ValueError, ArithmeticError) as err:   # PlanningError, UnknownSkillError, ...
             self.get_logger().error(f'/generalize with skill {settings.skill!r}: {short(err)}')
+            self.events.publish('plan_refused', f'/generalize with skill {settings.skill!r}: '
+                                f'{short(err)}', ERROR, service='/generalize',
+                                skill=settings.skill, reason=short(err))
             response.plan = path_from_numpy(np.zeros((0, 3)), stamp=stamp)
             return response
         response.plan = path_from_numpy(plan.positions, plan.t, stamp, 'base_link',
@@ -403,6 +409,9 @@ class DmpServer(Node):
         except (ValueError, ArithmeticError) as err:
             reason = f'with skill {settings.skill!r}: {short(err)}'
             self.get_logger().error(f'{self._generalize_with_name}: {reason}')
+            self.events.publish('plan_refused', f'{self._generalize_with_name}: {reason}', ERROR,
+                                service=self._generalize_with_name, skill=settings.skill,
+                                reason=short(err))
             response.result.reason = reason
             return response
         self._execute(settings, skill, plan, stamp, 'goal' not in given,
@@ -445,6 +454,10 @@ class DmpServer(Node):
             # serializes the message in ~2).
             self._path_pub.publish(serialize_path(plan.positions, plan.t, stamp, 'base_link',
                                                   plan.orientation))
+            self.events.publish('path_published', f'{settings.skill} ({plan.method}): '
+                                f'{len(plan.t)} poses over {plan.t[-1]:.2f} s published',
+                                skill=settings.skill, method=plan.method, poses=len(plan.t),
+                                duration_s=plan.t[-1], stamp_ns=stamp)
             if settings.publish_markers and self._markers.wanted():
                 self._markers.request(settings, skill, plan, header)
         self.get_logger().debug(f'planned {settings.skill} ({plan.method}), '
@@ -535,6 +548,8 @@ class DmpServer(Node):
                 f.refused(goal=new_goal is not None, obstacles=new_obstacles is not None)
                 self.get_logger().error(f'the plan in execution does not follow: '
                                         f'{short(err)}; it goes on as it was')
+                self.events.publish('follow_refused', f'the plan in execution does not follow: '
+                                    f'{short(err)}', WARN, reason=short(err), stamp_ns=f.stamp)
                 return
             self._publish_remainder(f, first, tau_c, new_goal, new_obstacles, received, settings)
 
@@ -553,10 +568,15 @@ class DmpServer(Node):
              if new_goal is not None else []) +
             ([f'obstacles moved to {np.round(new_obstacles[0], 3).tolist()}']
              if new_obstacles is not None else []))
-        self.get_logger().info(
-            f'following: {what}: re-planned from path time {p.t[first]:.2f} s (the '
-            f'controller at about {tau_c:.2f} s), {len(p.t) - keep} poses to '
-            f'{p.duration:.2f} s published in {took:.1f} ms (update {p.updates})')
+        text = (f'following: {what}: re-planned from path time {p.t[first]:.2f} s (the '
+                f'controller at about {tau_c:.2f} s), {len(p.t) - keep} poses to '
+                f'{p.duration:.2f} s published in {took:.1f} ms (update {p.updates})')
+        self.events.publish(
+            'followed', text, goal=[] if new_goal is None else new_goal,
+            obstacles=[] if new_obstacles is None else new_obstacles[0],
+            from_path_time_s=p.t[first], controller_path_time_s=tau_c, poses=len(p.t) - keep,
+            end_s=p.duration, took_ms=took, update=p.updates, stamp_ns=f.stamp)
+        self.get_logger().info(text)
         if settings.publish_markers and self._markers.wanted():
             shown = Plan(p.t, p.positions, p.velocities, p.orientation, f.start, p.goal,
                          p.obstacles, settings.plan.method, None)

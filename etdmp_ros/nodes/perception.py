@@ -41,7 +41,7 @@ import time
 
 import cv2
 from etdmp_ros.perception import detector_from_parameters, FrameSynchronizer
-from etdmp_ros.ros import system
+from etdmp_ros.ros import system, topics
 from etdmp_ros.ros.conversions import (camera_image_from_msg, cylinder_markers, image_msg,
                                        intrinsics_from_camera_info, pose_array_from_numpy,
                                        stamp_to_ns)
@@ -56,14 +56,14 @@ from sensor_msgs.msg import CameraInfo, Image
 from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'perception'
-COLOR_TOPIC = 'camera/camera/color/image_raw'
-DEPTH_TOPIC = 'camera/camera/aligned_depth_to_color/image_raw'
-INFO_TOPIC = 'camera/camera/color/camera_info'
-GOAL_TOPIC = 'etdmp/goal'
-OBSTACLES_TOPIC = 'etdmp/obstacles'
-VOLUMES_TOPIC = 'etdmp/obstacle_volumes'
-BOTTLE_TOPIC = 'etdmp/bottle'
-DEBUG_IMAGE_TOPIC = 'etdmp/detections/image'
+COLOR_TOPIC = topics.COLOR
+DEPTH_TOPIC = topics.DEPTH
+INFO_TOPIC = topics.COLOR_INFO
+GOAL_TOPIC = topics.GOAL
+OBSTACLES_TOPIC = topics.OBSTACLES
+VOLUMES_TOPIC = topics.OBSTACLE_VOLUMES
+BOTTLE_TOPIC = topics.BOTTLE
+DEBUG_IMAGE_TOPIC = topics.DETECTIONS_IMAGE
 BASE_FRAME = 'base_link'
 COLOR_ENCODINGS = ('rgb8', 'bgr8')
 DEPTH_ENCODINGS = ('16UC1', 'mono16')

@@ -45,7 +45,7 @@ from etdmp_ros.dmp import builtin_demo, learn
 from etdmp_ros.geometry.camera import CameraPose
 from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.nodes._web import one_line, WebServer
-from etdmp_ros.ros import system
+from etdmp_ros.ros import qos, system, topics
 from etdmp_ros.ros.conversions import image_from_cdr, intrinsics_from_camera_info, path_from_cdr
 from etdmp_ros.ros.conversions._cdr import CdrReader
 from etdmp_ros.ros.node_parameters import TeachParameters
@@ -62,7 +62,7 @@ import numpy as np
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter, parameter_value_to_python
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
@@ -70,9 +70,10 @@ NODE_NAME = 'teach'
 DESCRIPTION = system.node(NODE_NAME)
 PAGE_FILES = {'/': ('index.html', 'text/html'), '/teach.js': ('teach.js', 'text/javascript'),
               '/teach.css': ('teach.css', 'text/css')}
-COLOR_TOPIC = 'camera/camera/color/image_raw'
-INFO_TOPIC = 'camera/camera/color/camera_info'
-TRACE_TOPICS = {'ground_truth': 'ur10_sim/ground_truth/tool_tip', 'tool_pose': 'etdmp/tool_pose'}
+COLOR_TOPIC = topics.COLOR
+INFO_TOPIC = topics.COLOR_INFO
+TRACE_TOPICS = {'ground_truth': topics.of_node(topics.GROUND_TRUTH_TOOL_TIP, 'ur10_sim'),
+                'tool_pose': topics.TOOL_POSE}
 #: Seconds between two looks at whether a page watches (subscribing or unsubscribing the view).
 WATCH_PERIOD = 0.5
 #: Longest wait for a dmp_server service to be offered (s).
@@ -82,8 +83,6 @@ SERVICE_WAIT = 2.0
 RETRY_PERIOD = 1.0
 #: Plan poses projected for the page at most.
 PLAN_POINTS = 600
-_LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _VIEW = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 TRACE_TYPES = {'ground_truth': PointStamped, 'tool_pose': PoseStamped}
 
@@ -169,13 +168,14 @@ class TeachNode(Node):
         self._watched_until = 0.0
         self._view = []               # the subscriptions made while a page watches
         self.frames_received = 0
-        self.create_subscription(Path, 'etdmp/path', self._on_path, _LATCHED, raw=True)
-        self.create_subscription(String, 'etdmp/controller/status', self._on_status, _LATCHED)
+        self.create_subscription(Path, topics.PATH, self._on_path, qos.LATCHED, raw=True)
+        self.create_subscription(String, topics.CONTROLLER_STATUS, self._on_status, qos.LATCHED)
         server = settings.dmp_server
         self._get_client = self.create_client(GetParameters, f'{server}/get_parameters')
-        self._teach_client = self.create_client(SetParametersAtomically, f'{server}/teach')
+        self._teach_client = self.create_client(SetParametersAtomically,
+                                                topics.of_node(topics.TEACH, server))
         self._write_client = self.create_client(SetParametersAtomically,
-                                                f'{server}/generalize_with')
+                                                topics.of_node(topics.GENERALIZE_WITH, server))
         self.create_timer(WATCH_PERIOD, self._update_view)
         threading.Thread(target=_warm_up, daemon=True, name='warm_up').start()
         self._web = WebServer(make_app(self), settings.address, settings.port, self._web_log)
@@ -475,16 +475,16 @@ def _error(status, text):
     return web.json_response({'ok': False, 'error': text}, status=status)
 
 
-def make_app(node):
-    """Return the aiohttp application of the page: its files and its JSON API (docs/teach.md)."""
-    page = importlib.resources.files('etdmp_ros') / 'teach_page'
-    files = {route: ((page / name).read_bytes(), kind)
-             for route, (name, kind) in PAGE_FILES.items()}
-
+def _refuser(node):
+    """Return ``refused(request, status, text)``: log the refusal, answer it as JSON."""
     def refused(request, status, text):
         node.said(request, status, text)
         return _error(status, text)
+    return refused
 
+
+def _guard(node, refused):
+    """Return the middleware every request passes: this machine's names only, no tracebacks."""
     @web.middleware
     async def guarded(request, handler):
         # A page served to this machine only answers to this machine's names: a web site that
@@ -504,38 +504,48 @@ def make_app(node):
         except Exception as err:   # noqa: B902 - a bug must not be a traceback per request
             return refused(request, 500, f'internal error: {type(err).__name__}: '
                                          f'{_message(err)}')
+    return guarded
+
+
+def _json_post(action, refused):
+    """Return the handler of a POST whose JSON body ``action(data)`` answers (blocking)."""
+    async def handler(request):
+        if request.content_type != 'application/json':
+            return refused(request, 415, 'send the request as application/json (as the page '
+                                         'does)')
+        try:
+            body = await request.read()
+        except web.HTTPRequestEntityTooLarge:
+            return refused(request, 413, f'the request is larger than MAX_TEACH_REQUEST_BYTES = '
+                                         f'{limits.MAX_TEACH_REQUEST_BYTES} bytes (a drawing may '
+                                         f'have {limits.MAX_DRAWN_POINTS} points): nothing was '
+                                         'taught')
+        try:
+            data = decode_json(body)
+        except MalformedRequest as err:
+            return refused(request, 400, _message(err))
+        loop = asyncio.get_running_loop()
+        try:
+            return web.json_response(await loop.run_in_executor(None, action, data))
+        except TeachInputError as err:
+            return refused(request, 422, _message(err))
+        except Busy as err:
+            return refused(request, 409, str(err))
+        except Unavailable as err:
+            return refused(request, 503, str(err))
+    return handler
+
+
+def make_app(node):
+    """Return the aiohttp application of the page: its files and its JSON API (docs/teach.md)."""
+    page = importlib.resources.files('etdmp_ros') / 'teach_page'
+    files = {route: ((page / name).read_bytes(), kind)
+             for route, (name, kind) in PAGE_FILES.items()}
+    refused = _refuser(node)
 
     async def page_file(request):
         body, kind = files[request.path]
         return web.Response(body=body, content_type=kind, headers={'Cache-Control': 'no-cache'})
-
-    def post(action):
-        async def handler(request):
-            if request.content_type != 'application/json':
-                return refused(request, 415, 'send the request as application/json (as the '
-                                             'page does)')
-            try:
-                body = await request.read()
-            except web.HTTPRequestEntityTooLarge:
-                return refused(request, 413, f'the request is larger than '
-                                             f'MAX_TEACH_REQUEST_BYTES = '
-                                             f'{limits.MAX_TEACH_REQUEST_BYTES} bytes (a drawing '
-                                             f'may have {limits.MAX_DRAWN_POINTS} points): '
-                                             'nothing was taught')
-            try:
-                data = decode_json(body)
-            except MalformedRequest as err:
-                return refused(request, 400, _message(err))
-            loop = asyncio.get_running_loop()
-            try:
-                return web.json_response(await loop.run_in_executor(None, action, data))
-            except TeachInputError as err:
-                return refused(request, 422, _message(err))
-            except Busy as err:
-                return refused(request, 409, str(err))
-            except Unavailable as err:
-                return refused(request, 503, str(err))
-        return handler
 
     async def config(request):
         return web.json_response(node.config())
@@ -552,12 +562,12 @@ def make_app(node):
         return web.json_response(node.overlay(), headers={'Cache-Control': 'no-store'})
 
     app = web.Application(client_max_size=limits.MAX_TEACH_REQUEST_BYTES,
-                          middlewares=[guarded])
+                          middlewares=[_guard(node, refused)])
     for route in files:
         app.router.add_get(route, page_file)
     app.router.add_get('/api/config', config)
-    app.router.add_post('/api/teach', post(node.teach))
-    app.router.add_post('/api/write', post(node.write))
+    app.router.add_post('/api/teach', _json_post(node.teach, refused))
+    app.router.add_post('/api/write', _json_post(node.write, refused))
     app.router.add_get('/api/camera.jpg', camera)
     app.router.add_get('/api/overlay', overlay)
     return app

@@ -11,6 +11,9 @@ velocities in rad/s, UR order). Publishes, stamped with the simulated time:
 - ``/ur10_sim/ground_truth/goal``, ``.../obstacles`` and ``.../bottle`` (the centre of the
   bottle's mouth; base_link) with each camera frame,
   stamped like it (what the camera saw), or at 10 Hz when the camera is off;
+- ``/ur10_sim/events`` (:mod:`etdmp_ros.ros.events`): ``braked`` (the command watchdog),
+  ``stalled`` (at most one a second), ``stopped`` with the loop's figures, ``failed``; its
+  camera process's on ``/ur10_sim_camera/events``;
 - ``/ur10_sim/ground_truth/contacts`` (visualization_msgs/MarkerArray, transient local): the
   robot's contacts with the obstacles, the bottle, the table and the floor
   (:attr:`etdmp_ros.sim.UR10Sim.contacts`; a SPHERE per contact, its text ``<part> <item>
@@ -42,21 +45,19 @@ are ignored; ``~/teaching`` (std_msgs/String, transient local) says ``playing <f
 (dmp_server ``demo_files``; ``python -m etdmp_ros.demo.kinesthetic`` does both steps' first half).
 """
 
-import socket
-import subprocess
 import threading
 import time
 
 from etdmp_ros.dmp import DemonstrationError, load_demo
-from etdmp_ros.nodes._sim_camera import (CameraPublishers, command as camera_command,
-                                         encode as camera_snapshot)
+from etdmp_ros.nodes._sim_camera import CameraProcess, CameraPublishers
 from etdmp_ros.robot import (CAMERA_OPTICAL_FRAME, camera_transforms, FrameTree, GuidedMotion,
                              GuideError, parse_bottle_position, parse_goal_position,
                              parse_obstacle_positions, parse_obstacle_radii, robot_description)
-from etdmp_ros.ros import system
+from etdmp_ros.ros import qos, system, topics
 from etdmp_ros.ros.conversions import (contact_markers, joint_state_msg, MovingTransforms,
                                        ns_to_stamp, pose_array_from_numpy, tf_available,
                                        tf_message, velocity_command_array)
+from etdmp_ros.ros.events import ERROR, EventPublisher, WARN
 from etdmp_ros.ros.parameters import declare
 from etdmp_ros.ros.spin import rate_qos, run
 from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
@@ -65,7 +66,7 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
@@ -74,24 +75,6 @@ import yaml
 
 NODE_NAME = 'ur10_sim'
 OPTICAL_FRAME = CAMERA_OPTICAL_FRAME
-COMMAND_TOPIC = 'forward_velocity_controller/commands'
-COLOR_TOPIC = 'camera/camera/color/image_raw'
-COLOR_INFO_TOPIC = 'camera/camera/color/camera_info'
-DEPTH_TOPIC = 'camera/camera/aligned_depth_to_color/image_raw'
-DEPTH_INFO_TOPIC = 'camera/camera/aligned_depth_to_color/camera_info'
-CAMERA_TOPICS = {'color': COLOR_TOPIC, 'depth': DEPTH_TOPIC, 'color_info': COLOR_INFO_TOPIC,
-                 'depth_info': DEPTH_INFO_TOPIC}
-GOAL_TOPIC = '~/ground_truth/goal'
-OBSTACLES_TOPIC = '~/ground_truth/obstacles'
-BOTTLE_TOPIC = '~/ground_truth/bottle'
-TOOL_TIP_TOPIC = '~/ground_truth/tool_tip'
-CONTACTS_TOPIC = '~/ground_truth/contacts'
-TEACHING_TOPIC = '~/teaching'
-DESCRIPTION_TOPIC = 'robot_description'
-TF_TOPIC = 'tf'
-TF_STATIC_TOPIC = 'tf_static'
-#: QoS of /robot_description and /tf_static, as robot_state_publisher and tf2_ros use them.
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 DESCRIPTION = system.node(NODE_NAME)
 #: Fell more than this many ticks behind real time (a stall: overload, a debugger): the
 #: simulation slips, i.e. its time stops with the stall, as a physics simulator's does under
@@ -103,6 +86,8 @@ LATE_TICKS = 3
 #: Consecutive ticks answered by a command before a tick waits for its answer (command_wait):
 #: a controller that steps at a lower rate than the simulation, or none, is never waited for.
 ANSWERED_TICKS = 10
+#: Seconds between two reports of a stalled loop (log line and ``stalled`` event).
+STALL_REPORT_PERIOD = 1.0
 #: Hz of the goal and obstacle ground truth when the camera is off.
 GROUND_TRUTH_RATE = 10.0
 
@@ -113,28 +98,9 @@ class UR10SimNode(Node):
     def __init__(self, **kwargs):
         """Declare parameters, build the simulation, create publishers and the subscription."""
         super().__init__(NODE_NAME, **kwargs)
-        # Dynamic typing of goal_position and obstacle_positions: `ros2 param set` types
-        # "[1, 0, 0]" as integer[], "[0.7, 0.2, 0]" as a string and "[]" as bool[];
-        # _number_list takes them all as numbers. `obstacle_positions: []` in YAML leaves the
-        # parameter unset: no obstacles.
-        p = declare(self, DESCRIPTION)
-        for name in ('obstacle_positions', 'obstacle_radii'):
-            if p[name] is None:
-                p[name] = []
-        self._parameter_values = p   # (not _parameters: rclpy Node uses that name)
-        self.sim = UR10Sim.from_parameters(p)
-        self.steps_per_tick = max(1, round(1.0 / (p['control_rate'] * self.sim.timestep)))
-        self.tick_period = self.steps_per_tick * self.sim.timestep
-        if abs(self.tick_period * p['control_rate'] - 1.0) > 1e-6:
-            self.get_logger().warning(
-                f'control_rate {p["control_rate"]} Hz is not a whole number of physics steps '
-                f'of {self.sim.timestep} s: running at {1.0 / self.tick_period:.3f} Hz')
-        self.camera_period = 1.0 / p['camera_rate'] if p['camera_rate'] > 0 else 0.0
-        self.real_time_factor = p['real_time_factor']
-        self.command_wait = p['command_wait']
+        p = self._build(declare(self, DESCRIPTION))
         self._answered = threading.Event()   # a command arrived since the last joint states
         self._answered_ticks = 0
-
         self._lock = threading.Lock()
         self._guide = None            # the teaching mode's script, while it plays
         self._guide_name = ''
@@ -160,35 +126,13 @@ class UR10SimNode(Node):
                       'frames_dropped': 0, 'max_tick_gap': 0.0, 'late_ticks': 0,
                       'waits': 0, 'waits_expired': 0, 'wait_time': 0.0,
                       'contact_ticks': 0, 'contact_pairs': set()}
-        self._unreported_stall = (0.0, 0.0)     # (gap, simulated time) not warned about yet
+        self._unreported_stall = (0.0, 0.0)     # (gap, simulated time) not reported yet
         self._last_stall_warning = -1.0
-
-        reliable = QoSProfile(depth=10)
-        # A second of history: a slow reader must never block the simulation's publish().
-        state = rate_qos(1.0 / self.tick_period)
-        self._joint_pub = self.create_publisher(JointState, 'joint_states', state)
-        # Absolute, unlike every other name: rclpy's sim time listens to /clock. A second
-        # robot's simulation remaps it to its own (-r /clock:=clock, as the launch file does).
-        self._clock_pub = self.create_publisher(Clock, '/clock', state)
-        self._goal_pub = self.create_publisher(PointStamped, GOAL_TOPIC, reliable)
-        self._obstacles_pub = self.create_publisher(PoseArray, OBSTACLES_TOPIC, reliable)
-        self._bottle_pub = self.create_publisher(PointStamped, BOTTLE_TOPIC, reliable)
-        self._tool_pub = self.create_publisher(PointStamped, TOOL_TIP_TOPIC, state)
-        # Every message matters (the metrics count them), and a late subscriber gets the latest.
-        self._contacts_pub = self.create_publisher(
-            MarkerArray, CONTACTS_TOPIC,
-            QoSProfile(depth=rate_qos(1.0 / self.tick_period).depth,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        self._camera_publishers = None   # made by frame(), for run_for(): images in-process
-        self._tf_pub = None
-        self._publish_description()
-        self._teaching_pub = self.create_publisher(String, TEACHING_TOPIC, LATCHED)
-        self._teaching_pub.publish(String(data='idle'))
+        self._create_topics()
         if p['teach_script']:
             self._guide_name = p['teach_script']
             self._guide = self._load_guide(p['teach_script'])   # a bad one: startup fails
             self._publish_teaching('playing')
-        self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, reliable)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         k = self.sim.intrinsics
@@ -196,6 +140,54 @@ class UR10SimNode(Node):
             f'UR10 workcell ready: control {1.0 / self.tick_period:g} Hz, camera '
             f'{p["camera_rate"]:g} Hz {k.width}x{k.height} (f = {k.fx:.1f} px), watchdog '
             f'{self.sim.watchdog_timeout:g} s, real-time factor {self.real_time_factor:g}')
+
+    def _build(self, p):
+        """Build the simulation from the parameter values ``p``; return them (completed)."""
+        # Dynamic typing of goal_position and obstacle_positions: `ros2 param set` types
+        # "[1, 0, 0]" as integer[], "[0.7, 0.2, 0]" as a string and "[]" as bool[];
+        # _number_list takes them all as numbers. `obstacle_positions: []` in YAML leaves the
+        # parameter unset: no obstacles.
+        for name in ('obstacle_positions', 'obstacle_radii'):
+            if p[name] is None:
+                p[name] = []
+        self._parameter_values = p   # (not _parameters: rclpy Node uses that name)
+        self.sim = UR10Sim.from_parameters(p)
+        self.steps_per_tick = max(1, round(1.0 / (p['control_rate'] * self.sim.timestep)))
+        self.tick_period = self.steps_per_tick * self.sim.timestep
+        if abs(self.tick_period * p['control_rate'] - 1.0) > 1e-6:
+            self.get_logger().warning(
+                f'control_rate {p["control_rate"]} Hz is not a whole number of physics steps '
+                f'of {self.sim.timestep} s: running at {1.0 / self.tick_period:.3f} Hz')
+        self.camera_period = 1.0 / p['camera_rate'] if p['camera_rate'] > 0 else 0.0
+        self.real_time_factor = p['real_time_factor']
+        self.command_wait = p['command_wait']
+        return p
+
+    def _create_topics(self):
+        """Create the publishers and the command subscription; publish the latched state."""
+        reliable = QoSProfile(depth=10)
+        # A second of history: a slow reader must never block the simulation's publish().
+        state = rate_qos(1.0 / self.tick_period)
+        self._joint_pub = self.create_publisher(JointState, topics.JOINT_STATES, state)
+        # Absolute, unlike every other name: rclpy's sim time listens to /clock. A second
+        # robot's simulation remaps it to its own (-r /clock:=clock, as the launch file does).
+        self._clock_pub = self.create_publisher(Clock, topics.CLOCK, state)
+        self._goal_pub = self.create_publisher(PointStamped, topics.GROUND_TRUTH_GOAL, reliable)
+        self._obstacles_pub = self.create_publisher(PoseArray, topics.GROUND_TRUTH_OBSTACLES,
+                                                    reliable)
+        self._bottle_pub = self.create_publisher(PointStamped, topics.GROUND_TRUTH_BOTTLE,
+                                                 reliable)
+        self._tool_pub = self.create_publisher(PointStamped, topics.GROUND_TRUTH_TOOL_TIP, state)
+        # Every message matters (the metrics count them), and a late subscriber gets the latest.
+        self._contacts_pub = self.create_publisher(MarkerArray, topics.GROUND_TRUTH_CONTACTS,
+                                                   qos.latched(state.depth))
+        self.events = EventPublisher(self)
+        self._camera_publishers = None   # made by frame(), for run_for(): images in-process
+        self._tf_pub = None
+        self._publish_description()
+        self._teaching_pub = self.create_publisher(String, topics.TEACHING, qos.LATCHED)
+        self._teaching_pub.publish(String(data='idle'))
+        self.create_subscription(Float64MultiArray, topics.COMMANDS, self._on_command, reliable)
 
     # --------------------------------------------------------------------------- parameters
     def _validate_parameters(self, parameters):
@@ -292,7 +284,7 @@ class UR10SimNode(Node):
     def start(self):
         """Start the simulation thread (and the camera process when the camera is on)."""
         if self.camera_period:
-            self._camera = _CameraProcess(self)
+            self._camera = CameraProcess(self)
         self._thread = threading.Thread(target=self._run, name='ur10_sim', daemon=True)
         self._thread.start()
 
@@ -308,16 +300,25 @@ class UR10SimNode(Node):
         self.sim.close()
         stats = self.stats
         if stats['ticks']:
-            self.get_logger().info(
-                f'stopped at {self.sim.time:.2f} s simulated; {stats["ticks"]} ticks, '
-                f'{stats["late_ticks"]} more than {LATE_TICKS} periods after the previous one, '
-                f'largest wall-clock gap between two {stats["max_tick_gap"] * 1e3:.1f} ms; camera '
-                f'frames published {stats["frames"]}, dropped {stats["frames_dropped"]}; '
-                f'waited for a late command {stats["waits"]} times '
-                f'({stats["wait_time"] * 1e3:.0f} ms), {stats["waits_expired"]} in vain; '
-                f'contacts in {stats["contact_ticks"]} ticks'
-                + (': ' + ', '.join(sorted(f'{a}/{b}' for a, b in stats['contact_pairs']))
-                   if stats['contact_pairs'] else ''))
+            pairs = sorted(f'{a}/{b}' for a, b in stats['contact_pairs'])
+            text = (f'stopped at {self.sim.time:.2f} s simulated; {stats["ticks"]} ticks, '
+                    f'{stats["late_ticks"]} more than {LATE_TICKS} periods after the previous '
+                    f'one, largest wall-clock gap between two {stats["max_tick_gap"] * 1e3:.1f} '
+                    f'ms; camera frames published {stats["frames"]}, dropped '
+                    f'{stats["frames_dropped"]}; waited for a late command {stats["waits"]} '
+                    f'times ({stats["wait_time"] * 1e3:.0f} ms), {stats["waits_expired"]} in '
+                    f'vain; contacts in {stats["contact_ticks"]} ticks'
+                    + (': ' + ', '.join(pairs) if pairs else ''))
+            self.get_logger().info(text)
+            self.events.publish(
+                'stopped', text, t_s=self.sim.time, ticks=stats['ticks'],
+                late_ticks=stats['late_ticks'], late_after_periods=LATE_TICKS,
+                largest_tick_gap_ms=stats['max_tick_gap'] * 1e3, frames=stats['frames'],
+                frames_dropped=stats['frames_dropped'], command_waits=stats['waits'],
+                command_wait_ms=stats['wait_time'] * 1e3,
+                command_waits_in_vain=stats['waits_expired'],
+                contact_ticks=stats['contact_ticks'], contact_pairs=' '.join(pairs))
+            self.events.flush()
 
     def _run(self):
         try:
@@ -343,6 +344,9 @@ class UR10SimNode(Node):
                 return   # shutting down (Ctrl-C): publishing may fail, that is expected
             self.failed = True
             self.get_logger().fatal(f'simulation stopped: {type(exc).__name__}: {exc}')
+            self.events.publish('failed', f'simulation stopped: {type(exc).__name__}: {exc}',
+                                ERROR, reason=f'{type(exc).__name__}: {exc}')
+            self.events.flush()
             self.context.try_shutdown()
         finally:
             if self._camera is None:
@@ -382,13 +386,18 @@ class UR10SimNode(Node):
             stats['late_ticks'] += 1
             if gap > self._unreported_stall[0]:
                 self._unreported_stall = (gap, self.sim.time)
+        # Said at most once a second, in the log and as an event: a reliable event publisher
+        # whose reader is starved too would block this loop once its history is full.
         now = time.monotonic()
-        if self._unreported_stall[0] > 0.0 and now - self._last_stall_warning >= 1.0:
+        if (self._unreported_stall[0] > 0.0
+                and now - self._last_stall_warning >= STALL_REPORT_PERIOD):
             gap, at = self._unreported_stall
             self._unreported_stall, self._last_stall_warning = (0.0, 0.0), now
-            self.get_logger().warning(
-                f'simulation loop stalled: {gap * 1e3:.0f} ms between two ticks at t = '
-                f'{at:.3f} s (the machine is overloaded?)')
+            text = (f'simulation loop stalled: {gap * 1e3:.0f} ms between two ticks at t = '
+                    f'{at:.3f} s (the machine is overloaded?)')
+            self.get_logger().warning(text)
+            self.events.publish('stalled', text, WARN, gap_ms=gap * 1e3, t_s=at,
+                                late_ticks=stats['late_ticks'])
 
     def run_for(self, duration):
         """Run ``duration`` s of simulated time in the calling thread, unpaced (benchmarks)."""
@@ -396,9 +405,9 @@ class UR10SimNode(Node):
         while self.sim.time < end:
             self.tick()
 
-    def tick(self):
-        """Run one control period: take inputs, step, publish; render if a frame is due."""
-        sim, stats = self.sim, self.stats
+    def _take_inputs(self):
+        """Apply what arrived since the last tick: the command (or the script's), scene changes."""
+        sim = self.sim
         with self._lock:
             command, self._pending_command = self._pending_command, None
             goal, self._pending_goal = self._pending_goal, None
@@ -429,14 +438,20 @@ class UR10SimNode(Node):
         if obstacles is not None or radii is not None:
             sim.set_obstacles(sim.obstacle_positions if obstacles is None else obstacles, radii)
 
+    def tick(self):
+        """Run one control period: take inputs, step, publish; render if a frame is due."""
+        sim, stats = self.sim, self.stats
+        self._take_inputs()
         c0 = time.process_time()
         sim.step(self.steps_per_tick)
         c1 = time.process_time()
         if sim.watchdog_active and not self._watchdog_was_active and self._commands_seen:
-            self.get_logger().warning(f'no velocity command for {sim.watchdog_timeout:g} s: '
-                                      'braking to zero until the next one (the last at t = '
-                                      f'{sim.command_time:.3f} s, braked at t = '
-                                      f'{sim.braked_at:.3f} s)')
+            text = (f'no velocity command for {sim.watchdog_timeout:g} s: braking to zero until '
+                    f'the next one (the last at t = {sim.command_time:.3f} s, braked at t = '
+                    f'{sim.braked_at:.3f} s)')
+            self.get_logger().warning(text)
+            self.events.publish('braked', text, WARN, timeout_s=sim.watchdog_timeout,
+                                last_command_s=sim.command_time, braked_s=sim.braked_at)
         self._watchdog_was_active = sim.watchdog_active
         stamp = ns_to_stamp(round(sim.time * 1e9))
         self._answered.clear()      # the next command answers these joint states
@@ -467,14 +482,16 @@ class UR10SimNode(Node):
         its camera process instead, which publishes the same topics the same way.
         """
         if self._camera_publishers is None:
-            self._camera_publishers = CameraPublishers(self, CAMERA_TOPICS, self.sim.intrinsics)
+            self._camera_publishers = CameraPublishers(self, topics.CAMERA,
+                                                       self.sim.intrinsics)
         self._camera_publishers.publish(self.sim, state, stamp, self.stats)
         self.stats['frames'] += 1
 
     def _publish_description(self):
         """Publish /robot_description and /tf_static once (latched); set up /tf."""
         urdf = robot_description(self.sim.scene.tool_offset)
-        self._description_pub = self.create_publisher(String, DESCRIPTION_TOPIC, LATCHED)
+        self._description_pub = self.create_publisher(String, topics.ROBOT_DESCRIPTION,
+                                                      qos.LATCHED)
         self._description_pub.publish(String(data=urdf))
         if not tf_available():
             self.get_logger().warning('tf2_msgs is not installed: no /tf or /tf_static (the '
@@ -483,12 +500,12 @@ class UR10SimNode(Node):
         from tf2_msgs.msg import TFMessage
         frames = FrameTree(urdf)
         static = frames.fixed + camera_transforms(self.sim.camera_pose)
-        self._tf_static_pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, LATCHED)
+        self._tf_static_pub = self.create_publisher(TFMessage, topics.TF_STATIC, qos.LATCHED)
         self._tf_static_pub.publish(tf_message(static, ns_to_stamp(round(self.sim.time * 1e9))))
         self._frames = frames
         self._moving = MovingTransforms(frames.parents, frames.children, frames.translations)
         # tf2_ros's QoS for /tf: reliable, 100 deep.
-        self._tf_pub = self.create_publisher(TFMessage, TF_TOPIC, QoSProfile(depth=100))
+        self._tf_pub = self.create_publisher(TFMessage, topics.TF, QoSProfile(depth=100))
 
     def _publish_state(self, stamp):
         sim = self.sim
@@ -527,54 +544,6 @@ class UR10SimNode(Node):
         obstacles = pose_array_from_numpy(sim.obstacle_positions, frame_id='base_link')
         obstacles.header.stamp = stamp
         self._obstacles_pub.publish(obstacles)
-
-
-class _CameraProcess:
-    """
-    The camera of :class:`UR10SimNode` in a process of its own (:mod:`._sim_camera`).
-
-    :meth:`offer` never blocks: a snapshot that does not fit the socket's buffer (the camera
-    process is stuck) is dropped (``stats['frames_dropped']``); one that the process is too
-    slow to render is skipped there (it logs how many when it stops).
-    """
-
-    def __init__(self, node):
-        """Start the camera process with the node's parameters and topic names."""
-        self._node = node
-        self._link, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        self._link.setblocking(False)
-        parameters = {k: (list(v) if isinstance(v, tuple) else v)
-                      for k, v in node._parameter_values.items()}
-        argv = camera_command(theirs.fileno(), parameters, CAMERA_TOPICS,
-                              f'{node.get_name()}_camera', node.get_namespace())
-        self.process = subprocess.Popen(argv, pass_fds=(theirs.fileno(),))
-        theirs.close()
-        self._lost = False
-
-    def offer(self, state, stamp_ns):
-        """Send a camera state to be rendered (dropped if the process cannot take it now)."""
-        if self._lost:
-            return
-        try:
-            self._link.send(camera_snapshot(state, stamp_ns))
-        except BlockingIOError:
-            self._node.stats['frames_dropped'] += 1
-        except OSError as exc:   # the camera process has gone
-            self._lost = True
-            self._node.get_logger().error(
-                f'camera process exited (code {self.process.poll()}): {exc}; no more camera '
-                'frames')
-        else:
-            self._node.stats['frames'] += 1
-
-    def stop(self):
-        """Close the socket (the process finishes its frame and exits); kill it if it hangs."""
-        self._link.close()
-        try:
-            self.process.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait()
 
 
 def _number_list(parameter):

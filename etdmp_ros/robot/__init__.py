@@ -20,13 +20,15 @@ from ._trajectory import (MinimumJerkMove, PoseTrajectory, quaternions_to_rotati
                           trajectory_from_path, TrajectoryError)
 from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_urdf_path,
                     UR10Model)
+from ._watch import InputWatch, TrackingSummary
 
 __all__ = [
     'CAMERA_OPTICAL_FRAME', 'Command', 'ControllerConfig', 'DEFAULT_ACCELERATION_LIMITS',
     'DelayEstimator', 'DifferentialIK', 'FrameTree', 'GuidedMotion', 'GuideError', 'IKResult',
-    'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_RADIUS', 'PEN_TIP_LENGTH',
-    'PEN_TIP_RADIUS', 'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES', 'SceneConfig',
-    'TrajectoryController', 'Transform', 'TrajectoryError', 'UR10Model', 'camera_transforms',
+    'InputWatch', 'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_RADIUS',
+    'PEN_TIP_LENGTH', 'PEN_TIP_RADIUS', 'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES',
+    'SceneConfig', 'TrackingSummary', 'TrajectoryController', 'Transform', 'TrajectoryError',
+    'UR10Model', 'camera_transforms',
     'chain_pose', 'obstacle_radii_for', 'parse_bottle_position', 'parse_goal_position',
     'parse_obstacle_positions', 'parse_obstacle_radii', 'quaternions_to_rotations',
     'robot_data_dir', 'robot_description', 'trajectory_from_path', 'ur10_urdf_path',

@@ -11,7 +11,7 @@ path into a demonstration (``recorded_path_demo``); the rules are in its docstri
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 import itertools
 import os
@@ -165,18 +165,9 @@ def _mcap_topics(reader: Any) -> dict[str, str]:
     subscribed a topic nobody published (``ros2 bag record -a`` of a partial system) has
     nothing to learn from it, and it must not make the topic to learn from ambiguous.
     """
-    summary = reader.get_summary()
-    pairs: Iterable[tuple[str, Any]]
-    if summary is not None:
-        counts = (None if summary.statistics is None
-                  else summary.statistics.channel_message_counts)   # unlisted: none
-        pairs = [(channel.topic, summary.schemas.get(channel.schema_id))
-                 for channel_id, channel in summary.channels.items()
-                 if counts is None or counts.get(channel_id, 0) > 0]
-    else:   # no summary section (e.g. an interrupted recording): scan the records once
-        pairs = {channel.topic: schema for schema, channel, _ in reader.iter_messages()}.items()
-    return {topic: schema.name for topic, schema in pairs
-            if schema is not None and schema.name in RECORDED_TYPES}
+    from etdmp_ros.skills.recordings import reader_topics
+    return {topic: name for topic, (name, count) in reader_topics(reader).items()
+            if name in RECORDED_TYPES and count != 0}
 
 
 def _choose_topic(path: Path, topics: Mapping[str, str], topic: str | None) -> str:

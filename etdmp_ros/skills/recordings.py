@@ -214,14 +214,29 @@ class BagWriter:
         self.close()
 
 
-def topics(path: str | os.PathLike[str]) -> dict[str, tuple[str, int]]:
-    """Return {topic: (type, message count)} of an MCAP file, from its summary."""
+def topics(path: str | os.PathLike[str]) -> dict[str, tuple[str | None, int | None]]:
+    """Return {topic: (type, message count)} of an MCAP file (:func:`reader_topics`)."""
     with open(path, 'rb') as stream:
-        summary = make_reader(stream).get_summary()
+        return reader_topics(make_reader(stream))
+
+
+def reader_topics(reader: Any) -> dict[str, tuple[str | None, int | None]]:
+    """
+    Return {topic: (type, message count)} of an open MCAP ``reader``: the one way to list topics.
+
+    From the file's summary; a count is None when the summary has no statistics. A file without
+    a summary (an interrupted recording) is read once, record by record, and counted.
+    """
+    summary = reader.get_summary()
     if summary is None:
-        raise BagError(f'{path}: no summary (not a finished MCAP file)')
-    counts = summary.statistics.channel_message_counts if summary.statistics else {}
-    return {c.topic: (summary.schemas[c.schema_id].name, int(counts.get(c.id, 0)))
+        found: dict[str, tuple[str | None, int | None]] = {}
+        for schema, channel, _ in reader.iter_messages():
+            name, count = found.get(channel.topic, (schema.name if schema else None, 0))
+            found[channel.topic] = (name, count + 1)
+        return found
+    counts = summary.statistics.channel_message_counts if summary.statistics else None
+    return {c.topic: (summary.schemas[c.schema_id].name if c.schema_id in summary.schemas
+                      else None, None if counts is None else int(counts.get(c.id, 0)))
             for c in summary.channels.values()}
 
 

@@ -22,7 +22,7 @@ End to end: ``--runs`` closed-loop demos with the goal marker moved while the pe
 (``etdmp_ros.demo.run.run_demo`` with ``move_goal``, what ``make demo MOVE_GOAL=1`` runs; the four
 nodes as processes), read from each run's ``metrics.json`` ``goal_follow``, which the demo
 measures from its recording alone (``etdmp_ros.demo.metrics.follow_latencies``: /etdmp/goal,
-/etdmp/path, the commands' receipt times and the nodes' /rosout lines):
+/etdmp/path, the commands' receipt times and the nodes' events):
 
 1. perception: the marker moved (simulated time of ur10_sim's parameter change) -> the first
    /etdmp/goal showing it, as the demo's recorder received it (simulated ms), and -> the third,

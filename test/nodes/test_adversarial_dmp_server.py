@@ -383,12 +383,15 @@ def test_teaching_a_builtin_name_needs_teach_overwrite(attacked):
 def page(attacked, colcon_install, module_ros_env, tmp_path_factory):
     """Return the page of the installed teach node beside the module's dmp_server."""
     from support.drawings import request
-    from support.waiting import wait_for
-    from etdmp_ros.demo.teach_session import READY
+    from etdmp_ros.demo.teach_session import free_port, page_answers
     tmp = tmp_path_factory.mktemp('page')
-    node = NodeProcess(colcon_install, module_ros_env, tmp, 'teach', {'port': 0})
+    port = free_port('127.0.0.1')
+    node = NodeProcess(colcon_install, module_ros_env, tmp, 'teach', {'port': port})
+    url = f'http://localhost:{port}/'
     deadline = time.monotonic() + 60.0
-    url = wait_for(lambda: READY.search(node.log()), 60.0, 'the teach page', [node]).group(1)
+    while not page_answers(url + 'api/config'):
+        assert node.process.poll() is None and time.monotonic() < deadline, node.log()
+        time.sleep(0.1)
     # Once it has found dmp_server (DDS discovery: seconds on a loaded machine), as a page
     # opened beside a running system (make teach waits for every node likewise).
     while _post(url + 'api/teach', request('warm_up'))[0] == 503:

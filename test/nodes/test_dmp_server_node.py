@@ -16,6 +16,8 @@ import time
 
 from conftest import NodeProcess
 
+from diagnostic_msgs.msg import DiagnosticArray
+
 from etdmp_ros.dmp import builtin_demo, Demonstration, learn, nrmse, ObstacleGains, save_demo
 
 from etdmp_ros.geometry import quaternion as quat
@@ -26,6 +28,7 @@ from etdmp_ros.robot import JOINT_NAMES, UR10Model
 from etdmp_ros.robot._arm_check import ArmGeometry
 from etdmp_ros.robot._timing import plan_joints
 
+from etdmp_ros.ros import events, qos
 from etdmp_ros.ros.conversions import (cylinder_markers, joint_state_msg, path_from_numpy,
                                        path_to_numpy, pose_array_from_numpy)
 
@@ -106,6 +109,11 @@ class Client:
         self.node.create_subscription(Path, '/etdmp/path', self.paths.append, LATCHED)
         self.node.create_subscription(MarkerArray, '/etdmp/markers', self.markers.append,
                                       LATCHED)
+        self.events = []    # dmp_server's events (etdmp_ros.ros.events), in order
+        self.node.create_subscription(
+            DiagnosticArray, '/dmp_server/events',
+            lambda msg: self.events.extend(events.from_message(msg)),
+            qos.latched(events.HISTORY))
 
     def close(self):
         """Destroy the node and shut the context down."""
@@ -120,6 +128,17 @@ class Client:
             assert server.process.poll() is None, f'dmp_server exited:\n{server.log()}'
             assert time.monotonic() < deadline, f'no /generalize:\n{server.log()}'
         assert self.parameters.wait_for_service(timeout_sec=TIMEOUT)
+
+    def wait_for_event(self, kind, timeout=TIMEOUT):
+        """Return the first event of ``kind`` received since the last call (or fail)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            found = [e for e in self.events if e.kind == kind]
+            if found:
+                del self.events[:]
+                return found[0]
+            assert time.monotonic() < deadline, f'no {kind} event from dmp_server'
+            self.spin_for(0.05)
 
     def spin_for(self, seconds):
         """Process callbacks for a while."""
@@ -663,7 +682,7 @@ def test_a_plan_in_execution_follows_the_moved_goal(server, client):
     client.publish('joint_states', joint_state_msg(Q_INIT))
     perceived = np.array(SCENE['goal_position'])
     client.publish('goal', PointStamped(header=BASE, point=point_msg(perceived)))
-    del client.paths[:]
+    del client.paths[:], client.events[:]
     _, x, _, plan = client.call(None, None, start_frame='', goal_frame='')
     assert len(x) > 100
     deadline = time.monotonic() + TIMEOUT
@@ -687,7 +706,12 @@ def test_a_plan_in_execution_follows_the_moved_goal(server, client):
     assert offset >= 0.0
     np.testing.assert_allclose(y[:5], x[k:k + 5], atol=1e-9)   # the remainder, from the plan
     assert np.linalg.norm(y[-1] - PLANE.from_plane(PLANE.to_plane(moved))) < 1e-3
-    assert 'following: goal moved to' in server.log()
+    followed = client.wait_for_event('followed')
+    np.testing.assert_allclose(followed.numbers('goal'), moved, atol=1e-9)
+    assert followed.integer('poses') == len(y) and followed.integer('update') == 1
+    assert followed.integer('stamp_ns') == plan.header.stamp.sec * 10**9 + \
+        plan.header.stamp.nanosec
+    assert followed.number('from_path_time_s') >= offset - 1e-9
     assert client.set_parameters(follow_goal=False)[0].successful
     try:
         client.publish('goal', PointStamped(header=BASE, point=point_msg(perceived)), times=4)
@@ -704,7 +728,7 @@ def test_a_plan_in_execution_follows_an_obstacle_that_appears(server, client):
     client.publish('obstacles', obstacles_msg(np.zeros((0, 3))))
     perceived = np.array(SCENE['goal_position'])
     client.publish('goal', PointStamped(header=BASE, point=point_msg(perceived)))
-    del client.paths[:]
+    del client.paths[:], client.events[:]
     _, x, _, plan = client.call(None, None, start_frame='', goal_frame='')
     deadline = time.monotonic() + TIMEOUT
     while not client.paths:
@@ -727,7 +751,12 @@ def test_a_plan_in_execution_follows_an_obstacle_that_appears(server, client):
     assert clearance_2d(y, on_path) > 0.05 * size
     np.testing.assert_allclose(y[0], x[np.argmin(np.linalg.norm(x - y[0], axis=1))], atol=1e-9)
     assert np.linalg.norm(y[-1] - x[-1]) < 1e-3
-    assert 'following: obstacles moved to' in server.log()
+    followed = client.wait_for_event('followed')
+    assert len(followed.numbers('goal')) == 0       # the goal did not move: the obstacles did
+    # As dmp_server plans with them: placed on the task plane.
+    np.testing.assert_allclose(PLANE.to_plane(followed.numbers('obstacles').reshape(-1, 3)),
+                               PLANE.to_plane(on_path), atol=1e-9)
+    assert followed.integer('poses') == len(y)
     client.spin_for(0.5)    # the cleared obstacle set is followed too: back to no obstacle
 
 
@@ -928,3 +957,31 @@ def test_teach_learns_the_skill_named_in_the_request(server, client):
                                                 'many', 'typo'}, saved
     assert client.get_parameters('teach_skill_name', 'recorded_dim') == before
     wait_for_log(server, "taught demonstration for skill 'g' rejected")
+
+
+def test_teaching_reports_its_result_as_an_event(client):
+    # What dmp_server did with a taught demonstration is data on /dmp_server/events, whatever
+    # its log line says: learned with the figures, or refused with the reason.
+    n = 60
+    s = np.linspace(0.0, 1.0, n)
+    wave = np.column_stack([0.72 + 0.1 * s, 0.12 + 0.03 * np.sin(5.0 * s), np.zeros(n)])
+    t = np.linspace(0.0, 1.2, n)
+    client.spin_for(0.2)
+    del client.events[:]
+    ok, reason = client.ask('teach', name='evt_wave', t=t.tolist(),
+                            positions=wave.ravel().tolist(), recorded_dim='2d')
+    assert ok, reason
+    learned = client.wait_for_event('learned')
+    assert learned.node == 'dmp_server' and learned.level == events.OK
+    assert learned.values['skill'] == 'evt_wave' and learned.integer('samples') == n
+    assert learned.integer('dim') == 2 and learned.number('duration_s') == pytest.approx(1.2)
+    assert learned.values['source'] == '/dmp_server/teach'
+    assert learned.values['saved'].endswith('evt_wave.csv') and not learned.values['save_error']
+    assert learned.message == reason
+    ok, reason = client.ask('teach', name='evt_short', t=t[:5].tolist(),
+                            positions=wave[:5].ravel().tolist())
+    assert not ok
+    refused = client.wait_for_event('refused')
+    assert refused.level == events.ERROR and refused.values['skill'] == 'evt_short'
+    assert 'at least 10' in refused.values['reason'] and refused.message == reason
+    assert 'learned' not in {e.kind for e in client.events}

@@ -8,14 +8,15 @@ the messages' stamps (simulated time), so a loaded machine slows the test, not b
 """
 
 import os
-import re
 import signal
 import threading
 import time
 
 from conftest import NodeProcess
+from diagnostic_msgs.msg import DiagnosticArray
 from etdmp_ros.geometry.camera import CameraIntrinsics
 from etdmp_ros.robot import JOINT_NAMES, UR10Model
+from etdmp_ros.ros import events, qos
 from etdmp_ros.ros.background import BackgroundNode
 from etdmp_ros.ros.config_files import read_parameter_file
 from etdmp_ros.ros.conversions import (contacts_from_markers, image_from_msg,
@@ -45,6 +46,10 @@ TOPICS = {
 }
 
 
+#: ur10_sim's events (etdmp_ros.ros.events).
+EVENTS = '/ur10_sim/events'
+
+
 class Client(BackgroundNode):
     """rclpy in this process (own context, spinning in a thread), recording every topic."""
 
@@ -54,6 +59,9 @@ class Client(BackgroundNode):
         self.messages = {topic: [] for topic in TOPICS}
         for topic, msg_type in TOPICS.items():
             self.node.create_subscription(msg_type, topic, self._recorder(topic), 50)
+        self.messages[EVENTS] = []
+        self.node.create_subscription(DiagnosticArray, EVENTS, self._recorder(EVENTS),
+                                      qos.latched(events.HISTORY))
         self.command_pub = self.node.create_publisher(
             Float64MultiArray, '/forward_velocity_controller/commands', 10)
         self.parameters = self.node.create_client(SetParameters, '/ur10_sim/set_parameters')
@@ -73,6 +81,11 @@ class Client(BackgroundNode):
     def wait_for(self, predicate, timeout, what, sim):
         """Wait until ``predicate()``; fail saying ``what`` (with the node's log)."""
         return wait_for(predicate, timeout, what, [sim], period=0.01)
+
+    def events(self, kind):
+        """Return ur10_sim's events of ``kind`` received so far."""
+        found = [e for msg in self.received(EVENTS) for e in events.from_message(msg)]
+        return events.of_kind(found, 'ur10_sim', kind)
 
     def joint_state(self):
         """Return (stamp s, q, qd) of the newest joint state."""
@@ -225,10 +238,11 @@ class Responder(BackgroundNode):
         self.pub.publish(Float64MultiArray(data=[0.0] * 6))
 
 
-def _waits(log):
-    """Return (waits, in vain) of the simulation's stop line."""
-    found = re.search(r'waited for a late command (\d+) times \(\d+ ms\), (\d+) in vain', log)
-    return tuple(int(v) for v in found.groups())
+def _waits(client, sim):
+    """Return (waits, in vain) of the simulation's ``stopped`` event."""
+    client.wait_for(lambda: client.events('stopped'), 5.0, 'the stopped event', sim)
+    stopped = client.events('stopped')[-1]
+    return stopped.integer('command_waits'), stopped.integer('command_waits_in_vain')
 
 
 def test_a_late_controller_is_waited_for_not_missed(launch):
@@ -260,7 +274,7 @@ def test_a_late_controller_is_waited_for_not_missed(launch):
         stalls = responder.stalls
         responder.close()
     assert sim.stop() == 0
-    waits, in_vain = _waits(sim.log())
+    waits, in_vain = _waits(client, sim)
     print(f'{stalls} stalls ({stalls_unwaited} with command_wait 0): {waits} waits, {in_vain} in '
           f'vain; real-time factor unanswered {rtf_unanswered:.2f}')
     assert stalls - stalls_unwaited - 2 <= waits <= stalls - stalls_unwaited + 2
@@ -283,7 +297,12 @@ def test_commands_watchdog_and_runtime_parameters(launch):
     _, q2, qd2 = client.joint_state()
     assert np.abs(qd2).max() < 1e-3
     assert q2[0] - q1[0] < 0.2 * 0.5                 # stopped well before 0.5 s of motion
-    client.wait_for(lambda: 'braking' in sim.log(), 5.0, 'the watchdog warning', sim)
+    client.wait_for(lambda: client.events('braked'), 5.0, 'the watchdog event', sim)
+    braked = client.events('braked')[0]
+    assert braked.number('timeout_s') == pytest.approx(0.1)
+    assert braked.number('braked_s') - braked.number('last_command_s') == \
+        pytest.approx(0.1, abs=0.01)
+    assert 'braking' in sim.log()
     # Bad commands are rejected (with a warning), never applied.
     for bad in ([0.3] * 5, [0.3] * 7, [0.3, float('nan'), 0, 0, 0, 0], [float('inf')] * 6):
         client.command(bad, duration=0.2)

@@ -40,7 +40,6 @@ import itertools
 import json
 import os
 from pathlib import Path
-import re
 import shutil
 import signal
 import subprocess
@@ -338,22 +337,19 @@ def stop_figures(observed, down, up):
             'robot_time_down_s': (during[-1][0] - cut) * 1e-9 if during else 0.0}
 
 
-#: ur10_sim's warning when its command watchdog brakes (etdmp_ros.nodes.ur10_sim).
-_BRAKED = re.compile(r'no velocity command for [\d.]+ s: braking to zero until the next one '
-                     r'\(the last at t = ([\d.]+) s, braked at t = ([\d.]+) s\)')
-
-
-def watchdog_figures(sim_log, observed, cut_ns):
+def watchdog_figures(recorded_events, observed, cut_ns):
     """
-    Return when the simulation braked after the cut, in its own time (its log's figures).
+    Return when the simulation braked after the cut, in its own time (its ``braked`` events).
 
-    The first brake of ``sim_log`` at or after the cut (``cut_ns``, stamp): ``last_command_s``,
-    ``braked_after_last_command_s`` (the watchdog: its timeout, to a physics step) and
-    ``zero_velocity_after_last_command_s`` (every joint speed in ``observed`` below
-    :data:`STOPPED`, from the joint states' stamps). Empty if it did not brake.
+    The first brake among ``recorded_events`` (the run's recording's, etdmp_ros.ros.events) at
+    or after the cut (``cut_ns``, stamp): ``last_command_s``, ``braked_after_last_command_s``
+    (the watchdog: its timeout, to a physics step) and ``zero_velocity_after_last_command_s``
+    (every joint speed in ``observed`` below :data:`STOPPED`, from the joint states' stamps).
+    Empty if it did not brake.
     """
-    for last, braked in _BRAKED.findall(sim_log):
-        last, braked = float(last), float(braked)
+    from etdmp_ros.ros.events import of_kind
+    for event in of_kind(recorded_events, 'ur10_sim', 'braked'):
+        last, braked = event.number('last_command_s'), event.number('braked_s')
         if braked * 1e9 >= cut_ns:
             break
     else:
@@ -634,7 +630,8 @@ def run(args):
         if link.get('cut_stamp_ns') is not None:
             # The observer hears the joint states a little late on a busy machine, so its
             # cut is a little early: the simulation's own times are exact.
-            link.update(watchdog_figures((out / 'logs' / 'ur10_sim.log').read_text(), observed,
+            from etdmp_ros.demo.recording import read_streams
+            link.update(watchdog_figures(read_streams(out / demo.BAG_NAME)['events'], observed,
                                          link['cut_stamp_ns'] - int(0.05e9)))
         moving = first_command_after(observed, link['requested_again'])
         link['moving_again_after_s'] = None if moving is None else moving - link['up']

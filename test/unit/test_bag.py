@@ -30,7 +30,8 @@ TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage', 'sensor_msg
          'visualization_msgs/msg/MarkerArray', 'rcl_interfaces/msg/Log',
          'rcl_interfaces/msg/ParameterEvent', 'rosgraph_msgs/msg/Clock',
          'geometry_msgs/msg/PoseArray', 'std_msgs/msg/Float64MultiArray',
-         'std_msgs/msg/String') + (('tf2_msgs/msg/TFMessage',) if tf_available() else ())
+         'std_msgs/msg/String', 'diagnostic_msgs/msg/DiagnosticArray') + (
+             ('tf2_msgs/msg/TFMessage',) if tf_available() else ())
 
 
 def test_message_definitions_are_embedded_the_rosbag2_way():

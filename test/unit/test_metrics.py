@@ -8,6 +8,7 @@ from etdmp_ros.demo.metrics import (compute_metrics, contact_figures, cylinder_g
                                     system_figures)
 from etdmp_ros.demo.scenario import Scenario
 from etdmp_ros.geometry.task_plane import quadrant
+from etdmp_ros.ros.events import Event, WALL_CLOCK
 from etdmp_ros.skills import following
 import numpy as np
 import pytest
@@ -61,11 +62,6 @@ def test_quadrants():
 
 
 def test_command_rate_is_taken_while_the_arm_moves():
-    class Logs:
-
-        def log(self, node):
-            return ''
-
     period = 8_000_000                                   # ns, 125 Hz
     call = 1_000_000_000
     t = call + period * np.arange(-50, 1200)             # commands from before the call on
@@ -74,12 +70,17 @@ def test_command_rate_is_taken_while_the_arm_moves():
     commands[first:first + 1000, 0] = 0.1                # 8 s of motion, then zeros
     rec = {'command_time': t, 'commands': commands, 'command_wall_time': t * 1e-9}
     end = int(t[first + 1060])
-    figures = system_figures(_NoMonitor(), rec, call, end, Logs())
+    figures = system_figures(_NoMonitor(), rec, call, end)
     assert figures['moving_commands_per_s'] == pytest.approx(125.0)
     assert figures['first_moving_command_after_call_s'] == pytest.approx(0.48)
     commands[first + 400:first + 425, 0] = 0.0          # a 0.2 s halt in the middle
-    figures = system_figures(_NoMonitor(), rec, call, end, Logs())
+    figures = system_figures(_NoMonitor(), rec, call, end)
     assert figures['moving_commands_per_s'] == pytest.approx(974 / (999 * 0.008))
+
+
+def _event(wall_ns, node, kind, **values):
+    """Return an event as read back from a recording (values as published: text)."""
+    return Event(node, kind, 0, '', 0, {**values, WALL_CLOCK: str(wall_ns)})
 
 
 class _NoMonitor:
@@ -208,23 +209,23 @@ def _moved_run(follow=True):
                      for s in seen_t])
     confirming = seen[np.flatnonzero(seen[:, 4] == g1[1])[2]]       # the 3rd new one
     paths = [_path_row(stamp, t, original, wall(1.0))]
-    logs = []
+    events = []
     if follow:
         later = t >= 1.9
         published = confirming[1] + 4e6
         paths.append((int(3.68e9), published, stamp,
                       stamp + np.round(t[later] * 1e9).astype(np.int64), executed[later]))
-        logs = [(int(published + 1e5), 'dmp_server',
-                 f'following: goal moved to (0.850, 0.140, 0.000): re-planned from path time '
-                 f'2.00 s (the controller at about 1.80 s), {later.sum()} poses to 6.00 s '
-                 f'published in 4.1 ms (update 1)'),
-                (int(published + 6e6), 'controller',
-                 f'new path: {later.sum()} poses over {t[later][-1] - t[later][0]:.2f} s')]
+        events = [_event(int(published + 1e5), 'dmp_server', 'followed', goal='0.85 0.14 0.0',
+                         from_path_time_s='2.0', controller_path_time_s='1.8',
+                         poses=str(later.sum()), end_s='6.0', took_ms='4.1', update='1'),
+                  _event(int(published + 6e6), 'controller', 'path_accepted',
+                         poses=str(later.sum()), continued='false',
+                         duration_s=str(t[later][-1] - t[later][0]))]
     rec = {'tip': np.column_stack([stamps * 1e9, tip]),
            'reference': np.column_stack([stamps[ref] * 1e9, tip[ref]]),
            'commands': np.zeros((len(stamps), 6)), 'command_time': stamps * 1e9,
            'command_wall_time': np.array([wall(s) for s in stamps]) * 1e-9,
-           'status': [], 'paths': paths, 'goal_seen': seen, 'logs': logs}
+           'status': [], 'paths': paths, 'goal_seen': seen, 'events': events}
     status = [(int(1.1e9), 'approaching'), (int(t0 * 1e9), 'tracking'),
               (int((t0 + 6) * 1e9), 'holding'), (int((t0 + 6.5) * 1e9), 'idle')]
     marker0, marker1 = np.array([*g0[:2], 0.002]), np.array([*g1[:2], 0.002])

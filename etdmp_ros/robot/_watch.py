@@ -1,0 +1,173 @@
+"""
+Watching a control loop: when its joint states count as lost, and how well it tracked a path.
+
+ROS-free: :class:`InputWatch` decides from receipt times and stamps (ns) whether the robot's
+joint states are stale, late or missing; :class:`TrackingSummary` collects the figures of one
+tracked path (the controller node publishes them as its ``path_tracked`` event and logs them).
+"""
+
+import math
+
+
+class TrackingSummary:
+    """
+    What the log line at the end of a tracked path reports (and the benchmarks read).
+
+    The tracking error (metres, the controller's own: reference minus forward kinematics), the
+    control steps against the control periods the path spanned (from the joint states' stamps),
+    the joint states received and the largest wall-clock gap between two of them.
+    """
+
+    def __init__(self, period):
+        """Start empty; ``period`` is the control period (s)."""
+        self.period = period
+        self.steps = 0
+        self.received = 0
+        self.max_gap = 0.0
+        self._sum_sq = 0.0
+        self._max_error = 0.0
+        self._first = self._last = None
+        self._max_gap_at = None
+
+    def joint_state(self, gap, t):
+        """Count a joint state received while tracking (stamp ``t``), ``gap`` s after the last."""
+        self.received += 1
+        if gap > self.max_gap:
+            self.max_gap, self._max_gap_at = gap, t
+
+    def step(self, t, error):
+        """Count a control step at stamp ``t`` (s) with tracking error ``error`` (m)."""
+        self.steps += 1
+        self._sum_sq += error * error
+        self._max_error = max(self._max_error, error)
+        self._first = t if self._first is None else self._first
+        self._last = t
+
+    @property
+    def periods(self):
+        """Control periods from the first to the last step, both included."""
+        return 0 if self._first is None else round((self._last - self._first) / self.period) + 1
+
+    def figures(self):
+        """
+        Return the figures as a dict (mm, ms, s; the event ``path_tracked``'s values).
+
+        ``error_rms_mm``, ``error_max_mm``, ``steps``, ``periods``, ``joint_states``,
+        ``largest_gap_ms`` and ``largest_gap_at_s`` (NaN when no gap was seen).
+        """
+        return {'error_rms_mm': math.sqrt(self._sum_sq / max(self.steps, 1)) * 1e3,
+                'error_max_mm': self._max_error * 1e3, 'steps': self.steps,
+                'periods': self.periods, 'joint_states': self.received,
+                'largest_gap_ms': self.max_gap * 1e3,
+                'largest_gap_at_s': (math.nan if self._max_gap_at is None
+                                     else float(self._max_gap_at))}
+
+    def summary(self):
+        """Return the figures as one line of text."""
+        f = self.figures()
+        return (f'error RMS {f["error_rms_mm"]:.3f} mm, max {f["error_max_mm"]:.3f} mm; '
+                f'{self.steps} control steps in {self.periods} periods '
+                f'({self.received} joint states received, largest gap '
+                f'{f["largest_gap_ms"]:.1f} ms'
+                + (f' at t = {self._max_gap_at:.3f} s)' if self._max_gap_at is not None else ')'))
+
+
+class InputWatch:
+    """
+    When the joint states count as lost: no new one for ``timeout`` of the robot's time.
+
+    The robot's time is the time in which it moves. A real robot's is the wall clock (steady
+    here: the system clock may jump). A simulated robot's is the simulation's /clock
+    (``use_sim_time``): when the simulation stalls (its process not scheduled on a busy
+    machine), its time and its joint states stop together and the arm does not move, so nothing
+    is stale; the clock going on without joint states is. A simulation whose clock and joint
+    states both stop for ``stall_timeout`` of wall time counts as gone. Receipt times are used,
+    never the messages' stamps, which a wrong publisher can set to anything.
+    """
+
+    def __init__(self, timeout, stall_timeout):
+        """Timeouts in seconds (``stall_timeout`` applies only to simulated time)."""
+        self.timeout = timeout
+        self.stall_timeout = stall_timeout
+        self._robot = None      # robot time (ns) of the latest receipt
+        self._wall = None       # steady time (ns) of the latest receipt
+        self._stamp = None      # stamp (ns) of the latest joint state accepted
+        self._arrived = None    # stamp (ns) of the latest plausible joint state to arrive
+        self._simulated = False
+
+    def received(self, robot_ns, wall_ns, simulated, stamp_ns=None):
+        """Note a joint state (stamped ``stamp_ns``) received at these robot and steady times."""
+        if simulated != self._simulated:
+            self._stamp = self._arrived = None
+        self._robot, self._wall, self._simulated = robot_ns, wall_ns, simulated
+        if stamp_ns is not None:
+            self._stamp = stamp_ns
+
+    def implausible(self, stamp_ns, robot_ns, simulated, wall_ns=None):
+        """
+        Return why a joint state stamped ``stamp_ns`` cannot be the robot's ('' if it can).
+
+        Its stamp must have advanced from the last accepted one's as the robot's time did, to
+        within ``timeout``: a stamp far in the future would end the path at once (the
+        controller's time is the stamps'), one far in the past would read as a restart. On a
+        starved machine this process's view of the robot's clock (its /clock messages) and the
+        joint states arrive out of step, both ways, so:
+
+        - one that advanced, but less than the clock, is late, not false: this process was not
+          scheduled while the robot's clock went on (its /clock messages taken first), or the
+          transport held it back; refusing it stopped the arm as stale-input ("its stamp is
+          -0.104 s off the robot clock") on a machine loaded 9 times over;
+        - one ahead of the clock is the clock lagging (its /clock messages still queued) when
+          its stamp advanced no more than the wall clock (``wall_ns``, steady) did since the last
+          one was taken, plus ``timeout``: refusing it stopped the G next to a busy core ("+0.104
+          s off ... advanced 0.176 s ... while the clock advanced 0.072 s"). A stamp 100 s ahead
+          still is no stamp of the robot's.
+
+        The controller goes on from such a joint state; its missed steps re-synchronise the
+        path (etdmp_ros.robot._controller).
+        """
+        if self._stamp is None or simulated != self._simulated:
+            return ''
+        advance = (stamp_ns - self._stamp) * 1e-9
+        skew = advance - (robot_ns - self._robot) * 1e-9
+        if abs(skew) <= self.timeout or (skew < 0.0 and advance > 0.0):
+            return ''
+        if skew > 0.0 and wall_ns is not None and \
+                advance <= (wall_ns - self._wall) * 1e-9 + self.timeout:
+            return ''
+        return (f'its stamp is {skew:+.3f} s off the robot clock (advanced '
+                f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '
+                f'clock advanced {(robot_ns - self._robot) * 1e-9:.3f} s), not from the robot')
+
+    def gap(self, stamp_ns, simulated):
+        """
+        Return why the joint states before this one (stamped ``stamp_ns``) were lost, or ''.
+
+        The robot's time advanced more than ``timeout`` between two joint states that arrived
+        one after the other: the ones between never came (a network link that was down), even
+        if nothing noticed meanwhile, the robot's /clock having stopped reaching this node with
+        them. Joint states that only queued behind a busy process all arrive, a period apart.
+        """
+        previous, self._arrived = self._arrived, stamp_ns
+        if previous is None or (stamp_ns - previous) * 1e-9 <= self.timeout:
+            return ''
+        clock = 'simulated' if simulated else 'wall-clock'
+        return (f'none for {(stamp_ns - previous) * 1e-9:.3f} s of {clock} time: those '
+                'between the last two never came')
+
+    def lost(self, robot_ns, wall_ns, simulated):
+        """Return why the joint states count as lost at these times ('' if they do not)."""
+        if self._wall is None:
+            return 'never received'
+        if simulated != self._simulated:        # use_sim_time switched: start afresh
+            self.received(robot_ns, wall_ns, simulated)
+            return ''
+        age = (robot_ns - self._robot) * 1e-9
+        if age > self.timeout:
+            clock = 'simulated' if simulated else 'wall-clock'
+            return f'none for {age:.3f} s of {clock} time'
+        silent = (wall_ns - self._wall) * 1e-9
+        if simulated and silent > self.stall_timeout:
+            return (f'none for {silent:.3f} s of wall-clock time, and the simulation clock '
+                    'stopped with them (simulation_stall_timeout)')
+        return ''

@@ -1,0 +1,132 @@
+"""
+What a node reports happened, as data: ``~/events`` (diagnostic_msgs/DiagnosticArray).
+
+A log line is for people: its wording may change. What a program needs to know (a skill was
+taught or refused, a path was published, accepted or tracked with these figures, the
+simulation stalled) each node also publishes on its ``~/events`` topic, one
+DiagnosticArray per event holding one DiagnosticStatus:
+
+- ``name``: ``<node>: <kind>`` (diagnostic_updater's ``node: task`` form), the kind one of
+  the node's documented events (docs/ros.md#events), e.g. ``dmp_server: followed``;
+- ``level``: OK, WARN or ERROR, as the log line's severity;
+- ``message``: the log line's text, for people;
+- ``values``: the facts as key-value pairs, the keys documented with the event; numbers in
+  Python's shortest round-trip form, several numbers (a point, points) separated by spaces,
+  flags ``true`` / ``false``; always ``wall_clock_ns``, the wall clock when it happened (ns
+  since the epoch, the clock ``/rosout`` stamps log lines with and the demo's recorder stamps
+  receipts with), so that latencies between processes can be measured;
+- ``header.stamp``: the node's clock (the simulation's under ``use_sim_time``).
+
+The topic is latched (transient local, the last :data:`HISTORY` events), so a recorder that
+finds it late still gets what happened at start-up. Reliable: none is lost to a slow reader.
+The human log lines stay as they were; nothing reads their text.
+"""
+
+from dataclasses import dataclass, field
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from etdmp_ros.ros import qos, topics
+import numpy as np
+
+#: The levels of DiagnosticStatus, as ints.
+OK, WARN, ERROR = (int.from_bytes(level, 'little') for level in (
+    DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR))
+#: Events kept for subscribers that join late.
+HISTORY = 100
+#: The value every event carries: the wall clock (ns since the epoch) when it happened.
+WALL_CLOCK = 'wall_clock_ns'
+TYPE_NAME = 'diagnostic_msgs/msg/DiagnosticArray'
+
+
+def _text(value):
+    """Return a value as an event's text (see the module docstring)."""
+    if isinstance(value, (bool, np.bool_)):
+        return 'true' if value else 'false'
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))
+    if isinstance(value, str):
+        return value
+    return ' '.join(_text(v) for v in np.asarray(value).ravel().tolist())
+
+
+class EventPublisher:
+    """A node's ``~/events`` publisher (:meth:`publish`, :meth:`flush`)."""
+
+    def __init__(self, node, topic=topics.EVENTS):
+        """Create the latched publisher on ``node``."""
+        self._node = node
+        self._publisher = node.create_publisher(DiagnosticArray, topic, qos.latched(HISTORY))
+
+    def publish(self, kind, message='', level=OK, **values):
+        """
+        Publish one event: ``kind``, the human ``message``, its ``level``, its facts ``values``.
+
+        Values: numbers, flags, text, or sequences of numbers (see the module docstring).
+        """
+        wall = time.time_ns()
+        status = DiagnosticStatus(level=bytes([level]), name=f'{self._node.get_name()}: {kind}',
+                                  message=message)
+        status.values = [KeyValue(key=key, value=_text(value)) for key, value in values.items()]
+        status.values.append(KeyValue(key=WALL_CLOCK, value=str(wall)))
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self._node.get_clock().now().to_msg()
+        self._publisher.publish(array)
+
+    def flush(self, timeout=0.5):
+        """Wait up to ``timeout`` s until every subscriber has every event (before exiting)."""
+        from rclpy.duration import Duration
+        return self._publisher.wait_for_all_acked(Duration(seconds=timeout))
+
+
+@dataclass(frozen=True)
+class Event:
+    """One event as read back (:func:`from_message`); ``values`` as published (text)."""
+
+    node: str
+    kind: str
+    level: int
+    message: str
+    stamp_ns: int
+    values: dict = field(default_factory=dict)
+
+    @property
+    def wall_ns(self):
+        """Return the wall clock (ns since the epoch) when it happened."""
+        return int(self.values[WALL_CLOCK])
+
+    def number(self, key):
+        """Return value ``key`` as a float (None if the event has no such value)."""
+        return float(self.values[key]) if key in self.values else None
+
+    def integer(self, key):
+        """Return value ``key`` as an int (None if the event has no such value)."""
+        return int(self.values[key]) if key in self.values else None
+
+    def numbers(self, key):
+        """Return value ``key`` as a float array (empty if the event has no such value)."""
+        return np.array([float(v) for v in self.values.get(key, '').split()])
+
+    def flag(self, key):
+        """Return value ``key`` as a bool (False if the event has no such value)."""
+        return self.values.get(key) == 'true'
+
+
+def from_message(msg):
+    """Return the :class:`Event` s of a DiagnosticArray published by :class:`EventPublisher`."""
+    stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    found = []
+    for status in msg.status:
+        node, _, kind = status.name.rpartition(': ')
+        level = status.level if isinstance(status.level, int) else \
+            int.from_bytes(status.level, 'little')
+        found.append(Event(node, kind, level, status.message, stamp,
+                           {kv.key: kv.value for kv in status.values}))
+    return found
+
+
+def of_kind(events, node, kind):
+    """Return the events of ``node`` (its name, without namespace) of ``kind``, in order."""
+    return [e for e in events if e.node == node and e.kind == kind]
