@@ -146,7 +146,7 @@ BENCHMARKS := core obstacles obstacle_volumes sim dmp_server controller percepti
 
 bench: $(addprefix bench-,$(BENCHMARKS))
 
-# Record a stir by hand, learn it, repeat it (issue 16; needs no peer library).
+# Record a stir by hand, learn it, repeat it (needs no peer library).
 bench-kinesthetic: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_kinesthetic.py $(BENCH_ARGS)
 
@@ -169,7 +169,7 @@ bench-system: $(STAMP)
 bench-two-hosts: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_two_hosts.py $(BENCH_ARGS)
 
-# Restarts of ros2 launch in one domain after a crash, each node killed (issue 23; the ros2 CLI;
+# Restarts of ros2 launch in one domain after a crash, each node killed (the ros2 CLI;
 # docs/reliability.md; about 50 minutes, not in `make bench`).
 bench-faults: $(STAMP) ros-tools
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_faults.py $(BENCH_ARGS)
@@ -179,7 +179,7 @@ bench-%: $(BENCH_STAMP)
 	MUJOCO_GL=egl $(BENCH_VENV)/bin/python test/benchmarks/bench_$*.py $(BENCH_ARGS)
 
 clean:
-	rm -rf out build install log .pytest_cache *.egg-info
+	rm -rf out build install log .pytest_cache .mypy_cache *.egg-info
 	find . -path ./.git -prune -o -path './.venv*' -prune -o \
 	  \( -name __pycache__ -o -name '*.nbi' -o -name '*.nbc' \) -print0 | xargs -0 rm -rf
 

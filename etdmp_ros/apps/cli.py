@@ -171,7 +171,24 @@ def _cmd_generalize(args):
         raise UsageError(f'{METHOD_LABELS[args.method]} cannot serve this request: '
                          f'{chosen.error}')
 
-    name = demo.name
+    _print_comparison(args, demo.name, skill, start, goal, obstacles, results)
+    if json_path:
+        _write_json(json_path, args, demo.name, start, goal, obstacles, results)
+    if plot_path:
+        from etdmp_ros.apps.plotting import plot_generalization
+        paths = {m: (r.trajectory.x if r.ok else None) for m, r in results.items()}
+        n_obs = len(obstacles)
+        title = f'{demo.name}: ET-DMP vs DMP' + (
+            f", {n_obs} obstacle{'s' if n_obs > 1 else ''}" if n_obs else '')
+        path = plot_generalization(plot_path, demo=skill.demo, start=start, goal=goal,
+                                   paths=paths, obstacles=obstacles, title=title,
+                                   selected=args.method)
+        print(f'wrote {path}')
+    return 0
+
+
+def _print_comparison(args, name, skill, start, goal, obstacles, results):
+    """Print the request and every method's figures, the selected one marked."""
     print(f'skill {name}: {skill.dim}D, {len(skill.demo)} samples, tau = {skill.tau:.3g} s, '
           f'{args.formulation}')
     print(f'start {start.tolist()} -> goal {goal.tolist()}, {len(obstacles)} obstacle(s)')
@@ -188,31 +205,23 @@ def _cmd_generalize(args):
               f"{_fmt(r.final_distance_to_goal):>11}{_fmt(r.min_clearance, '.3f'):>11}")
     print('(* = selected method; nRMSE vs the demonstration, docs/design.md)')
 
-    if json_path:
-        traj = chosen.trajectory
-        doc = {
-            'skill': name, 'method': args.method, 'mode': args.mode,
-            'formulation': args.formulation, 'start': start.tolist(), 'goal': goal.tolist(),
-            'obstacles': obstacles.tolist(),
-            't': np.asarray(traj.t).tolist(), 'x': np.asarray(traj.x).tolist(),
-            'v': np.asarray(traj.v).tolist(), 'a': np.asarray(traj.a).tolist(),
-            'rotation': np.asarray(traj.rotation).tolist(),
-            'virtual_start': np.asarray(traj.virtual_start).tolist(),
-            'metrics': {m: r.metrics() for m, r in results.items()},
-        }
-        json_path.write_text(json.dumps(doc, allow_nan=False) + '\n', encoding='utf-8')
-        print(f'wrote {json_path}')
-    if plot_path:
-        from etdmp_ros.apps.plotting import plot_generalization
-        paths = {m: (r.trajectory.x if r.ok else None) for m, r in results.items()}
-        n_obs = len(obstacles)
-        title = f'{name}: ET-DMP vs DMP' + (
-            f", {n_obs} obstacle{'s' if n_obs > 1 else ''}" if n_obs else '')
-        path = plot_generalization(plot_path, demo=skill.demo, start=start, goal=goal,
-                                   paths=paths, obstacles=obstacles, title=title,
-                                   selected=args.method)
-        print(f'wrote {path}')
-    return 0
+
+def _write_json(json_path, args, name, start, goal, obstacles, results):
+    """Write the selected method's trajectory and every method's metrics as JSON."""
+    chosen = results[args.method]
+    traj = chosen.trajectory
+    doc = {
+        'skill': name, 'method': args.method, 'mode': args.mode,
+        'formulation': args.formulation, 'start': start.tolist(), 'goal': goal.tolist(),
+        'obstacles': obstacles.tolist(),
+        't': np.asarray(traj.t).tolist(), 'x': np.asarray(traj.x).tolist(),
+        'v': np.asarray(traj.v).tolist(), 'a': np.asarray(traj.a).tolist(),
+        'rotation': np.asarray(traj.rotation).tolist(),
+        'virtual_start': np.asarray(traj.virtual_start).tolist(),
+        'metrics': {m: r.metrics() for m, r in results.items()},
+    }
+    json_path.write_text(json.dumps(doc, allow_nan=False) + '\n', encoding='utf-8')
+    print(f'wrote {json_path}')
 
 
 # --------------------------------------------------------------------------------------------

@@ -38,24 +38,26 @@ the bottle axis at its mouth). "wipe" and "stir" carry orientations (the sponge'
 along the stroke; a tilted stirrer circling with the spiral), the letters none.
 """
 
+from __future__ import annotations
+
 import csv
-from dataclasses import dataclass, field
 import functools
 from importlib import resources
+from importlib.resources.abc import Traversable
 import io
 import itertools
+import os
 from pathlib import Path
+from typing import Any, BinaryIO, IO
 import zipfile
 
 from etdmp_ros import limits
-from etdmp_ros.geometry.quaternion import MIN_NORM, unit_and_norm
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
 
+from ._demonstration import (Demonstration, from_arrays, MIN_SAMPLES, unit_quaternions,
+                             validate)
 from ._errors import DemonstrationError
-
-# Forcing-term fitting and finite-difference accelerations need a few samples per basis width;
-# fewer than this is almost certainly a truncated or mis-parsed file.
-MIN_SAMPLES = 10
 
 TIME_COLUMNS = ('t', 'time', 'stamp')
 #: CSV columns of the orientation quaternion, in the order (x, y, z, w) it is stored in.
@@ -65,87 +67,7 @@ SUFFIXES = ('.csv', '.npy', '.npz')
 _DATA_DIR = 'data'
 
 
-@dataclass(frozen=True, eq=False, repr=False)
-class Demonstration:
-    """
-    One demonstrated movement: ``positions`` (T, d) at strictly increasing times ``t`` (T,).
-
-    Arrays are copied to read-only float64 on construction. ``t`` defaults to uniform samples
-    over tau = 1 s. A 1-D ``positions`` (T,) is taken as a one-dimensional movement (T, 1).
-    ``orientations`` (T, 4), optional, are unit quaternions (x, y, z, w), normalised here.
-    Raises :class:`DemonstrationError` if the data is unusable (too short, NaN/inf, time not
-    increasing, shapes inconsistent, a zero quaternion).
-    """
-
-    name: str
-    positions: np.ndarray
-    t: np.ndarray = field(default=None)
-    orientations: np.ndarray = field(default=None)
-
-    def __post_init__(self):
-        """Validate and freeze the arrays."""
-        if not isinstance(self.name, str) or not self.name:
-            raise DemonstrationError(f'demonstration name must be a non-empty string, '
-                                     f'got {self.name!r}')
-        where = f'demonstration {self.name!r}'
-        positions = _as_float_array(self.positions, 'positions', where)
-        if positions.ndim == 1:
-            positions = positions[:, None]
-        if self.t is None:
-            t = np.linspace(0.0, 1.0, positions.shape[0] if positions.ndim == 2 else 0)
-        else:
-            t = _as_float_array(self.t, 't', where)
-        _validate(positions, t, where, _array_location)
-        positions = positions.copy()
-        t = t.copy()
-        positions.flags.writeable = False
-        t.flags.writeable = False
-        object.__setattr__(self, 'positions', positions)
-        object.__setattr__(self, 't', t)
-        if self.orientations is not None:
-            q = unit_quaternions(self.orientations, len(positions), where,
-                                 lambda row: f'orientations[{row}]')
-            q.flags.writeable = False
-            object.__setattr__(self, 'orientations', q)
-
-    @property
-    def n_samples(self):
-        """Return the number of samples T."""
-        return self.positions.shape[0]
-
-    @property
-    def dim(self):
-        """Return the number of position coordinates d."""
-        return self.positions.shape[1]
-
-    @property
-    def has_orientation(self):
-        """Return True if the samples carry orientations."""
-        return self.orientations is not None
-
-    @property
-    def duration(self):
-        """Time from the first to the last sample in seconds (the DMP's tau)."""
-        return float(self.t[-1] - self.t[0])
-
-    @property
-    def start(self):
-        """First position (d,)."""
-        return self.positions[0].copy()
-
-    @property
-    def goal(self):
-        """Last position (d,)."""
-        return self.positions[-1].copy()
-
-    def __repr__(self):
-        """Summarise without printing the arrays."""
-        return (f'Demonstration(name={self.name!r}, samples={self.n_samples}, dim={self.dim}, '
-                f'duration={self.duration:g} s'
-                f'{", with orientations" if self.has_orientation else ""})')
-
-
-def load_demo(path, name=None):
+def load_demo(path: str | os.PathLike[str], name: str | None = None) -> Demonstration:
     """
     Read a demonstration from a ``.csv``, ``.npy`` or ``.npz`` file (see the module docstring).
 
@@ -185,7 +107,7 @@ def load_demo(path, name=None):
                                  f'{_shorten(str(err))})') from None
 
 
-def check_file_size(path):
+def check_file_size(path: str | os.PathLike[str]) -> int:
     """Raise DemonstrationError if the file at ``path`` is larger than MAX_DEMO_FILE_BYTES."""
     size = Path(path).stat().st_size
     if size > limits.MAX_DEMO_FILE_BYTES:
@@ -195,12 +117,13 @@ def check_file_size(path):
     return size
 
 
-def _shorten(text, limit=None):
+def _shorten(text: str, limit: int | None = None) -> str:
     limit = limits.MAX_REASON_CHARS if limit is None else limit
     return text if len(text) <= limit else text[:limit - 3] + '...'
 
 
-def save_demo(path, demo, precision=None):
+def save_demo(path: str | os.PathLike[str], demo: Demonstration,
+              precision: int | None = None) -> None:
     """
     Write ``demo`` to ``path`` in the format its suffix names; :func:`load_demo` reads it back.
 
@@ -223,7 +146,7 @@ def save_demo(path, demo, precision=None):
         with open(path, 'wb') as f:
             np.save(f, demo.positions, allow_pickle=False)
     elif suffix == '.npz':
-        arrays = {'positions': demo.positions, 't': demo.t}
+        arrays: dict[str, Any] = {'positions': demo.positions, 't': demo.t}
         if demo.has_orientation:
             arrays['quaternions'] = demo.orientations
         with open(path, 'wb') as f:
@@ -232,12 +155,12 @@ def save_demo(path, demo, precision=None):
         path.write_text(_format_csv(demo, precision), encoding='utf-8')
 
 
-def builtin_demo_names():
+def builtin_demo_names() -> list[str]:
     """Names of the demonstrations shipped with the package, sorted."""
     return list(_builtin_files())
 
 
-def builtin_demo(name):
+def builtin_demo(name: str) -> Demonstration:
     """
     Load a shipped demonstration by name (see :func:`builtin_demo_names`).
 
@@ -251,13 +174,13 @@ def builtin_demo(name):
 
 
 @functools.lru_cache(maxsize=None)
-def _load_builtin(name):
+def _load_builtin(name: str) -> Demonstration:
     resource = _builtin_files()[name]
     return _parse_csv(resource.read_text(encoding='utf-8'), f'built-in demo {name!r}', name)
 
 
 @functools.lru_cache(maxsize=1)
-def _builtin_files():
+def _builtin_files() -> dict[str, Traversable]:
     # importlib.resources finds the data both in a source tree and in an installed package.
     data = resources.files(__package__).joinpath(_DATA_DIR)
     found = {}
@@ -268,29 +191,30 @@ def _builtin_files():
     return {name: found[name] for name in sorted(found)}
 
 
-def _column_names(dim):
+def _column_names(dim: int) -> list[str]:
     if dim <= 3:
         return ['x', 'y', 'z'][:dim]
     return [f'x{k}' for k in range(dim)]
 
 
-def _format_number(value, precision):
+def _format_number(value: float, precision: int | None) -> str:
     if precision is None:
         return np.format_float_positional(value, unique=True, trim='-')
     return np.format_float_positional(value, precision=precision, unique=True, trim='-')
 
 
-def _format_csv(demo, precision):
+def _format_csv(demo: Demonstration, precision: int | None) -> str:
     out = io.StringIO()
     quaternions = list(ORIENTATION_COLUMNS) if demo.has_orientation else []
     out.write(','.join(['t'] + _column_names(demo.dim) + quaternions) + '\n')
-    rows = demo.positions if not quaternions else np.hstack([demo.positions, demo.orientations])
+    rows = demo.positions if not quaternions else np.hstack(
+        [demo.positions, demo.orientations])  # type: ignore[list-item]
     for t, row in zip(demo.t, rows):
         out.write(','.join(_format_number(v, precision) for v in (t, *row)) + '\n')
     return out.getvalue()
 
 
-def _is_number(text):
+def _is_number(text: str) -> bool:
     try:
         float(text)
     except ValueError:
@@ -298,7 +222,7 @@ def _is_number(text):
     return True
 
 
-def _parse_csv(text, source, name):
+def _parse_csv(text: str, source: str, name: str) -> Demonstration:
     reader = enumerate(csv.reader(io.StringIO(text)), start=1)
     read = list(itertools.islice(reader, limits.MAX_CSV_ROWS + 1))
     rows = [(number, cells) for number, cells in read if any(c.strip() for c in cells)]
@@ -309,8 +233,35 @@ def _parse_csv(text, source, name):
     if not rows:
         raise DemonstrationError(f'{source}: empty file; expected a header row such as '
                                  f'"t,x,y" followed by one sample per line')
-    header_line, header = rows[0]
-    header = [h.strip() for h in header]
+    header_line, cells = rows[0]
+    header = [h.strip() for h in cells]
+    time_cols, quat_cols, pos_cols = _csv_columns(header, header_line, source)
+    data = rows[1:]
+    values = _csv_values(data, header, source)
+    if len(data) < MIN_SAMPLES:
+        raise DemonstrationError(f'{source}: {len(data)} data rows; a demonstration needs at '
+                                 f'least {MIN_SAMPLES} samples')
+    positions = values[:, pos_cols]
+    t = values[:, time_cols[0]] if time_cols else np.linspace(0.0, 1.0, len(data))
+    lines = [line for line, _ in data]
+    pos_names = [header[k] for k in pos_cols]
+    time_name = header[time_cols[0]] if time_cols else 't'
+
+    def locate(row: int, col: int | None = None) -> str:
+        column = time_name if col is None else pos_names[col]
+        return f'line {lines[row]}, column {column!r}'
+
+    validate(positions, t, source, locate)
+    orientations: Array | None = None
+    if quat_cols:
+        orientations = unit_quaternions(values[:, quat_cols], len(data), source,
+                                        lambda row: f'line {lines[row]}')
+    return Demonstration(name, positions, t, orientations)
+
+
+def _csv_columns(header: list[str], header_line: int,
+                 source: str) -> tuple[list[int], list[int], list[int]]:
+    """Return the indices of the time, quaternion and position columns the header names."""
     if all(_is_number(h) for h in header):
         raise DemonstrationError(f'{source}: no header row: line {header_line} holds numbers; the '
                                  f'first line must name the columns, e.g. "t,x,y" or "x,y"')
@@ -343,7 +294,11 @@ def _parse_csv(text, source, name):
         raise DemonstrationError(f'{source}: header (line {header_line}) names {len(header)} '
                                  f'columns; at most {limits.MAX_DEMO_COORDINATES} coordinates '
                                  'and a time column (MAX_DEMO_COORDINATES)')
-    data = rows[1:]
+    return time_cols, quat_cols, pos_cols
+
+
+def _csv_values(data: list[tuple[int, list[str]]], header: list[str], source: str) -> Array:
+    """Return the numbers (T, columns) of the CSV's data rows, (line number, cells) each."""
     values = np.empty((len(data), len(header)))
     for i, (line, cells) in enumerate(data):
         if len(cells) != len(header):
@@ -359,26 +314,7 @@ def _parse_csv(text, source, name):
             except ValueError:
                 raise DemonstrationError(f'{source}: line {line}, column {header[k]!r}: '
                                          f'{_shorten(repr(cell), 40)} is not a number') from None
-
-    if len(data) < MIN_SAMPLES:
-        raise DemonstrationError(f'{source}: {len(data)} data rows; a demonstration needs at '
-                                 f'least {MIN_SAMPLES} samples')
-    positions = values[:, pos_cols]
-    t = values[:, time_cols[0]] if time_cols else np.linspace(0.0, 1.0, len(data))
-    lines = [line for line, _ in data]
-    pos_names = [header[k] for k in pos_cols]
-    time_name = header[time_cols[0]] if time_cols else 't'
-
-    def locate(row, col=None):
-        column = time_name if col is None else pos_names[col]
-        return f'line {lines[row]}, column {column!r}'
-
-    _validate(positions, t, source, locate)
-    orientations = None
-    if quat_cols:
-        orientations = unit_quaternions(values[:, quat_cols], len(data), source,
-                                        lambda row: f'line {lines[row]}')
-    return Demonstration(name, positions, t, orientations)
+    return values
 
 
 _NPY_MAGIC = b'\x93NUMPY'
@@ -387,7 +323,7 @@ _PICKLE_REFUSED = 'holds pickled (object) data; refusing to unpickle it (unsafe)
     'numeric arrays'
 
 
-def _load_numpy(path, suffix, name):
+def _load_numpy(path: Path, suffix: str, name: str) -> Demonstration:
     with open(path, 'rb') as f:
         head = f.read(len(_NPY_MAGIC))
     if not head:
@@ -413,7 +349,7 @@ def _load_numpy(path, suffix, name):
     if isinstance(loaded, np.ndarray):
         if suffix != '.npy':
             raise DemonstrationError(f'{path}: holds a single .npy array, not an .npz archive')
-        return _from_arrays(loaded, None, str(path), name)
+        return from_arrays(loaded, None, str(path), name)
     with loaded:
         if suffix != '.npz':
             raise DemonstrationError(f'{path}: holds an .npz archive, not a single .npy array')
@@ -433,10 +369,10 @@ def _load_numpy(path, suffix, name):
             if 'pickle' in str(err):
                 raise DemonstrationError(f'{path}: {_PICKLE_REFUSED}') from None
             raise DemonstrationError(f'{path}: unreadable array ({err})') from None
-    return _from_arrays(positions, t, str(path), name, orientations)
+    return from_arrays(positions, t, str(path), name, orientations)
 
 
-def _check_npy_header(stream, source):
+def _check_npy_header(stream: BinaryIO | IO[bytes], source: str) -> None:
     """
     Read the header of the .npy array at ``stream`` and refuse it before it is allocated.
 
@@ -473,138 +409,3 @@ def _check_npy_header(stream, source):
     if problem:
         raise DemonstrationError(f'{source}: its header claims shape '
                                  f'{_shorten(str(shape), 80)}: {problem}; not loaded')
-
-
-def _from_arrays(positions, t, source, name, orientations=None):
-    positions = _as_float_array(positions, 'positions', source)
-    if positions.ndim == 1:
-        positions = positions[:, None]
-    if t is not None:
-        t = _as_float_array(t, 't', source)
-    elif positions.ndim == 2:
-        t = np.linspace(0.0, 1.0, positions.shape[0])
-    _validate(positions, t, source, _array_location)
-    if orientations is not None:
-        orientations = unit_quaternions(orientations, len(positions), source,
-                                        lambda row: f'quaternions[{row}]')
-    return Demonstration(name, positions, t, orientations)
-
-
-def _as_float_array(value, what, where):
-    try:
-        array = np.asarray(value)
-    except (TypeError, ValueError) as err:
-        raise DemonstrationError(f'{where}: {what} is not an array ({err})') from None
-    if array.dtype.kind not in 'iuf':
-        if array.dtype.kind == 'O':
-            # Lists of numbers arrive as object arrays only when ragged or mixed with non-numbers.
-            try:
-                return np.asarray(array.tolist(), dtype=np.float64)
-            except (TypeError, ValueError):
-                pass
-        raise DemonstrationError(f'{where}: {what} must be real numbers, got dtype '
-                                 f'{array.dtype} (shape {array.shape})')
-    return array.astype(np.float64, copy=False)
-
-
-def _array_location(row, col=None):
-    return f't[{row}]' if col is None else f'positions[{row}, {col}]'
-
-
-def _validate(positions, t, where, locate):
-    """Raise DemonstrationError unless positions (T, d) and t (T,) form a usable demonstration."""
-    if positions.ndim != 2:
-        raise DemonstrationError(f'{where}: positions must be a (T, d) array, got shape '
-                                 f'{positions.shape}')
-    n, dim = positions.shape
-    if dim < 1:
-        raise DemonstrationError(f'{where}: positions have no coordinates (shape '
-                                 f'{positions.shape})')
-    if n < MIN_SAMPLES:
-        hint = ''
-        if 1 <= n < dim:
-            hint = '; if the array is stored as (d, T), transpose it to (T, d)'
-        raise DemonstrationError(f'{where}: {n} samples; a demonstration needs at least '
-                                 f'{MIN_SAMPLES}{hint}')
-    if t.shape != (n,):
-        raise DemonstrationError(f'{where}: t must have shape ({n},) to match positions '
-                                 f'{positions.shape}, got {t.shape}')
-    bad = np.argwhere(~np.isfinite(positions))
-    if bad.size:
-        row, col = bad[0]
-        raise DemonstrationError(f'{where}: {locate(row, col)} is {positions[row, col]}; '
-                                 f'positions must be finite ({len(bad)} bad value(s))')
-    bad = np.flatnonzero(~np.isfinite(t))
-    if bad.size:
-        raise DemonstrationError(f'{where}: {locate(bad[0])} is {t[bad[0]]}; times must be '
-                                 f'finite')
-    bad = np.flatnonzero(np.diff(t) <= 0.0)
-    if bad.size:
-        row = bad[0] + 1
-        raise DemonstrationError(f'{where}: time does not increase at {locate(row)}: '
-                                 f'{t[row]!r} after {t[row - 1]!r}; times must be strictly '
-                                 f'increasing')
-    _check_limits(positions, t, where, locate)
-
-
-def _check_limits(positions, t, where, locate):
-    """Raise DemonstrationError unless the demonstration fits :mod:`etdmp_ros.limits`."""
-    n, dim = positions.shape
-    if n > limits.MAX_DEMO_SAMPLES:
-        raise DemonstrationError(f'{where}: {n} samples, more than the limit '
-                                 f'MAX_DEMO_SAMPLES = {limits.MAX_DEMO_SAMPLES}')
-    if dim > limits.MAX_DEMO_COORDINATES:
-        raise DemonstrationError(f'{where}: {dim} coordinates, more than the limit '
-                                 f'MAX_DEMO_COORDINATES = {limits.MAX_DEMO_COORDINATES}')
-    duration = float(t[-1] - t[0])
-    if duration > limits.MAX_DEMO_DURATION:
-        raise DemonstrationError(f'{where}: lasts {duration:.6g} s, longer than the limit '
-                                 f'MAX_DEMO_DURATION = {limits.MAX_DEMO_DURATION:g} s (check '
-                                 'the time stamps)')
-    steps = np.diff(t)
-    row = int(np.argmin(steps)) + 1
-    if steps[row - 1] < limits.MIN_DEMO_SAMPLE_INTERVAL:
-        raise DemonstrationError(f'{where}: samples {steps[row - 1]:.3g} s apart at '
-                                 f'{locate(row)}, closer than MIN_DEMO_SAMPLE_INTERVAL = '
-                                 f'{limits.MIN_DEMO_SAMPLE_INTERVAL:g} s')
-    big = np.argwhere(np.abs(positions) > limits.MAX_DEMO_COORDINATE)
-    if big.size:
-        row, col = big[0]
-        raise DemonstrationError(f'{where}: {locate(row, col)} is {positions[row, col]:.3g}, '
-                                 f'beyond the limit MAX_DEMO_COORDINATE = '
-                                 f'{limits.MAX_DEMO_COORDINATE:g} in absolute value')
-
-
-def unit_quaternions(values, n, where, locate):
-    """
-    Check and normalise demonstrated orientations: ``values`` (n, 4), ROS order (x, y, z, w).
-
-    ``locate(row)`` names a sample in messages (``orientations[3]``, ``line 5``). Raises
-    DemonstrationError for a wrong shape or dtype, a non-finite or a zero quaternion.
-    """
-    try:
-        q = np.asarray(values)
-    except (TypeError, ValueError) as err:
-        raise DemonstrationError(f'{where}: orientations are not an array ({err})') from None
-    if q.dtype.kind not in 'iuf':
-        raise DemonstrationError(f'{where}: orientations must be real numbers, got dtype '
-                                 f'{q.dtype} (shape {q.shape})')
-    q = q.astype(np.float64)
-    if q.shape != (n, 4):
-        raise DemonstrationError(f'{where}: orientations must have shape ({n}, 4): one '
-                                 f'quaternion (x, y, z, w) per sample, got {q.shape}')
-    bad = np.flatnonzero(~np.all(np.isfinite(q), axis=1))
-    if bad.size:
-        raise DemonstrationError(f'{where}: the orientation at {locate(bad[0])} is '
-                                 f'{q[bad[0]].tolist()}; quaternions must be finite '
-                                 f'({bad.size} bad sample(s))')
-    unit, norm = unit_and_norm(q)   # no overflow: (1e308, 0, 0, 1e308) is a rotation too
-    bad = np.flatnonzero(norm < MIN_NORM)
-    if bad.size:
-        raise DemonstrationError(f'{where}: the orientation at {locate(bad[0])} is the zero '
-                                 f'quaternion {q[bad[0]].tolist()}, which is no rotation '
-                                 f'({bad.size} such sample(s)); give unit quaternions '
-                                 '(x, y, z, w)')
-    # Quaternions already unit to round-off are kept as they are, so that normalising is
-    # idempotent (a file written and read back keeps every bit).
-    return np.where(np.abs(norm - 1.0)[:, None] <= 4e-16, q, unit)

@@ -31,18 +31,28 @@ segment between two samples, closer to an obstacle's centre than its radius rais
 GeneralizationError; such a plan is never returned.
 """
 
-from dataclasses import dataclass, field
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
 from functools import lru_cache
 import math
+from typing import Any
 
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
+from numpy.typing import NDArray
 
+from ._clearance import check_clearance, format_point, Obstacles
+from ._displacement import bump, Displacement, Values
 from ._errors import GeneralizationError
 
 try:  # The fast path is optional: without numba the numpy reference serves.
     import numba
 except ImportError:  # pragma: no cover - numba is pinned in requirements
-    numba = None
+    numba = None  # type: ignore[assignment]
+
+#: An encounter's detour: (amplitude, direction (d,), ts, ta, tb, te), the bump's corners.
+Encounter = tuple[float, Array, float, float, float, float]
 
 #: Candidate directions of a detour in 2D (evenly spaced angles).
 DIRECTIONS_2D = 72
@@ -62,31 +72,21 @@ PLATEAUS = (1.0, 0.5, 0.0)
 _PLATEAUS = np.array(PLATEAUS)
 
 
-@dataclass(frozen=True)
-class Obstacles:
-    """Obstacles with a size: ``centres`` (m, d) and ``radii`` (m,), both real situation."""
-
-    centres: np.ndarray
-    radii: np.ndarray
-
-    def __len__(self):
-        """Return the number of obstacles."""
-        return len(self.centres)
-
-
-def _icosphere(level):
+def _icosphere(level: int) -> Array:
     """Return unit vectors (n, 3): the vertices of an icosahedron subdivided ``level`` times."""
     p = (1.0 + math.sqrt(5.0)) / 2.0
-    verts = [(-1, p, 0), (1, p, 0), (-1, -p, 0), (1, -p, 0), (0, -1, p), (0, 1, p),
-             (0, -1, -p), (0, 1, -p), (p, 0, -1), (p, 0, 1), (-p, 0, -1), (-p, 0, 1)]
+    corners = [(-1, p, 0), (1, p, 0), (-1, -p, 0), (1, -p, 0), (0, -1, p), (0, 1, p),
+               (0, -1, -p), (0, 1, -p), (p, 0, -1), (p, 0, 1), (-p, 0, -1), (-p, 0, 1)]
     faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
              (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
              (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    verts = [np.array(v, dtype=float) / np.linalg.norm(v) for v in verts]
+    verts = [np.array(v, dtype=float) / np.linalg.norm(v) for v in corners]
     for _ in range(level):
+        cache: dict[tuple[int, int], int]
+        new_faces: list[tuple[int, int, int]]
         cache, new_faces = {}, []
 
-        def middle(i, j):
+        def middle(i: int, j: int) -> int:
             key = (min(i, j), max(i, j))
             if key not in cache:
                 m = verts[i] + verts[j]
@@ -102,7 +102,7 @@ def _icosphere(level):
 
 
 @lru_cache(maxsize=None)
-def _directions(d):
+def _directions(d: int) -> Array:
     if d == 2:
         angle = 2.0 * np.pi * np.arange(DIRECTIONS_2D) / DIRECTIONS_2D
         directions = np.column_stack([np.cos(angle), np.sin(angle)])
@@ -112,120 +112,14 @@ def _directions(d):
     return directions
 
 
-def candidate_directions(d):
+def candidate_directions(d: int) -> Array:
     """Return the detour's candidate unit directions (n, d) in the virtual situation."""
     if d not in (2, 3):
         raise GeneralizationError(f'obstacles with a size need 2 or 3 dimensions, not {d}')
     return _directions(d)
 
 
-# -- the displacement ------------------------------------------------------------------------
-
-def smoothstep(u):
-    """Return the quintic smoothstep S(u) and its first two derivatives (u clipped to [0, 1])."""
-    u = np.clip(u, 0.0, 1.0)
-    u2 = u * u
-    return (u2 * u * (10.0 + u * (-15.0 + 6.0 * u)), 30.0 * u2 * (1.0 - u) ** 2,
-            60.0 * u * (1.0 - u) * (1.0 - 2.0 * u))
-
-
-def _hermite_out(u):
-    """Quintic Hermite basis from (1, 0, 0), (0, 1, 0), (0, 0, 1) at u = 0 to 0 at u = 1."""
-    u = np.clip(u, 0.0, 1.0)
-    h0 = 1.0 - u ** 3 * (10.0 - 15.0 * u + 6.0 * u * u)
-    h1 = u - u ** 3 * (6.0 - 8.0 * u + 3.0 * u * u)
-    h2 = 0.5 * (u ** 2 - 3.0 * u ** 3 + 3.0 * u ** 4 - u ** 5)
-    d0 = -30.0 * u * u * (1.0 - u) ** 2
-    d1 = 1.0 - 18.0 * u * u + 32.0 * u ** 3 - 15.0 * u ** 4
-    d2 = 0.5 * (2.0 * u - 9.0 * u * u + 12.0 * u ** 3 - 5.0 * u ** 4)
-    e0 = -60.0 * u * (1.0 - u) * (1.0 - 2.0 * u)
-    e1 = -36.0 * u + 96.0 * u * u - 60.0 * u ** 3
-    e2 = 0.5 * (2.0 - 18.0 * u + 36.0 * u * u - 20.0 * u ** 3)
-    return np.stack([h0, h1, h2]), np.stack([d0, d1, d2]), np.stack([e0, e1, e2])
-
-
-def bump(t, ts, ta, tb, te):
-    """
-    Return the bump b(t) and its first two time derivatives at times ``t`` (n,).
-
-    0 before ``ts``, rising along the smoothstep to 1 at ``ta``, 1 until ``tb``, falling to 0
-    at ``te``, 0 after. A ramp of zero length is a step (only used where no sample lies on it).
-    """
-    t = np.asarray(t, dtype=float)
-    b, b1, b2 = np.zeros_like(t), np.zeros_like(t), np.zeros_like(t)
-    rise = ta - ts
-    fall = te - tb
-    if rise > 0.0:
-        on = (t > ts) & (t < ta)
-        s, s1, s2 = smoothstep((t[on] - ts) / rise)
-        b[on], b1[on], b2[on] = s, s1 / rise, s2 / rise ** 2
-    if fall > 0.0:
-        on = (t > tb) & (t < te)
-        s, s1, s2 = smoothstep((te - t[on]) / fall)
-        b[on], b1[on], b2[on] = s, -s1 / fall, s2 / fall ** 2
-    b[(t >= ta) & (t <= tb)] = 1.0
-    return b, b1, b2
-
-
-@dataclass(frozen=True)
-class Displacement:
-    """
-    A detour's displacement ``delta(t)`` as a function of time (see the module docstring).
-
-    Encounter arrays: ``ts``, ``ta``, ``tb``, ``te`` (E,) the bump's corners, ``amplitude``
-    (E,), ``direction`` (E, d). The carried part: ``t0``, ``blend`` (its duration, 0 for none)
-    and ``carry`` (3, d): the displacement, its velocity and acceleration at ``t0``.
-    """
-
-    ts: np.ndarray
-    ta: np.ndarray
-    tb: np.ndarray
-    te: np.ndarray
-    amplitude: np.ndarray
-    direction: np.ndarray
-    t0: float = 0.0
-    blend: float = 0.0
-    carry: np.ndarray = field(default=None)
-
-    @property
-    def end(self):
-        """Return the time after which the displacement is zero."""
-        ends = [self.t0 + self.blend] + [float(t) for t in self.te]
-        return max(ends)
-
-    def __call__(self, t):
-        """Return delta, delta', delta'' at times ``t`` (n,), sorted, each (n, d)."""
-        t = np.asarray(t, dtype=float)
-        d = self.direction.shape[1]
-        out = [np.zeros((len(t), d)) for _ in range(3)]
-        for e in range(len(self.amplitude)):
-            if self.amplitude[e] == 0.0:
-                continue
-            # Only the samples inside the bump's window: it is zero elsewhere.
-            lo, hi = np.searchsorted(t, [self.ts[e], self.te[e]], side='right')
-            parts = bump(t[lo:hi], self.ts[e], self.ta[e], self.tb[e], self.te[e])
-            for o, part in zip(out, parts):
-                o[lo:hi] += (self.amplitude[e] * part)[:, None] * self.direction[e]
-        if self.blend > 0.0 and self.carry is not None:
-            T = self.blend
-            lo, hi = np.searchsorted(t, [self.t0, self.t0 + T], side='left')
-            h, h1, h2 = _hermite_out((t[lo:hi] - self.t0) / T)
-            coeff = self.carry * np.array([1.0, T, T * T])[:, None]    # in units of u
-            out[0][lo:hi] += h.T @ coeff
-            out[1][lo:hi] += h1.T @ coeff / T
-            out[2][lo:hi] += h2.T @ coeff / T ** 2
-        return out
-
-
-def no_displacement(d):
-    """Return the zero displacement in ``d`` dimensions."""
-    empty = np.zeros(0)
-    return Displacement(empty, empty, empty, empty, empty, np.zeros((0, d)))
-
-
-# -- planning a detour -----------------------------------------------------------------------
-
-def _runs(mask):
+def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     """Return (first, last) index pairs of the runs of True in a 1D boolean array."""
     if not mask.any():
         return []
@@ -235,7 +129,8 @@ def _runs(mask):
     return list(zip(starts.tolist(), ends.tolist()))
 
 
-def amplitudes(W, q, N, b, own, at_least=0.0):
+def amplitudes(W: Array, q: Array, N: Array, b: Array, own: NDArray[np.bool_],
+               at_least: float = 0.0) -> Array:
     """
     Return, per direction, the smallest amplitude >= ``at_least`` that keeps samples clear.
 
@@ -272,7 +167,9 @@ def amplitudes(W, q, N, b, own, at_least=0.0):
 
 if numba is not None:
     @numba.njit(cache=True, fastmath=False)
-    def _amplitude_nb(W, c, n, b, own, at_least):  # pragma: no cover - numba
+    def _amplitude_nb(W: Array, c: Array, n: Array,
+                      b: Array, own: NDArray[np.bool_],
+                      at_least: float) -> float:  # pragma: no cover - numba
         k, m, d = W.shape
         A = at_least
         while True:
@@ -298,7 +195,8 @@ if numba is not None:
             A = jump
 
 
-def amplitude(W, q, n, b, own, at_least=0.0, fast=True):
+def amplitude(W: Array, q: Array, n: Array, b: Array, own: NDArray[np.bool_],
+              at_least: float = 0.0, fast: bool = True) -> float:
     """Return :func:`amplitudes` for one direction ``n`` (d,): numba loop, or the reference."""
     if not fast or numba is None:
         return float(amplitudes(W, q, n[None], b, own, at_least)[0])
@@ -307,20 +205,20 @@ def amplitude(W, q, n, b, own, at_least=0.0, fast=True):
                                float(at_least)))
 
 
-def _arc_time(s, t, target):
+def _arc_time(s: Array, t: Array, target: float) -> float:
     """Return the first sample time at which the arc length ``s`` reaches ``target``."""
     i = int(np.searchsorted(s, target, side='left'))
     return float(t[min(max(i, 0), len(t) - 1)])
 
 
-def _pushes(W, q, n):
+def _pushes(W: Array, q: Array, n: Array) -> Array:
     """Return, per sample, the push along ``n`` that takes it out of every ball it is in."""
     p = W @ n
     c = np.einsum('kmi,kmi->km', W, W) - q * q
     return np.max(np.where(c < 0.0, -p + np.sqrt(np.maximum(p * p - c, 0.0)), 0.0), axis=1)
 
 
-def chords(values, refine):
+def chords(values: Array, refine: int) -> Array:
     """
     Append to ``values`` (k, ...) the points at ``i / (refine + 1)`` along each chord.
 
@@ -336,7 +234,10 @@ def chords(values, refine):
     return np.concatenate([values, inner.reshape((-1,) + values.shape[1:])])
 
 
-def _encounter(t, ds, base, C, q, own, span, directions, size, fast, refine=0):
+def _encounter(t: Array, ds: Array, base: Array,
+               C: Array, q: Array, own: NDArray[np.bool_],
+               span: Sequence[Any], directions: Array, size: float, fast: bool,
+               refine: int = 0) -> Encounter | None:
     """
     Return the best (amplitude, direction, ts, ta, tb, te) for one encounter, or None.
 
@@ -375,7 +276,9 @@ def _encounter(t, ds, base, C, q, own, span, directions, size, fast, refine=0):
     return None
 
 
-def _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size, refine=0):
+def _options(tw: Array, dsw: Array, W: Array, q: Array, own: NDArray[np.bool_], directions: Array,
+             candidates: Iterable[int], ts: float, ta: float, te: float, size: float,
+             refine: int = 0) -> tuple[float, float, Array, float, float, float, float] | None:
     """Return the best (cost, A, n, ts, ta, tb, te) of the candidates: the numpy reference."""
     best = None
     for i in candidates:
@@ -396,7 +299,8 @@ def _options(tw, dsw, W, q, own, directions, candidates, ts, ta, te, size, refin
 
 if numba is not None:
     @numba.njit(cache=True, fastmath=False)
-    def _bump_nb(t, ts, ta, tb, te):  # pragma: no cover - numba
+    def _bump_nb(t: float, ts: float, ta: float, tb: float,
+                 te: float) -> float:  # pragma: no cover - numba
         """Scalar :func:`bump` value."""
         if t >= ta and t <= tb:
             return 1.0
@@ -409,8 +313,13 @@ if numba is not None:
         return u * u * u * (10.0 + u * (-15.0 + 6.0 * u))
 
     @numba.njit(cache=True, fastmath=False)
-    def _encounter_nb(tw, dsw, W, own, q, D, candidates, fractions, ts, ta, te, size, tie,
-                      Wc, cc, refine):  # pragma: no cover - numba
+    def _encounter_nb(tw: Array, dsw: Array,
+                      W: Array, own: NDArray[np.bool_], q: Array,
+                      D: Array, candidates: NDArray[np.intp],
+                      fractions: Array, ts: float, ta: float, te: float,
+                      size: float, tie: float, Wc: Array,
+                      cc: Array, refine: int) -> tuple[
+                          int, float, float, float]:  # pragma: no cover - numba
         """Run :func:`_options`' loop over directions and bump shapes."""
         k, m, d = W.shape
         push = np.zeros(k)
@@ -457,8 +366,10 @@ if numba is not None:
         return best_i, best_A, best_lo, best_hi
 
 
-def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t0=None,
-           blend_length=None, fast=True, acceleration=None, refine=0):
+def detour(t: Array, x: Array, obstacles: Obstacles, margin: float, ramp: float, directions: Array,
+           size: float, displacement: Displacement | None = None, t0: float | None = None,
+           blend_length: float | None = None, fast: bool = True, acceleration: float | None = None,
+           refine: int = 0) -> Displacement | None:
     """
     Plan the detour of the plan ``x`` (n, d) sampled at ``t`` (n,) around ``obstacles``.
 
@@ -477,44 +388,77 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
     result is not checked here (:func:`keep_clear` does).
     """
     n, d = x.shape
-    C, r = obstacles.centres, obstacles.radii
+    C = obstacles.centres
     t0 = float(t[0]) if t0 is None else float(t0)
-    carry = None
-    blend = 0.0
-    base = x
-    if displacement is not None:
-        now = displacement(np.array([t0]))
-        carry = np.stack([now[0][0], now[1][0], now[2][0]])
-        if not np.any(carry):
-            carry = None
+    carry = None if displacement is None else _carry(displacement, t0)
     if len(C) == 0 and carry is None:
         return None
     step = np.diff(x, axis=0)
     ds = np.sqrt(np.einsum('ki,ki->k', step, step))
     s = np.concatenate([[0.0], np.cumsum(ds)])
     ds = np.concatenate([[0.0], ds])                # arc length before each sample
+    blend = 0.0
+    base = x
     if carry is not None:
         blend = max(_arc_time(s, t, min(blend_length, s[-1])) - t0, 0.0)
         if blend <= 0.0:
             blend = float(t[-1] - t0)
         carry_only = Displacement(*(np.zeros(0),) * 5, np.zeros((0, d)), t0, blend, carry)
         base = x + carry_only(t)[0]
-    if len(C) == 0:
-        return carry_only
+        if len(C) == 0:
+            return carry_only
+    q, inside = _target_radii(base, obstacles, margin)
+    if not inside.any():
+        return carry_only if carry is not None else None
+    spans = _spans(t, s, base, C, q, inside, ramp, directions, acceleration, t0,
+                   None if carry is None else blend)
+    found = _encounters(t, ds, base, obstacles, q, _joined(spans), directions, size, fast,
+                        refine, acceleration, t0)
+    A = np.array([f[0] for f in found])
+    N = np.array([f[1] for f in found]).reshape(-1, d)
+    corners = np.array([f[2:] for f in found], dtype=float).reshape(-1, 4)
+    return Displacement(corners[:, 0], corners[:, 1], corners[:, 2], corners[:, 3], A, N, t0,
+                        blend, carry)
+
+
+def _carry(displacement: Displacement, t0: float) -> Array | None:
+    """Return the displacement in force at ``t0`` and its derivatives (3, d), or None if 0."""
+    now = displacement(np.array([t0]))
+    carry = np.stack([now[0][0], now[1][0], now[2][0]])
+    return carry if np.any(carry) else None
+
+
+def _target_radii(base: Array, obstacles: Obstacles, margin: float) -> tuple[Array, NDArray[
+        np.bool_]]:
+    """
+    Return the target radii ``q`` (m,) and which samples of ``base`` (n, d) are within (n, m).
+
+    ``q`` is ``r + margin``, lowered to what the ends of the plan allow (> r); an obstacle that
+    holds the plan's start or end raises GeneralizationError.
+    """
+    C, r = obstacles.centres, obstacles.radii
     dist = np.linalg.norm(base[:, None, :] - C[None], axis=2)          # (n, m)
-    # The target radius: r + margin, lowered to what the ends of the plan allow (> r).
     ends = np.minimum(dist[0], dist[-1])
     for j in np.flatnonzero(ends < r):
         end = 0 if dist[0, j] < r[j] else -1
         raise GeneralizationError(
-            f"obstacle #{j} (centre {_fmt(C[j])}, radius {r[j]:.4g}) contains the plan's "
-            f"{'start' if end == 0 else 'end'} ({dist[end, j]:.4g} from its centre): the "
+            f'obstacle #{j} (centre {format_point(C[j])}, radius {r[j]:.4g}) contains the '
+            f"plan's {'start' if end == 0 else 'end'} ({dist[end, j]:.4g} from its centre): the "
             'clearance cannot be kept')
     q = np.minimum(r + margin, ends)
-    inside = dist < q
-    if not inside.any():
-        return carry_only if carry is not None else None
-    spans = []              # [ts, ta, tb, te, obstacles]
+    return q, dist < q
+
+
+def _spans(t: Array, s: Array, base: Array, C: Array, q: Array, inside: NDArray[np.bool_],
+           ramp: float, directions: Array, acceleration: float | None, t0: float,
+           blend: float | None) -> list[list[Any]]:
+    """
+    Return the stretches of samples ``inside`` an obstacle: ``[ts, ta, tb, te, {j}, need]``.
+
+    ``s`` (n,): the arc length at the samples; ``blend``: the carried displacement's blend
+    time, or None without one; ``need``: per direction, the least translation that clears it.
+    """
+    spans = []
     t_last = float(t[-1])
     for j in range(len(C)):
         length = ramp * q[j]
@@ -528,17 +472,28 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
                 least = _ramp_time(float(need.min()), acceleration)
                 ts, te = min(ts, ta - least), max(te, tb + least)
             ts, te = max(ts, t0), min(te, t_last)
-            if carry is not None and ts <= t0:
+            if blend is not None and ts <= t0:
                 # Rising from the switch as the carried displacement fades: together smooth.
                 ta = max(ta, t0 + blend)
                 tb, te = max(tb, ta), max(te, ta)
             spans.append([ts, ta, tb, te, {j}, need])
-    # Stretches whose bumps overlap in time become one encounter (one direction, one bump):
-    # bumps of their own, raised together, were measured to bend the shape more
-    # (docs/design.md#obstacles-with-a-size). The encounters' windows are then disjoint, and
-    # each amplitude is found on its own.
-    found = []
-    joined = _joined(spans)
+    return spans
+
+
+def _encounters(t: Array, ds: Array, base: Array, obstacles: Obstacles, q: Array,
+                joined: list[list[Any]], directions: Array, size: float, fast: bool,
+                refine: int, acceleration: float | None, t0: float) -> list[Encounter]:
+    """
+    Return the best detour of each encounter: ``joined`` spans (:func:`_joined`) in time order.
+
+    Stretches whose bumps overlap in time are one encounter (one direction, one bump): bumps
+    of their own, raised together, were measured to bend the shape more
+    (docs/design.md#obstacles-with-a-size). The encounters' windows are then disjoint, and
+    each amplitude is found on its own.
+    """
+    C, r = obstacles.centres, obstacles.radii
+    t_last = float(t[-1])
+    found: list[Encounter] = []
     for e, span in enumerate(joined):
         own = np.zeros(len(C), dtype=bool)
         own[sorted(span[4])] = True
@@ -546,8 +501,9 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
         if best is None:
             j = min(span[4])
             raise GeneralizationError(
-                f'passing obstacle #{j} (centre {_fmt(C[j])}, radius {r[j]:.4g}) needs a '
-                f"detour larger than the movement's size {size:.4g}: no detour keeps the shape")
+                f'passing obstacle #{j} (centre {format_point(C[j])}, radius {r[j]:.4g}) needs '
+                f"a detour larger than the movement's size {size:.4g}: no detour keeps the "
+                'shape')
         if acceleration:
             # A joined encounter may need more than its stretches' least pushes: lengthen its
             # ramps into the free time around it (windows stay disjoint) and solve again.
@@ -555,14 +511,10 @@ def detour(t, x, obstacles, margin, ramp, directions, size, displacement=None, t
                     joined[e + 1][0] if e + 1 < len(joined) else t_last)
             best = _slower(t, base, C, q, own, best, room, acceleration, size, fast, refine)
         found.append(best)
-    A = np.array([f[0] for f in found])
-    N = np.array([f[1] for f in found]).reshape(-1, d)
-    corners = np.array([f[2:] for f in found], dtype=float).reshape(-1, 4)
-    return Displacement(corners[:, 0], corners[:, 1], corners[:, 2], corners[:, 3], A, N, t0,
-                        blend, carry)
+    return found
 
 
-def _needs(W, q, directions):
+def _needs(W: Array, q: float, directions: Array) -> Array:
     """
     Return, per direction, the translation that takes every sample of ``W`` (k, d) out.
 
@@ -575,13 +527,15 @@ def _needs(W, q, directions):
     return np.max(out, axis=0)
 
 
-def _ramp_time(amplitude, acceleration):
+def _ramp_time(amplitude: float, acceleration: float) -> float:
     """Return the ramp duration whose smoothstep keeps ``amplitude`` under ``acceleration``."""
     # The quintic smoothstep's second derivative peaks at 10 / sqrt(3) (at u = 1/2 -+ 1/sqrt(12)).
     return math.sqrt(10.0 / math.sqrt(3.0) * amplitude / acceleration)
 
 
-def _slower(t, base, C, q, own, best, room, acceleration, size, fast, refine=0):
+def _slower(t: Array, base: Array, C: Array, q: Array, own: NDArray[np.bool_], best: Encounter,
+            room: tuple[float, float], acceleration: float, size: float, fast: bool,
+            refine: int = 0) -> Encounter:
     """Return ``best`` with ramps lengthened (within ``room``) to keep the acceleration bound."""
     A, n, ts, ta, tb, te = best
     least = _ramp_time(A, acceleration)
@@ -596,9 +550,9 @@ def _slower(t, base, C, q, own, best, room, acceleration, size, fast, refine=0):
     return (A2, n, new_ts, ta, tb, new_te) if A2 <= size else best
 
 
-def _joined(spans):
+def _joined(spans: list[list[Any]]) -> list[list[Any]]:
     """Join spans ``[ts, ta, tb, te, balls, need]`` whose windows ``(ts, te)`` overlap."""
-    out = []
+    out: list[list[Any]] = []
     for span in sorted(spans, key=lambda span: span[0]):
         if out and span[0] <= out[-1][3]:
             last = out[-1]
@@ -611,7 +565,8 @@ def _joined(spans):
     return out
 
 
-def keep_clear(t, x, obstacles, *args, where='the plan', **kwargs):
+def keep_clear(t: Array, x: Array, obstacles: Obstacles, *args: Any, where: str = 'the plan',
+               **kwargs: Any) -> tuple[Displacement | None, Values | None]:
     """
     Return :func:`detour`'s displacement for ``x`` and its values at ``t``, checked clear.
 
@@ -622,73 +577,12 @@ def keep_clear(t, x, obstacles, *args, where='the plan', **kwargs):
     still not clear (:func:`check_clearance`): never a plan that enters an obstacle.
     """
     for refine in (0, REFINE):
-        shift = detour(t, x, obstacles, *args, refine=refine, **kwargs)
+        shift = detour(t, x, obstacles, *args, refine=refine, **kwargs)  # type: ignore[misc]
         values = None if shift is None else shift(t)
         try:
-            check_clearance(x if shift is None else x + values[0], obstacles, where)
+            check_clearance(x if shift is None or values is None else x + values[0], obstacles,
+                            where)
             return shift, values
         except GeneralizationError as err:
             error = err
     raise error
-
-
-def check_clearance(x, obstacles, where='the plan'):
-    """
-    Raise GeneralizationError unless the polyline ``x`` (n, d) keeps out of every obstacle.
-
-    A sample closer to a centre than its radius, or a straight segment between two samples
-    that passes closer, fails.
-    """
-    C, r = obstacles.centres, obstacles.radii
-    if len(C) == 0:
-        return
-    if numba is not None and len(x) >= 2:
-        gap = _gaps_nb(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(C, float))
-    else:
-        gap = segment_gaps(x, C)
-    j = int(np.argmin(gap - r))
-    if gap[j] < r[j]:
-        raise GeneralizationError(
-            f'{where} passes {gap[j]:.4g} from the centre of obstacle #{j} ({_fmt(C[j])}), '
-            f'inside its radius {r[j]:.4g}: refused')
-
-
-def segment_gaps(x, C):
-    """Return the smallest distance of the polyline ``x`` (n, d) to each centre (m,)."""
-    if len(x) < 2:
-        return np.linalg.norm(x[:, None] - C[None], axis=2).min(axis=0)
-    a, ab = x[:-1, None], np.diff(x, axis=0)[:, None]                    # (k, 1, d)
-    ac = C[None] - a                                                      # (k, m, d)
-    length2 = np.maximum(np.sum(ab * ab, axis=2), 1e-300)                 # (k, 1)
-    u = np.clip(np.sum(ac * ab, axis=2) / length2, 0.0, 1.0)              # (k, m)
-    return np.linalg.norm(ac - u[..., None] * ab, axis=2).min(axis=0)
-
-
-if numba is not None:
-    @numba.njit(cache=True, fastmath=False)
-    def _gaps_nb(x, C):  # pragma: no cover - numba
-        """Compute :func:`segment_gaps` in one loop."""
-        n, d = x.shape
-        m = C.shape[0]
-        out = np.full(m, np.inf)
-        for k in range(n - 1):
-            for j in range(m):
-                ab2 = 0.0
-                acab = 0.0
-                for i in range(d):
-                    ab = x[k + 1, i] - x[k, i]
-                    ab2 += ab * ab
-                    acab += (C[j, i] - x[k, i]) * ab
-                u = min(max(acab / max(ab2, 1e-300), 0.0), 1.0)
-                gap2 = 0.0
-                for i in range(d):
-                    e = C[j, i] - x[k, i] - u * (x[k + 1, i] - x[k, i])
-                    gap2 += e * e
-                gap = math.sqrt(gap2)
-                if gap < out[j]:
-                    out[j] = gap
-        return out
-
-
-def _fmt(point):
-    return '(' + ', '.join(f'{c:.4g}' for c in point) + ')'

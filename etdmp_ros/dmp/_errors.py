@@ -1,5 +1,8 @@
 """Errors of the DMP core (ValueErrors with a message for users), and the check behind most."""
 
+from __future__ import annotations
+
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
 
 
@@ -11,7 +14,7 @@ class GeneralizationError(ValueError):
     """A generalization request cannot be served (bad start, goal, obstacles; degeneracy)."""
 
 
-def finite_array(value, name):
+def finite_array(value: object, name: str) -> Array:
     """Convert a request argument to a finite float array or raise GeneralizationError."""
     try:
         arr = np.asarray(value, dtype=float)

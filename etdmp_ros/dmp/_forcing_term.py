@@ -14,10 +14,15 @@ at tau too (:func:`hoffmann_term`), so past tau every plan is the spring alone, 
 goal.
 """
 
+from __future__ import annotations
+
 from collections import OrderedDict
+from collections.abc import Callable
 from functools import lru_cache
 
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Timings whose forcing tables a ForcingTerm keeps (least recently made dropped first).
 TABLE_CACHE_SIZE = 8
@@ -29,27 +34,31 @@ HOFFMANN_WIDTH = 0.3
 HOFFMANN_STEPS = 4000
 #: Steps of the normalised time on which the fit's end condition is computed.
 END_STEPS = 1000
+#: A rollout's forcing table: (phase term at the sub-steps' midpoints, f there, phase term at
+#: the samples, f there).
+_Table = tuple[Array, Array, Array,
+               Array]
 
 
-def phase(t, tau, alpha):
+def phase(t: ArrayLike, tau: float, alpha: float) -> Array:
     """Phase ``s(t) = exp(-alpha t / tau)`` (paper Eq. 5 integrated, s(0) = 1)."""
     return np.exp(-alpha * np.asarray(t, dtype=float) / tau)
 
 
-def _smootherstep(x):
+def _smootherstep(x: ArrayLike) -> tuple[Array, Array, Array]:
     """Return S(x) = 6 x^5 - 15 x^4 + 10 x^3 on [0, 1] (0 below, 1 above) and S', S''."""
     x = np.clip(x, 0.0, 1.0)
     return (x ** 3 * (10.0 + x * (6.0 * x - 15.0)), 30.0 * x ** 2 * (1.0 - x) ** 2,
             60.0 * x * (1.0 - x) * (1.0 - 2.0 * x))
 
 
-def _time(s, alpha):
+def _time(s: ArrayLike, alpha: float) -> Array:
     """Normalised time ``t / tau = -ln(s) / alpha`` of phases ``s`` (inf for s <= 0)."""
     with np.errstate(divide='ignore'):
         return -np.log(np.maximum(np.asarray(s, dtype=float), 0.0)) / alpha
 
 
-def gate(s, alpha, width=GATE_WIDTH):
+def gate(s: ArrayLike, alpha: float, width: float = GATE_WIDTH) -> Array:
     """
     Return the gate ``G(s)``: 1 until ``(1 - width) tau``, 0 from ``t = tau`` (s = exp(-alpha)).
 
@@ -62,7 +71,7 @@ def gate(s, alpha, width=GATE_WIDTH):
 
 
 @lru_cache(maxsize=16)
-def _hoffmann_table(K, D, alpha):
+def _hoffmann_table(K: float, D: float, alpha: float) -> tuple[Array, Array]:
     """Tabulate :func:`hoffmann_term` over the normalised time u in [0, 1]: (u, rho / K)."""
     from ._integrate import discretize      # the integrator's exact step (no import cycle)
     n = HOFFMANN_STEPS
@@ -87,7 +96,7 @@ def _hoffmann_table(K, D, alpha):
     return u, rho / K
 
 
-def hoffmann_term(s, K, D, alpha):
+def hoffmann_term(s: ArrayLike, K: float, D: float, alpha: float) -> Array:
     """
     Return Hoffmann's phase term ``rho(s) / K``, with ``tau dv = ... - (g - x0) rho(s) + ...``.
 
@@ -103,7 +112,8 @@ def hoffmann_term(s, K, D, alpha):
 
 
 @lru_cache(maxsize=16)
-def _end_condition(n_basis, alpha, K, D):
+def _end_condition(n_basis: int, alpha: float, K: float, D: float) -> tuple[
+        Array, Array, Array, Array]:
     """
     Return (C (2, N), G (n, 2), P (2, 2), s (n,)): how the state at t = tau follows from F.
 
@@ -135,7 +145,7 @@ class ForcingTerm:
     which is how rollouts precompute the forcing (the phase does not depend on the state).
     """
 
-    def __init__(self, n_basis, alpha, K=156.25, D=25.0):
+    def __init__(self, n_basis: int, alpha: float, K: float = 156.25, D: float = 25.0) -> None:
         if int(n_basis) < 2:
             raise ValueError(f'n_basis must be >= 2, got {n_basis}')
         self.n_basis = int(n_basis)
@@ -147,13 +157,15 @@ class ForcingTerm:
         # A kernel drops to exp(-1) at its neighbour's centre: enough overlap for a smooth fit.
         self.widths = 1.0 / np.append(gaps, gaps[-1]) ** 2
         self.weights = np.zeros((self.n_basis, 0))
-        self._tables = OrderedDict()    # timing -> (s_mid, f(s_mid), s_out, f(s_out))
-        self._hoffmann = None           # (u, rho / K) of Hoffmann's term, made when first used
+        # timing -> (s_mid, f(s_mid), s_out, f(s_out))
+        self._tables: OrderedDict[tuple[float, float, int, int], _Table] = OrderedDict()
+        # (u, rho / K) of Hoffmann's term, made when first used
+        self._hoffmann: tuple[Array, Array] | None = None
         # Phases above these: the gate is 1, Hoffmann's term is his own (K s).
         self._s_gate = float(np.exp(-self.alpha * (1.0 - GATE_WIDTH)))
         self._s_hoffmann = float(np.exp(-self.alpha * (1.0 - HOFFMANN_WIDTH)))
 
-    def phase_term(self, s):
+    def phase_term(self, s: ArrayLike) -> Array:
         """Return Hoffmann's phase term ``rho(s) / K`` (:func:`hoffmann_term`), shape (n,)."""
         s = np.asarray(s, dtype=float)
         if s.size and s.min() >= self._s_hoffmann:     # Hoffmann's own: an online step's case
@@ -164,7 +176,7 @@ class ForcingTerm:
         return np.where(s >= self._s_hoffmann, s, np.interp(_time(s, self.alpha), u, rho,
                                                             right=0.0))
 
-    def design_matrix(self, s):
+    def design_matrix(self, s: ArrayLike) -> Array:
         """Regressors ``s G(s) psi_i(s) / sum_j psi_j(s)`` for phases ``s`` (shape (n, N))."""
         s = np.asarray(s, dtype=float)
         psi = np.exp(-self.widths * (s[:, None] - self.centres) ** 2)
@@ -174,7 +186,8 @@ class ForcingTerm:
         # (where the gate is 0 anyway).
         return gated[:, None] * psi / np.maximum(psi.sum(axis=1, keepdims=True), 1e-300)
 
-    def fit(self, s, f_target, regularization=1e-8, end=None):
+    def fit(self, s: ArrayLike, f_target: Array, regularization: float = 1e-8,
+            end: tuple[ArrayLike, float, Callable[[Array], Array] | None] | None = None) -> Array:
         """
         Fit the weights to ``f_target`` (shape (n, d)) by ridge-regularised least squares.
 
@@ -206,7 +219,7 @@ class ForcingTerm:
         self._tables = OrderedDict()
         return self.weights
 
-    def table(self, tau, dt, n_out, substeps):
+    def table(self, tau: float, dt: float, n_out: int, substeps: int) -> _Table:
         """
         Return (s_mid, f(s_mid), s_out, f(s_out)) of a rollout's timing, cached per timing.
 
@@ -228,6 +241,6 @@ class ForcingTerm:
                 tables.popitem(last=False)
         return table
 
-    def __call__(self, s):
+    def __call__(self, s: ArrayLike) -> Array:
         """Evaluate f(s) for phases ``s`` (shape (n,)); returns shape (n, d)."""
         return self.design_matrix(s) @ self.weights

@@ -18,9 +18,13 @@ fast path, used when numba is importable). Both start from a given state (``x0``
 the online rollout (``_online.py``): the DMP equations are written here once.
 """
 
+from __future__ import annotations
+
 import functools
 
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._obstacles import steering_axis
 
@@ -30,10 +34,18 @@ MAX_SUBSTEP = 1e-3
 try:  # The fast path is optional: without numba the reference path serves.
     import numba
 except ImportError:  # pragma: no cover - numba is pinned in requirements
-    numba = None
+    numba = None  # type: ignore[assignment]
+
+#: The obstacle coupling's gains as the rollouts take them: (gamma, beta, gamma2, k), ``k``
+#: (1/length) one per system (B,) or one for all.
+Gains = tuple[float, float, float, ArrayLike]
+#: The exact step of :func:`discretize`: (Phi (2, 2), Gamma (2,)).
+Step = tuple[Array, Array]
+#: Positions, velocities and accelerations, each (B, n, d) (or (N, d) for :func:`chain`).
+Samples = tuple[Array, Array, Array]
 
 
-def _expm(a):
+def _expm(a: Array) -> Array:
     """Matrix exponential of a small matrix by scaling and squaring of a Taylor series."""
     norm = np.abs(a).sum(axis=1).max()
     squarings = max(0, int(np.ceil(np.log2(norm))) + 1) if norm > 0.5 else 0
@@ -49,18 +61,18 @@ def _expm(a):
 
 
 @functools.lru_cache(maxsize=64)
-def _discretized(K, D, tau, h):
+def _discretized(K: float, D: float, tau: float, h: float) -> Step:
     phi, gam = _discretize(K, D, tau, h)
     phi.flags.writeable = gam.flags.writeable = False
     return phi, gam
 
 
-def discretize(K, D, tau, h):
+def discretize(K: float, D: float, tau: float, h: float) -> Step:
     """Exact zero-order-hold step (Phi (2, 2), Gamma (2,)) of ``z = (x, v)`` over ``h`` seconds."""
     return _discretized(float(K), float(D), float(tau), float(h))
 
 
-def _discretize(K, D, tau, h):
+def _discretize(K: float, D: float, tau: float, h: float) -> Step:
     aug = np.zeros((3, 3))
     aug[:2, :2] = np.array([[0.0, 1.0], [-K, -D]]) / tau
     aug[1, 2] = 1.0 / tau
@@ -68,7 +80,7 @@ def _discretize(K, D, tau, h):
     return e[:2, :2].copy(), e[:2, 2].copy()
 
 
-def _rotate(v, omega, angle_scale):
+def _rotate(v: Array, omega: Array, angle_scale: float) -> Array:
     """Rotate each v (B, d) about omega (B, 3) by |omega| * angle_scale (Rodrigues)."""
     d = v.shape[1]
     v3 = v if d == 3 else np.concatenate([v, np.zeros((len(v), 1))], axis=1)
@@ -81,8 +93,10 @@ def _rotate(v, omega, angle_scale):
     return out[:, :d]
 
 
-def rollout_reference(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau,
-                      h, substeps, R, v0=None):
+def rollout_reference(x0: Array, goal: Array, A: Array, M: Array, s_mid: Array, f_mid: Array,
+                      s_out: Array, f_out: Array, obstacles: Array, gains: Gains, K: float,
+                      D: float, tau: float, h: float, substeps: int, R: Array,
+                      v0: ArrayLike | None = None) -> Samples:
     """
     Numpy reference rollout in the virtual situation, returned in the real one.
 
@@ -102,11 +116,11 @@ def rollout_reference(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gai
     gamma, beta, gamma2, k = gains
     k = np.asarray(k, dtype=float)[:, None]
 
-    def omega_at(x, v):
+    def omega_at(x: Array, v: Array) -> Array:
         return steering_axis(x, v, obstacles, goal, gamma, beta, gamma2, k)
 
     for i in range(n):
-        lam = 0.0
+        lam: float | Array = 0.0
         if have_obstacles:
             lam = np.cross(omega_at(x, v), v if d == 3 else np.c_[v, np.zeros(B)])[:, :d]
         X[:, i], V[:, i] = x, v / tau
@@ -125,7 +139,8 @@ def rollout_reference(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gai
 
 if numba is not None:
     @numba.njit(cache=True, fastmath=False)
-    def _omega_nb(x, v, obs, g, gamma, beta, gamma2, k, d, out):
+    def _omega_nb(x: Array, v: Array, obs: Array, g: Array, gamma: float, beta: float,
+                  gamma2: float, k: float, d: int, out: Array) -> None:
         """Steering axis Omega (3,) for one state; mirrors _obstacles.steering_axis."""
         out[0] = out[1] = out[2] = 0.0
         x2 = x[2] if d == 3 else 0.0
@@ -167,7 +182,8 @@ if numba is not None:
             out[2] += w * r2
 
     @numba.njit(cache=True, fastmath=False)
-    def _turn_nb(x, v, obstacles, g, gamma, beta, gamma2, k, angle_scale, d, om):
+    def _turn_nb(x: Array, v: Array, obstacles: Array, g: Array, gamma: float, beta: float,
+                 gamma2: float, k: float, angle_scale: float, d: int, om: Array) -> None:
         """Turn v in place by the obstacle coupling's rotation over one sub-step."""
         _omega_nb(x, v, obstacles, g, gamma, beta, gamma2, k, d, om)
         norm = np.sqrt(om[0] ** 2 + om[1] ** 2 + om[2] ** 2)
@@ -184,8 +200,9 @@ if numba is not None:
                 v[2] = v2 * ca + (k0 * v1 - k1 * v0) * sa + k2 * kv * (1.0 - ca)
 
     @numba.njit(cache=True, fastmath=False)
-    def _substep_nb(x, v, g, A, M, s, f, obstacles, gamma, beta, gamma2, k, K, phi, gam,
-                    angle_scale, d, om):
+    def _substep_nb(x: Array, v: Array, g: Array, A: Array, M: Array, s: float, f: Array,
+                    obstacles: Array, gamma: float, beta: float, gamma2: float, k: float, K: float,
+                    phi: Array, gam: Array, angle_scale: float, d: int, om: Array) -> None:
         """One sub-step of one system in place: the exact linear update, then the turn of v."""
         for i in range(d):
             u = K * g[i] + A[i] * s + M[i] * f[i]
@@ -196,8 +213,11 @@ if numba is not None:
             _turn_nb(x, v, obstacles, g, gamma, beta, gamma2, k, angle_scale, d, om)
 
     @numba.njit(cache=True, fastmath=False)
-    def _rollout_nb(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gamma, beta, gamma2,
-                    k, K, D, tau, phi, gam, angle_scale, substeps, R, vel0, X, V, Acc):
+    def _rollout_nb(x0: Array, goal: Array, A: Array, M: Array, s_mid: Array, f_mid: Array,
+                    s_out: Array, f_out: Array, obstacles: Array, gamma: float, beta: float,
+                    gamma2: float, k: Array, K: float, D: float, tau: float, phi: Array,
+                    gam: Array, angle_scale: float, substeps: int, R: Array, vel0: Array, X: Array,
+                    V: Array, Acc: Array) -> None:
         # Scalars and indices only in the loops: an array view per sub-step (goal[b], f_mid[j])
         # costs more than the sub-step's arithmetic (the batch ran 4x slower per system).
         B, d = x0.shape
@@ -252,8 +272,11 @@ if numba is not None:
                                  angle_scale, d, om)
 
     @numba.njit(cache=True, fastmath=False)
-    def _chain_nb(x_real, xd_real, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles,
-                  gamma, beta, gamma2, K, D, tau, phi, gam, angle_scale, substeps, X, Xd, Acc):
+    def _chain_nb(x_real: Array, xd_real: Array, goal: Array, A: Array, M: Array, R: Array,
+                  k: Array, s_mid: Array, f_mid: Array, s_out: Array, f_out: Array,
+                  obstacles: Array, gamma: float, beta: float, gamma2: float, K: float, D: float,
+                  tau: float, phi: Array, gam: Array, angle_scale: float, substeps: int, X: Array,
+                  Xd: Array, Acc: Array) -> None:
         N, d = goal.shape
         n_obs = obstacles.shape[0]
         x = np.empty(d)
@@ -303,8 +326,10 @@ if numba is not None:
                 vr[j] = Xd[n, j] * tau
 
 
-def chain(x, xd, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau, h,
-          substeps, step=None):
+def chain(x: ArrayLike, xd: ArrayLike, goal: Array, A: ArrayLike, M: ArrayLike, R: ArrayLike,
+          k: ArrayLike, s_mid: ArrayLike, f_mid: ArrayLike, s_out: ArrayLike, f_out: ArrayLike,
+          obstacles: ArrayLike, gains: tuple[float, float, float, object], K: float, D: float,
+          tau: float, h: float, substeps: int, step: Step | None = None) -> Samples:
     """
     Advance one system N output steps, each in the virtual situation of its own placement.
 
@@ -313,8 +338,9 @@ def chain(x, xd, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles, gains,
     one output step of ``substeps`` sub-steps (forcing at the midpoints ``s_mid``, ``f_mid``:
     N * substeps rows) and maps the new sample (forcing ``s_out[n]``, ``f_out[n]``) back: what
     N calls of :func:`rollout` with two output samples do, in one numba loop (the online
-    rollout's remainder, ``OnlineRun.run``). ``obstacles`` (n_obs, d) in the real situation.
-    Returns X, Xd, Acc (N, d): the samples after each step. Needs numba. ``step`` may give
+    rollout's remainder, ``OnlineRun.run``). ``obstacles`` (n_obs, d) in the real situation;
+    ``gains`` as :func:`rollout` takes them, whose ``k`` is not used here. Returns X, Xd, Acc
+    (N, d): the samples after each step. Needs numba. ``step`` may give
     ``discretize(K, D, tau, h)`` already computed.
     """
     phi, gam = discretize(K, D, tau, h) if step is None else step
@@ -330,8 +356,10 @@ def chain(x, xd, goal, A, M, R, k, s_mid, f_mid, s_out, f_out, obstacles, gains,
     return X, Xd, Acc
 
 
-def rollout(x0, goal, A, M, s_mid, f_mid, s_out, f_out, obstacles, gains, K, D, tau, h,
-            substeps, R, fast=True, v0=None, step=None):
+def rollout(x0: Array, goal: Array, A: Array, M: Array, s_mid: Array, f_mid: Array, s_out: Array,
+            f_out: Array, obstacles: Array, gains: Gains, K: float, D: float, tau: float, h: float,
+            substeps: int, R: Array, fast: bool = True, v0: ArrayLike | None = None,
+            step: Step | None = None) -> Samples:
     """
     Roll out B systems; same arguments and results as :func:`rollout_reference`.
 

@@ -17,9 +17,13 @@ vector ``e x v / |e x v|`` for the coordinate axis ``e`` least aligned with ``v`
 Eq. 26 term still pushes sideways.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
@@ -54,7 +58,7 @@ class ObstacleGains:
     ramp: float = 1.0
     detour_acceleration: float = 1.0
 
-    def decay(self, length_scale):
+    def decay(self, length_scale: float | Array) -> float | Array:
         """
         Return ``k`` (1/length) for movements whose start-goal distance is ``length_scale``.
 
@@ -69,7 +73,7 @@ class ObstacleGains:
             return float(self.k)
         return self.k_relative / max(float(length_scale), 1e-300)
 
-    def validate(self):
+    def validate(self) -> None:
         """Raise ValueError unless every gain is finite and non-negative."""
         for name in ('gamma', 'beta', 'gamma2', 'k_relative', 'clearance_margin', 'ramp',
                      'detour_acceleration'):
@@ -80,7 +84,7 @@ class ObstacleGains:
             raise ValueError(f'obstacle gain k must be finite and >= 0, got {self.k!r}')
 
 
-def _as3(a):
+def _as3(a: ArrayLike) -> Array:
     """Embed (..., 2) vectors in 3D with z = 0; leave (..., 3) as they are."""
     a = np.asarray(a, dtype=float)
     if a.shape[-1] == 3:
@@ -88,7 +92,9 @@ def _as3(a):
     return np.concatenate([a, np.zeros(a.shape[:-1] + (1,))], axis=-1)
 
 
-def steering_axis(x, v, obstacles, goal, gamma, beta, gamma2, k):
+def steering_axis(x: Array, v: ArrayLike, obstacles: ArrayLike, goal: ArrayLike,
+                  gamma: float, beta: float, gamma2: float,
+                  k: float | Array) -> Array:
     """
     ``Omega`` (..., 3) such that ``lambda* = Omega x v`` (Eq. 22-27 with the safe region).
 
@@ -113,7 +119,7 @@ def steering_axis(x, v, obstacles, goal, gamma, beta, gamma2, k):
     return np.einsum('...n,...ni->...i', c, r_hat)
 
 
-def _fallback_axis(v3, planar):
+def _fallback_axis(v3: Array, planar: bool) -> Array:
     """Deterministic unit axis perpendicular to v for when v points straight at an obstacle."""
     if planar:
         return np.broadcast_to(np.array([0.0, 0.0, 1.0]), v3.shape)
@@ -124,7 +130,9 @@ def _fallback_axis(v3, planar):
     return axis / np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-300)
 
 
-def obstacle_coupling(x, v, obstacles, goal, gains=ObstacleGains(), length_scale=1.0):
+def obstacle_coupling(x: Array, v: ArrayLike, obstacles: ArrayLike,
+                      goal: ArrayLike, gains: ObstacleGains = ObstacleGains(),
+                      length_scale: float | Array = 1.0) -> Array:
     """
     Compute the coupling term lambda* (Eq. 27) in the same dimension as ``x`` (2 or 3).
 

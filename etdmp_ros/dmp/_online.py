@@ -33,7 +33,7 @@ import math
 from typing import NamedTuple, Optional, Tuple
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from ._detour import candidate_directions, keep_clear, Obstacles
 from ._errors import GeneralizationError
@@ -43,9 +43,10 @@ from ._online_gains import OnlineGains
 from ._online_input import (check_goal_clear, check_goal_off_start, check_obstacle_set,
                             check_online_request, check_point, check_radii)
 from ._transform import EPS
+from ..geometry.arrays import Array as FloatArray
 
 #: A float array (its shape in the docstrings).
-Array = NDArray[np.float64]
+Array = FloatArray
 
 #: Length, in durations tau, of the forcing table that :meth:`OnlineRun.run` reads its rows
 #: from (a remainder reaching past it is computed instead).

@@ -15,10 +15,14 @@ demonstration's frame is kept, and its output is turned back by the rotation par
 ``q_g`` becomes the virtual goal ``Q^-1 q_g``.
 """
 
+from __future__ import annotations
+
 from collections import OrderedDict
 
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.arrays import Array, Quaternions, Rotations, RotationVectors
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._errors import GeneralizationError
 from ._forcing_term import ForcingTerm, phase
@@ -34,7 +38,8 @@ ORIENTATION_MODES = ('demo', 'goal', 'tool')
 _CACHE_SIZE = 8
 
 
-def check_goal_orientation(orientation, goal_orientation, batch):
+def check_goal_orientation(orientation: OrientationDMP | None, goal_orientation: ArrayLike | None,
+                           batch: int) -> Quaternions | None:
     """
     Validate ``goal_orientation`` of a request with ``batch`` starts; return (B, 4) or None.
 
@@ -66,7 +71,8 @@ def check_goal_orientation(orientation, goal_orientation, batch):
     return unit
 
 
-def turn_quaternions(R, method, mode, independent_axis):
+def turn_quaternions(R: Rotations, method: str, mode: int,
+                     independent_axis: int) -> Quaternions:
     """
     Return the quaternions Q (B, 4) by which the orientation is turned: the rotation part of R^T.
 
@@ -99,7 +105,8 @@ class OrientationDMP:
     unwrapped from the end backwards (``e_demo``).
     """
 
-    def __init__(self, q, t, tau, K, D, alpha, n_basis, regularization):
+    def __init__(self, q: ArrayLike, t: Array, tau: float, K: float, D: float,
+                 alpha: float, n_basis: int, regularization: float) -> None:
         self.demo = quat.continuous(q)
         self.K, self.D, self.alpha = K, D, alpha
         self.start, self.goal = self.demo[0].copy(), self.demo[-1].copy()
@@ -117,15 +124,18 @@ class OrientationDMP:
         with np.errstate(all='ignore'):
             # The reproduction ends at its goal orientation, at rest (design.md#coming-to-rest).
             self.forcing.fit(s, target, regularization, end=(self.e_start, 1.0, None))
-        self._reproductions = OrderedDict()
+        self._reproductions: OrderedDict[tuple[float, float, int, int], tuple[
+            Array, Array]] = OrderedDict()
 
     # -- rollout in the virtual situation ---------------------------------------------------
 
-    def _table(self, tau, dt, n_out, substeps):
+    def _table(self, tau: float, dt: float, n_out: int, substeps: int) -> tuple[
+            Array, Array, Array, Array]:
         """Phase and f_q(s) at every sub-step midpoint and output sample, cached per timing."""
         return self.forcing.table(tau, dt, n_out, substeps)
 
-    def _rollout(self, e0, tau, dt, n_out, substeps, fast):
+    def _rollout(self, e0: Array, tau: float, dt: float, n_out: int,
+                 substeps: int, fast: bool) -> tuple[Array, Array]:
         """Integrate the DMP on ``e`` from ``e0`` (B, 3) at rest; return e, de/dt (B, n, 3)."""
         B = len(e0)
         s_mid, f_mid, s_out, f_out = self._table(tau, dt, n_out, substeps)
@@ -136,7 +146,8 @@ class OrientationDMP:
                               fast=fast)
         return e, e_dot
 
-    def _reproduction(self, tau, dt, n_out, substeps, fast):
+    def _reproduction(self, tau: float, dt: float, n_out: int, substeps: int,
+                      fast: bool) -> tuple[Array, Array]:
         """Return the virtual orientation path to the demonstration's goal (cached per timing)."""
         key = (tau, dt, n_out, substeps)
         found = self._reproductions.get(key)
@@ -151,7 +162,7 @@ class OrientationDMP:
                 self._reproductions.popitem(last=False)
         return found
 
-    def virtual_start(self, goals):
+    def virtual_start(self, goals: Quaternions) -> RotationVectors:
         """
         Return the start ``e0'`` (B, 3) of the DMP toward virtual goal orientations (B, 4).
 
@@ -164,7 +175,9 @@ class OrientationDMP:
 
     # -- generalization -----------------------------------------------------------------------
 
-    def generalize(self, turn, goal_orientation, tau, dt, n_out, substeps, fast=True):
+    def generalize(self, turn: Quaternions, goal_orientation: Quaternions | None,
+                   tau: float, dt: float, n_out: int, substeps: int,
+                   fast: bool = True) -> tuple[Quaternions, Array]:
         """
         Return orientations q (B, n, 4) and angular velocities omega (B, n, 3), real situation.
 

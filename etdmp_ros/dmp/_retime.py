@@ -27,9 +27,14 @@ curve through its samples, orientations through their rotation vectors from the 
 (the same chart as the orientation DMP), so the path passes through every recorded sample.
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+import functools
 from typing import NamedTuple
 
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.arrays import Array, Quaternions
 import numpy as np
 
 #: Longest slowed stretch, in the new time, as a fraction of the recording's duration.
@@ -63,20 +68,20 @@ class Retiming(NamedTuple):
 
     start: float
     end: float
-    times: np.ndarray
+    times: Array
 
 
-def _speed_profile(r):
+def _speed_profile(r: Array) -> Array:
     """Return ``p(r) = 1 - S(r)``, the speed factor of a stretch slowing to rest (r in [0, 1])."""
     return 1.0 - r ** 4 * (35.0 + r * (-84.0 + r * (70.0 - 20.0 * r)))
 
 
-def _progress(r):
+def _progress(r: Array) -> Array:
     """Return ``Phi(r)``, the integral of ``p`` from 0 to r (``Phi(1) = 1/2``)."""
     return r - r ** 5 * (7.0 + r * (-14.0 + r * (10.0 - 2.5 * r)))
 
 
-def _inverse(function, values, iterations=60):
+def _inverse(function: Callable[[Array], Array], values: Array, iterations: int = 60) -> Array:
     """Return r in [0, 1] with ``function(r) = values`` for an increasing ``function``."""
     low, high = np.zeros_like(values), np.ones_like(values)
     for _ in range(iterations):
@@ -86,7 +91,7 @@ def _inverse(function, values, iterations=60):
     return 0.5 * (low + high)
 
 
-def _hermite(t, y, m, times):
+def _hermite(t: Array, y: Array, m: Array, times: Array) -> Array:
     """Evaluate the cubic Hermite curve through (t, y) with slopes m at ``times`` (sorted)."""
     k = np.clip(np.searchsorted(t, times, side='right') - 1, 0, len(t) - 2)
     h = (t[k + 1] - t[k])[:, None]
@@ -96,7 +101,7 @@ def _hermite(t, y, m, times):
             + (-2 * x3 + 3 * x2) * y[k + 1] + (x3 - x2) * h * m[k + 1])
 
 
-def _held(values, scale, tolerance, from_end):
+def _held(values: Array, scale: float, tolerance: float, from_end: bool) -> int:
     """Return how many samples at one end of ``values`` (T, k) sit on that end's sample."""
     end = values[-1] if from_end else values[0]
     still = np.linalg.norm(values - end, axis=1) <= tolerance * scale
@@ -104,7 +109,8 @@ def _held(values, scale, tolerance, from_end):
     return int(np.argmin(order)) if not np.all(order) else len(values)
 
 
-def _span(tm, values, scales, duration, k):
+def _span(tm: Array, values: Sequence[Array], scales: Sequence[float],
+          duration: float, k: int) -> tuple[int, int] | None:
     """
     Return the samples (i, j) of ``tm`` that the stretch at end ``k`` (0 or -1) covers, or None.
 
@@ -130,33 +136,42 @@ def _span(tm, values, scales, duration, k):
     return None if j == edge or wanted <= 0.0 else (min(edge, j), max(edge, j))
 
 
-def _offset(r, start):
+def _offset(r: Array, start: bool) -> Array:
     """Return the recording time covered at ``r``, per new length: Phi, or its mirror (start)."""
     return 0.5 - _progress(1.0 - r) if start else _progress(r)
 
 
-def come_to_rest(t, positions, orientations=None):
+def _channels(positions: Array,
+              orientations: Quaternions | None) -> tuple[list[Array], list[float]]:
+    """
+    Return the channels in which the ends are found, and their scales.
+
+    Positions in sizes; orientations as rotation vectors from the last, in ANGLE_SIZE (the
+    orientation DMP's chart).
+    """
+    size = float(np.max(np.linalg.norm(positions - positions[-1], axis=1)))
+    channels, scales = [positions], [size]
+    if orientations is not None:
+        channels.append(quat.unwrap(quat.log_map(quat.multiply(
+            orientations, quat.conjugate(orientations[-1]))), backward=True))
+        scales.append(ANGLE_SIZE)
+    return channels, scales
+
+
+def come_to_rest(t: Array, positions: Array, orientations: Quaternions | None = None) -> tuple[
+        Array, Array, Quaternions | None, Retiming]:
     """
     Re-time a demonstration's ends so that it starts and ends at rest along its own path.
 
     ``t`` (T,) increasing seconds from 0, ``positions`` (T, d), ``orientations`` (T, 4) unit
     quaternions (x, y, z, w), sign-continuous, or None. Returns ``(t, positions, orientations,
     retiming)``: the re-timed demonstration (the arrays given when both ends are at rest) and
-    the :class:`Retiming`. The recorded samples outside the slowed stretches are kept as they
-    are.
+    the :class:`Retiming`; recorded samples outside the slowed stretches are kept as they are.
     """
     unchanged = t, positions, orientations, Retiming(0.0, 0.0, t)
     T, duration = len(t), float(t[-1] - t[0])
-    size = float(np.max(np.linalg.norm(positions - positions[-1], axis=1)))
-    # Channels: positions in sizes; orientations as rotation vectors from the last, in
-    # ANGLE_SIZE (the orientation DMP's chart).
-    channels, scales, recorded = [positions], [size], [positions]
-    if orientations is not None:
-        goal_q = orientations[-1]
-        channels.append(quat.unwrap(quat.log_map(quat.multiply(
-            orientations, quat.conjugate(goal_q))), backward=True))
-        scales.append(ANGLE_SIZE)
-        recorded.append(orientations)
+    channels, scales = _channels(positions, orientations)
+    recorded = [positions] if orientations is None else [positions, orientations]
     # The motion: without the samples held still (in every channel) at either end.
     first = min(_held(v, s, HOLD_TOLERANCE, False) for v, s in zip(channels, scales)) - 1
     last = T - min(_held(v, s, HOLD_TOLERANCE, True) for v, s in zip(channels, scales))
@@ -170,7 +185,8 @@ def come_to_rest(t, positions, orientations=None):
     slopes = [np.gradient(v[motion], tm, axis=0, edge_order=2) for v in channels]
     period = duration / (T - 1)
     recorded_times = np.array(t, dtype=float)
-    pieces_t, pieces = [], [[] for _ in channels]
+    pieces_t: list[Array] = []
+    pieces: list[list[Array]] = [[] for _ in channels]
     shift, cursor, added = 0.0, 0, [0.0, 0.0]
     for which, span in enumerate(spans):
         if span is None:
@@ -185,11 +201,11 @@ def come_to_rest(t, positions, orientations=None):
         pieces_t += [t[cursor:a + 1] + shift, t[a] + shift + length * r]
         recorded_times[cursor:a + 1] += shift
         recorded_times[a + 1:b] = t[a] + shift + length * _inverse(
-            lambda x, start=which == 0: _offset(x, start), (t[a + 1:b] - t[a]) / length)
+            functools.partial(_offset, start=which == 0), (t[a + 1:b] - t[a]) / length)
         for i, (values, m) in enumerate(zip(channels, slopes)):
             between = _hermite(tm, values[motion], m, times)
             if i == 1:      # rotation vectors back to quaternions: q = exp(e / 2) q_g
-                between = quat.multiply(quat.exp_map(between), goal_q)
+                between = quat.multiply(quat.exp_map(between), recorded[1][-1])
             pieces[i] += [recorded[i][cursor:a + 1], between]
         cursor = b
         shift += length - covered

@@ -4,9 +4,13 @@ Similarity between a generalized movement and the demonstration (paper Eq. 15-16
 The definitions: docs/design.md#similarity-measure.
 """
 
+from __future__ import annotations
+
 from typing import NamedTuple
 
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._transform import plane_rotation
 
@@ -18,7 +22,7 @@ class Similarity(NamedTuple):
     conventional: float
 
 
-def _resample(y, n):
+def _resample(y: Array, n: int) -> Array:
     """Resample (m, d) samples to n by linear interpolation in normalised phase (index)."""
     if len(y) == n:
         return y
@@ -27,7 +31,7 @@ def _resample(y, n):
     return np.stack([np.interp(dst, src, y[:, i]) for i in range(y.shape[1])], axis=1)
 
 
-def similarity(generated, demo, n_samples=None):
+def similarity(generated: ArrayLike, demo: ArrayLike, n_samples: int | None = None) -> Similarity:
     """
     Compute the nRMSE of ``generated`` (m, d) against ``demo`` (n, d), both variants.
 
@@ -61,14 +65,15 @@ def similarity(generated, demo, n_samples=None):
     return Similarity(float(np.sqrt(np.sum(per_axis ** 2))), float(np.sqrt(np.sum(per_axis))))
 
 
-def nrmse(generated, demo, variant='conventional', n_samples=None):
+def nrmse(generated: ArrayLike, demo: ArrayLike, variant: str = 'conventional',
+          n_samples: int | None = None) -> float:
     """Compute the nRMSE of ``generated`` against ``demo`` (variant "conventional" or "paper")."""
     if variant not in Similarity._fields:
         raise ValueError(f'variant must be one of {Similarity._fields}, got {variant!r}')
     return getattr(similarity(generated, demo, n_samples), variant)
 
 
-def clearance(x, obstacles):
+def clearance(x: ArrayLike, obstacles: ArrayLike) -> float:
     """Smallest distance from any sample of path(s) ``x`` (..., d) to any obstacle point (n, d)."""
     x = np.asarray(x, dtype=float)
     obs = np.asarray(obstacles, dtype=float).reshape(-1, x.shape[-1])

@@ -1,11 +1,16 @@
 """Learning a skill from one demonstration and generalizing it with DMP or ET-DMP."""
 
+from __future__ import annotations
+
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
 from etdmp_ros import limits
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.arrays import Array, Quaternions, Rotations
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._demos import Demonstration
 from ._detour import candidate_directions, keep_clear, Obstacles
@@ -13,7 +18,7 @@ from ._errors import DemonstrationError, finite_array, GeneralizationError
 from ._forcing_term import ForcingTerm, phase
 from ._integrate import MAX_SUBSTEP, rollout
 from ._obstacles import ObstacleGains
-from ._online import OnlineRun
+from ._online import OnlineGains, OnlineRun
 from ._orientation import check_goal_orientation, OrientationDMP, turn_quaternions
 from ._retime import come_to_rest
 from ._transform import EPS, EuclideanTransform, transforms
@@ -51,26 +56,26 @@ class Trajectory:
     (docs/orientation.md); both are None for a position-only skill.
     """
 
-    t: np.ndarray
-    x: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    start: np.ndarray
-    goal: np.ndarray
+    t: Array
+    x: Array
+    v: Array
+    a: Array
+    start: Array
+    goal: Array
     method: str
-    rotation: np.ndarray
-    virtual_start: np.ndarray
-    q: np.ndarray = None
-    omega: np.ndarray = None
+    rotation: Rotations
+    virtual_start: Array
+    q: Quaternions | None = None
+    omega: Array | None = None
 
 
 class _Request(NamedTuple):
     """A checked :meth:`Skill.generalize` request (see :meth:`Skill._check_request`)."""
 
-    starts: np.ndarray
-    goals: np.ndarray
-    obstacles: np.ndarray
-    radii: np.ndarray
+    starts: Array
+    goals: Array
+    obstacles: Array
+    radii: Array
     avoidance: str
     single: bool
     gains: ObstacleGains
@@ -79,8 +84,10 @@ class _Request(NamedTuple):
     n_out: int
 
 
-def learn(positions, orientations=None, dt=None, t=None, n_basis=100, K=156.25, D=25.0,
-          alpha=4.0, formulation='ijspeert', regularization=1e-8):
+def learn(positions: ArrayLike | Demonstration, orientations: ArrayLike | None = None,
+          dt: float | None = None, t: ArrayLike | None = None, n_basis: int = 100,
+          K: float = 156.25, D: float = 25.0, alpha: float = 4.0, formulation: str = 'ijspeert',
+          regularization: float = 1e-8) -> Skill:
     """
     Learn a skill from one demonstration.
 
@@ -94,12 +101,13 @@ def learn(positions, orientations=None, dt=None, t=None, n_basis=100, K=156.25, 
     if isinstance(positions, Demonstration):
         if orientations is None:
             orientations = positions.orientations
-        positions, t = positions.positions, positions.t if t is None else t
+        t = positions.t if t is None else t
+        positions = positions.positions
     if t is None and dt is not None:
         if not (np.isfinite(dt) and dt > 0.0):
             raise DemonstrationError(f'dt must be a positive number, got {dt!r}')
         t = np.arange(len(np.atleast_1d(positions))) * float(dt)
-    demo = Demonstration('demonstration', positions, t, orientations)
+    demo = Demonstration('demonstration', positions, t, orientations)  # type: ignore[arg-type]
     if demo.has_orientation and demo.dim not in (2, 3):
         raise DemonstrationError(f'orientations need a 2D (task plane) or 3D skill, this one has '
                                  f'{demo.dim} coordinate(s)')
@@ -122,8 +130,9 @@ class Skill:
     by ~0. The Ijspeert per-dimension scaling is applied only when the plain DMP is asked for.
     """
 
-    def __init__(self, y, t, n_basis, K, D, alpha, formulation, regularization,
-                 orientations=None):
+    def __init__(self, y: Array, t: Array, n_basis: int, K: float, D: float, alpha: float,
+                 formulation: str, regularization: float,
+                 orientations: Quaternions | None = None) -> None:
         if orientations is not None:
             orientations = quat.continuous(orientations)
         #: The demonstration as learned (``demo``, ``demo_t``): re-timed to start and end at rest
@@ -149,6 +158,7 @@ class Skill:
         s = phase(t, self.tau, alpha)
         needed = self.tau ** 2 * xdd + D * self.tau * xd - K * (self.goal - y)
         offset = self.goal - self.start
+        end: tuple[Array, float, Callable[[Array], Array] | None]
         if formulation == 'ijspeert':
             target = needed / self.size
             end = (-offset, self.size, None)
@@ -165,48 +175,51 @@ class Skill:
             raise DemonstrationError('learning this demonstration overflows (its coordinates or '
                                      'accelerations are too large to be represented)')
         #: The orientation DMP (docs/orientation.md), or None for a position-only skill.
-        self.orientation = None if orientations is None else OrientationDMP(
+        self.orientation: OrientationDMP | None = None if orientations is None else OrientationDMP(
             orientations, t, self.tau, K, D, alpha, n_basis, regularization)
 
     @property
-    def has_orientation(self):
+    def has_orientation(self) -> bool:
         """Return True if the skill was learned with orientations."""
         return self.orientation is not None
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return (f'Skill(dim={self.dim}, tau={self.tau:.3g}, samples={len(self.demo)}, '
                 f'formulation={self.formulation!r}, n_basis={self.forcing.n_basis})')
 
     # -- generalization -------------------------------------------------------------------------
 
-    def reproduce(self, dt=None):
+    def reproduce(self, dt: float | None = None) -> Trajectory:
         """Roll out the plain DMP from the demonstration's own start to its own goal."""
         return self.generalize(self.start, self.goal, method='dmp', dt=dt)
 
-    def generalize(self, start, goal, obstacles=(), method='etdmp', mode=1, independent_axis=2,
-                   dt=None, tau=None, margin=None, gains=None, fast=True, goal_orientation=None,
-                   obstacle_radii=None, avoidance=None):
+    def generalize(self, start: ArrayLike, goal: ArrayLike, obstacles: ArrayLike = (),
+                   method: str = 'etdmp', mode: int = 1, independent_axis: int = 2,
+                   dt: float | None = None, tau: float | None = None,
+                   margin: float | None = None, gains: ObstacleGains | None = None,
+                   fast: bool = True, goal_orientation: ArrayLike | None = None,
+                   obstacle_radii: ArrayLike | None = None,
+                   avoidance: str | None = None) -> Trajectory:
         """
         Generalize the skill from ``start`` to ``goal``.
 
         ``start``: (d,) for one movement or (B, d) for a batch; ``goal``: (d,) or (B, d);
         ``obstacles``: (n_obs, d) centres (2D/3D); ``obstacle_radii``: (n_obs,) the clearance the
-        plan must keep from each centre (the caller adds the tool's radius and a safety margin),
-        or None for the paper's point obstacles. ``avoidance`` (AVOIDANCES): "detour", the
-        default with radii (docs/design.md#obstacles-with-a-size: no sample closer to a centre
-        than its radius, checked; obstacles farther than their radius plus
-        ``gains.clearance_margin`` from the obstacle-free plan change nothing), or "paper", the
-        paper's coupling Eq. 22-27, the default without radii (radii are then not used).
-        ``method``: "etdmp" (Euclidean transformation, ``mode`` 1 or 2 in 3D) or "dmp" (the plain
-        baseline). The output is sampled every ``dt`` (default: the demonstration's mean sample
-        period) from 0 to ``tau * (1 + margin)``; the default margin is 0 (the output is
-        phase-aligned with the demonstration), OBSTACLE_MARGIN with the paper's coupling, since
-        its detour delays arrival at the goal.
-        For a skill with orientations the output also carries ``q`` and ``omega``: the
-        demonstrated orientations turned with the motion or, given ``goal_orientation``
-        (x, y, z, w), (4,) or (B, 4), converging to it (docs/orientation.md).
-        Raises GeneralizationError on bad or degenerate input, and when the detour cannot keep
-        the clearance (never a plan that enters an obstacle).
+        plan must keep from each centre (the caller adds the tool's radius and a safety margin), or
+        None for the paper's point obstacles. ``avoidance`` (AVOIDANCES): "detour", the default
+        with radii (docs/design.md#obstacles-with-a-size: no sample closer to a centre than its
+        radius, checked; obstacles farther than their radius plus ``gains.clearance_margin`` from
+        the obstacle-free plan change nothing), or "paper", the paper's coupling Eq. 22-27, the
+        default without radii (radii are then not used). ``method``: "etdmp" (Euclidean
+        transformation, ``mode`` 1 or 2 in 3D) or "dmp" (the plain baseline). The output is sampled
+        every ``dt`` (default: the demonstration's mean sample period) from 0 to ``tau * (1 +
+        margin)``; the default margin is 0 (the output is phase-aligned with the demonstration),
+        OBSTACLE_MARGIN with the paper's coupling, since its detour delays arrival at the goal. For
+        a skill with orientations the output also carries ``q`` and ``omega``: the demonstrated
+        orientations turned with the motion or, given ``goal_orientation`` (x, y, z, w), (4,) or
+        (B, 4), converging to it (docs/orientation.md). Raises GeneralizationError on bad or
+        degenerate input, and when the detour cannot keep the clearance (never a plan that enters
+        an obstacle).
         """
         r = self._check_request(start, goal, obstacles, method, dt, tau, margin, gains,
                                 obstacle_radii, avoidance)
@@ -241,7 +254,8 @@ class Skill:
         return Trajectory(t, x, v, a, r.starts, r.goals, method, transform.R, virtual_start, q,
                           omega)
 
-    def _detour(self, t, x, v, a, r, R, fast=True):
+    def _detour(self, t: Array, x: Array, v: Array, a: Array, r: _Request, R: Rotations,
+                fast: bool = True) -> None:
         """
         Displace the obstacle-free rollouts ``x``, ``v``, ``a`` (B, n, d) around the obstacles.
 
@@ -263,7 +277,7 @@ class Skill:
                     t, x[b], obstacles, r.gains.clearance_margin * sizes[b], r.gains.ramp,
                     directions @ R[b], sizes[b], fast=fast,
                     acceleration=r.gains.detour_acceleration * peak)
-                if shift is None:
+                if shift is None or values is None:     # both None: no obstacle in the way
                     continue
                 delta, delta_v, delta_a = values
                 x[b] += delta
@@ -273,9 +287,12 @@ class Skill:
                 which = '' if r.single else f' (start #{b})'
                 raise GeneralizationError(f'{err}{which}') from None
 
-    def online(self, start, goal, obstacles=(), method='etdmp', mode=1, independent_axis=2,
-               dt=None, tau=None, gains=None, online=None, fast=True, obstacle_radii=None,
-               avoidance=None):
+    def online(self, start: ArrayLike, goal: ArrayLike, obstacles: ArrayLike = (),
+               method: str = 'etdmp', mode: int = 1, independent_axis: int = 2,
+               dt: float | None = None, tau: float | None = None,
+               gains: ObstacleGains | None = None, online: OnlineGains | None = None,
+               fast: bool = True, obstacle_radii: ArrayLike | None = None,
+               avoidance: str | None = None) -> OnlineRun:
         """
         Start an online rollout from ``start`` to ``goal``: the goal may move while it runs.
 
@@ -291,7 +308,8 @@ class Skill:
         return OnlineRun(self, start, goal, obstacles, method, mode, independent_axis, dt, tau,
                          gains, online, fast, obstacle_radii, avoidance)
 
-    def _placement(self, starts, goals, method, mode, independent_axis):
+    def _placement(self, starts: Array, goals: Array, method: str, mode: int,
+                   independent_axis: int) -> tuple[EuclideanTransform, Array, Array, Array]:
         """
         Place the skill between ``starts`` and ``goals`` (both (B, d)): the transform and A, M.
 
@@ -317,7 +335,7 @@ class Skill:
             M = np.full_like(starts, self.K * self.size)
         return transform, virtual_start, A, M
 
-    def _placed_size(self, starts, goals):
+    def _placed_size(self, starts: ArrayLike, goals: ArrayLike) -> Array:
         """
         Return the size of the movement placed between ``starts`` and ``goals`` ((B,) or ()).
 
@@ -328,8 +346,10 @@ class Skill:
         ratio = self.size / n_demo if n_demo > EPS * self.size else 1.0
         return np.linalg.norm(np.asarray(starts) - np.asarray(goals), axis=-1) * ratio
 
-    def _check_request(self, start, goal, obstacles, method, dt, tau, margin, gains,
-                       obstacle_radii=None, avoidance=None):
+    def _check_request(self, start: ArrayLike, goal: ArrayLike, obstacles: ArrayLike,
+                       method: str, dt: float | None, tau: float | None, margin: float | None,
+                       gains: ObstacleGains | None, obstacle_radii: ArrayLike | None = None,
+                       avoidance: str | None = None) -> _Request:
         """
         Validate the arguments of :meth:`generalize` and return them as a :class:`_Request`.
 
@@ -339,29 +359,8 @@ class Skill:
         ``independent_axis`` are checked by the transform, which alone uses them. Raises
         GeneralizationError for the first problem found.
         """
-        d = self.dim
-        start = finite_array(start, 'start')
-        goal = finite_array(goal, 'goal')
-        single = start.ndim <= 1
-        starts = start.reshape(1, -1) if single else start
-        if starts.ndim != 2 or starts.shape[1] != d or len(starts) == 0:
-            raise GeneralizationError(
-                f'start must have shape ({d},) or (B, {d}), got {start.shape}')
-        if goal.shape in ((d,), (1, d)):
-            goals = np.repeat(goal.reshape(1, d), len(starts), axis=0)
-        elif goal.shape == starts.shape:
-            goals = goal.copy()
-        else:
-            raise GeneralizationError(f'goal must have shape ({d},) or ({len(starts)}, {d}), '
-                                      f'got {goal.shape}')
-        obs = finite_array(obstacles, 'obstacles')
-        if obs.size == 0:
-            obs = np.zeros((0, d))
-        elif obs.ndim > 2 or obs.shape[-1] != d:
-            raise GeneralizationError(f'obstacles must have shape (n, {d}), got {obs.shape}')
-        obs = obs.reshape(-1, d)
-        if len(obs) and d not in (2, 3):
-            raise GeneralizationError(f'obstacle avoidance needs 2 or 3 dimensions, skill has {d}')
+        starts, goals, single = self._check_ends(start, goal)
+        obs = self._check_centres(obstacles)
         if method not in METHODS:
             raise GeneralizationError(f'method must be one of {METHODS}, got {method!r}')
         radii = self._check_radii(obstacle_radii, len(obs))
@@ -377,11 +376,50 @@ class Skill:
             raise GeneralizationError(str(exc)) from None
         tau = self.tau if tau is None else tau
         dt = self.dt if dt is None else dt
+        if margin is None:
+            margin = OBSTACLE_MARGIN if len(obs) and avoidance == 'paper' else 0.0
+        n_out = self._check_timing(tau, dt, margin)
+        self._check_placement(starts, goals, obs, radii, avoidance == 'detour', single)
+        return _Request(starts, goals, obs, radii, avoidance, single, gains, tau, dt, n_out)
+
+    def _check_ends(self, start: ArrayLike, goal: ArrayLike) -> tuple[Array, Array, bool]:
+        """Return ``starts`` and ``goals`` (B, d) and whether one start was given (not a batch)."""
+        d = self.dim
+        start = finite_array(start, 'start')
+        goal = finite_array(goal, 'goal')
+        single = start.ndim <= 1
+        starts = start.reshape(1, -1) if single else start
+        if starts.ndim != 2 or starts.shape[1] != d or len(starts) == 0:
+            raise GeneralizationError(
+                f'start must have shape ({d},) or (B, {d}), got {start.shape}')
+        if goal.shape in ((d,), (1, d)):
+            goals = np.repeat(goal.reshape(1, d), len(starts), axis=0)
+        elif goal.shape == starts.shape:
+            goals = goal.copy()
+        else:
+            raise GeneralizationError(f'goal must have shape ({d},) or ({len(starts)}, {d}), '
+                                      f'got {goal.shape}')
+        return starts, goals, single
+
+    def _check_centres(self, obstacles: ArrayLike) -> Array:
+        """Return the obstacles' centres as (n_obs, d); raise for bad ones."""
+        d = self.dim
+        obs = finite_array(obstacles, 'obstacles')
+        if obs.size == 0:
+            obs = np.zeros((0, d))
+        elif obs.ndim > 2 or obs.shape[-1] != d:
+            raise GeneralizationError(f'obstacles must have shape (n, {d}), got {obs.shape}')
+        obs = obs.reshape(-1, d)
+        if len(obs) and d not in (2, 3):
+            raise GeneralizationError(f'obstacle avoidance needs 2 or 3 dimensions, skill has {d}')
+        return obs
+
+    @staticmethod
+    def _check_timing(tau: float, dt: float, margin: float) -> int:
+        """Return the number of output samples of ``tau`` (s) plus ``margin`` every ``dt`` (s)."""
         for name, value in (('tau', tau), ('dt', dt)):
             if not (np.isfinite(value) and value > 0.0):
                 raise GeneralizationError(f'{name} must be a positive number, got {value!r}')
-        if margin is None:
-            margin = OBSTACLE_MARGIN if len(obs) and avoidance == 'paper' else 0.0
         if not (np.isfinite(margin) and margin >= 0.0):
             raise GeneralizationError(f'margin must be >= 0, got {margin!r}')
         n_out = int(round(tau * (1.0 + margin) / dt)) + 1
@@ -392,31 +430,37 @@ class Skill:
         if n_out > MAX_SAMPLES:
             raise GeneralizationError(f'{n_out} samples requested (dt={dt:g}, tau={tau:g}); '
                                       f'at most {MAX_SAMPLES}')
+        return n_out
+
+    def _check_placement(self, starts: Array, goals: Array, obs: Array, radii: Array,
+                         detour: bool, single: bool) -> None:
+        """Raise unless every start leaves its goal and no obstacle holds a goal (or start)."""
         gaps = np.linalg.norm(starts - goals, axis=1)
         if np.any(gaps <= EPS * self.size):
             b = int(np.argmin(gaps))
             raise GeneralizationError(
                 f'start equals goal (|x0 - g| = {gaps[b]:.3g}) for start #{b}: there is no '
                 'movement to generalize')
-        if len(obs):
-            to_goal = np.linalg.norm(obs[None] - goals[:, None], axis=2)
-            if np.any(to_goal <= EPS * self.size):
-                raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
-            if avoidance == 'detour':
-                for name, points in (('goal', goals), ('start', starts)):
-                    gap = np.linalg.norm(obs[None] - points[:, None], axis=2) - radii
-                    if np.any(gap < 0.0):
-                        b, j = (int(i[0]) for i in np.nonzero(gap < 0.0))
-                        which = '' if single else f' #{b}'
-                        raise GeneralizationError(
-                            f'the {name}{which} lies inside obstacle #{j} (centre '
-                            f'{np.round(obs[j], 4).tolist()}, radius {radii[j]:.4g}: '
-                            f'{gap[b, j] + radii[j]:.4g} from its centre): the plan cannot keep '
-                            'its clearance')
-        return _Request(starts, goals, obs, radii, avoidance, single, gains, tau, dt, n_out)
+        if not len(obs):
+            return
+        to_goal = np.linalg.norm(obs[None] - goals[:, None], axis=2)
+        if np.any(to_goal <= EPS * self.size):
+            raise GeneralizationError('an obstacle lies on the goal: the goal is unreachable')
+        if not detour:
+            return
+        for name, points in (('goal', goals), ('start', starts)):
+            gap = np.linalg.norm(obs[None] - points[:, None], axis=2) - radii
+            if np.any(gap < 0.0):
+                b, j = (int(i[0]) for i in np.nonzero(gap < 0.0))
+                which = '' if single else f' #{b}'
+                raise GeneralizationError(
+                    f'the {name}{which} lies inside obstacle #{j} (centre '
+                    f'{np.round(obs[j], 4).tolist()}, radius {radii[j]:.4g}: '
+                    f'{gap[b, j] + radii[j]:.4g} from its centre): the plan cannot keep '
+                    'its clearance')
 
     @staticmethod
-    def _check_radii(obstacle_radii, n_obs):
+    def _check_radii(obstacle_radii: ArrayLike | None, n_obs: int) -> Array:
         """Return the obstacle radii as (n_obs,) (zeros for None); raise for bad ones."""
         if obstacle_radii is None:
             return np.zeros(n_obs)
@@ -430,7 +474,7 @@ class Skill:
             raise GeneralizationError(f'obstacle_radii must be >= 0, got {radii.tolist()}')
         return radii
 
-    def _plain_scale(self, i_current):
+    def _plain_scale(self, i_current: Array) -> Array:
         """
         Ijspeert's per-dimension spatial scaling ``(g - x0)_i / (g_D - x0_D)_i``.
 
@@ -452,6 +496,7 @@ class Skill:
                 "or formulation='hoffmann'")
         return np.where(tiny, 1.0, -i_current / np.where(tiny, 1.0, offset))
 
-    def _forcing_table(self, tau, dt, n_out, substeps):
+    def _forcing_table(self, tau: float, dt: float, n_out: int, substeps: int) -> tuple[
+            Array, Array, Array, Array]:
         """Phase and f(s) at every sub-step midpoint and output sample, cached per timing."""
         return self.forcing.table(tau, dt, n_out, substeps)

@@ -26,17 +26,21 @@ number per block, ``|I_C| / |I_D|``, and needs no division by a component of ``I
 ~0. A block in which the demonstration does not move (``|I_D_block| ~ 0``) uses the overall ratio.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 import math
 
+from etdmp_ros.geometry.arrays import Array, Rotations
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ._errors import GeneralizationError
 
 try:  # The fast path is optional: without numba the numpy formula below serves.
     import numba
 except ImportError:  # pragma: no cover - numba is pinned in requirements
-    numba = None
+    numba = None  # type: ignore[assignment]
 
 #: Relative size below which a vector counts as zero (and a direction as undefined).
 EPS = 1e-9
@@ -51,25 +55,25 @@ class EuclideanTransform:
     or (B, d).
     """
 
-    R: np.ndarray
-    scale: np.ndarray
+    R: Rotations
+    scale: Array
 
-    def to_virtual(self, points, goal):
+    def to_virtual(self, points: ArrayLike, goal: Array) -> Array:
         """Map real points (..., d) to the virtual situation about ``goal`` (Eq. 12, 23)."""
         points = np.asarray(points, dtype=float)
         return _apply(self.R, points - goal, transpose=False) + goal
 
-    def from_virtual(self, points, goal):
+    def from_virtual(self, points: ArrayLike, goal: Array) -> Array:
         """Map virtual points back to the real situation about ``goal`` (Eq. 13)."""
         points = np.asarray(points, dtype=float)
         return _apply(self.R, points - goal, transpose=True) + goal
 
-    def vectors_from_virtual(self, vectors):
+    def vectors_from_virtual(self, vectors: ArrayLike) -> Array:
         """Map virtual velocities or accelerations back (``R^T v``, Eq. 14)."""
         return _apply(self.R, np.asarray(vectors, dtype=float), transpose=True)
 
 
-def _apply(R, y, transpose):
+def _apply(R: Array, y: Array, transpose: bool) -> Array:
     """Apply R (or R^T) to row vectors y; batched R (B, d, d) pairs with y (B, d) or (B, n, d)."""
     Rt = R if transpose else np.swapaxes(R, -1, -2)
     if R.ndim == 2 or y.ndim == 3:
@@ -77,7 +81,7 @@ def _apply(R, y, transpose):
     return (y[:, None] @ Rt)[:, 0]
 
 
-def plane_rotation(i_demo, i_current):
+def plane_rotation(i_demo: ArrayLike, i_current: ArrayLike) -> Rotations:
     """
     Rotations turning each row of ``i_current`` (B, d) onto the direction of ``i_demo`` (d,).
 
@@ -99,7 +103,9 @@ def plane_rotation(i_demo, i_current):
 
 if numba is not None:
     @numba.njit(cache=True, fastmath=False)
-    def _plane_rotation_nb(i_current, e_demo, demo_ok, axis, eps):  # pragma: no cover - numba
+    def _plane_rotation_nb(i_current: Array, e_demo: Array,
+                           demo_ok: bool, axis: Array,
+                           eps: float) -> Array:  # pragma: no cover - numba
         n, d = i_current.shape
         R = np.zeros((n, d, d))
         u, w = np.empty(d), np.empty(d)
@@ -134,7 +140,7 @@ if numba is not None:
         return R
 
 
-def plane_rotation_numpy(i_demo, i_current):
+def plane_rotation_numpy(i_demo: ArrayLike, i_current: ArrayLike) -> Rotations:
     """Compute :func:`plane_rotation` with numpy only (the reference; and d == 1)."""
     i_demo = np.asarray(i_demo, dtype=float)
     i_current = np.atleast_2d(np.asarray(i_current, dtype=float))
@@ -170,14 +176,15 @@ def plane_rotation_numpy(i_demo, i_current):
     return R
 
 
-def _norm_ratio(i_demo, i_current, fallback):
+def _norm_ratio(i_demo: Array, i_current: Array, fallback: Array) -> Array:
     """Return ``|I_C| / |I_D|`` per row, or ``fallback`` where ``|I_D|`` is 0."""
     n_demo = np.linalg.norm(i_demo)
     n_cur = np.linalg.norm(np.atleast_2d(i_current), axis=1)
     return n_cur / n_demo if n_demo > 0.0 else fallback
 
 
-def transforms(i_demo, i_current, mode=1, independent_axis=2, size=0.0):
+def transforms(i_demo: ArrayLike, i_current: ArrayLike, mode: int = 1, independent_axis: int = 2,
+               size: float = 0.0) -> EuclideanTransform:
     """
     Batched transforms: ``i_current`` (B, d) → EuclideanTransform with R (B, d, d), scale (B, d).
 
@@ -217,13 +224,14 @@ def transforms(i_demo, i_current, mode=1, independent_axis=2, size=0.0):
         sub_demo, sub_cur = i_demo[block], i_current[:, block]
         quiet = np.linalg.norm(sub_demo) <= EPS * n_demo
         R_block = plane_rotation(np.zeros(len(block)) if quiet else sub_demo, sub_cur)
-        R[np.ix_(np.arange(n), block, block)] = R_block
+        R[np.ix_(np.arange(n), block, block)] = R_block  # type: ignore[arg-type]
         ratio = overall if quiet else _norm_ratio(sub_demo, sub_cur, overall)
         scale[:, block] = ratio[:, None]
     return EuclideanTransform(R, scale)
 
 
-def euclidean_transform(i_demo, i_current, mode=1, independent_axis=2, size=0.0):
+def euclidean_transform(i_demo: ArrayLike, i_current: ArrayLike, mode: int = 1,
+                        independent_axis: int = 2, size: float = 0.0) -> EuclideanTransform:
     """Transform for one start: ``I_D`` (d,), ``I_C`` (d,) → EuclideanTransform with R (d, d)."""
     batch = transforms(i_demo, np.asarray(i_current, dtype=float)[None], mode, independent_axis,
                        size)

@@ -12,11 +12,16 @@ Conventions are those of ``sensor_msgs/CameraInfo`` and REP-103/105:
   Orientations are quaternions ``[x, y, z, w]`` (ROS order).
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 from dataclasses import dataclass
 import math
 
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.arrays import Array, Points3, Rotations
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 @dataclass(frozen=True)
@@ -36,7 +41,7 @@ class CameraIntrinsics:
     cx: float
     cy: float
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate the values (positive size and focal lengths, finite numbers)."""
         if int(self.width) != self.width or int(self.height) != self.height or \
                 self.width < 1 or self.height < 1:
@@ -47,7 +52,7 @@ class CameraIntrinsics:
             raise ValueError(f'focal lengths must be positive and finite, got {values}')
 
     @classmethod
-    def from_fovy(cls, width, height, fovy_deg):
+    def from_fovy(cls, width: int, height: int, fovy_deg: float) -> CameraIntrinsics:
         """
         Return the intrinsics of an OpenGL/MuJoCo camera with vertical field of view ``fovy_deg``.
 
@@ -61,32 +66,32 @@ class CameraIntrinsics:
         return cls(int(width), int(height), f, f, (width - 1) / 2.0, (height - 1) / 2.0)
 
     @property
-    def fovy_deg(self):
+    def fovy_deg(self) -> float:
         """Vertical field of view in degrees (edge to edge)."""
         return math.degrees(2.0 * math.atan(0.5 * self.height / self.fy))
 
     @property
-    def fovx_deg(self):
+    def fovx_deg(self) -> float:
         """Horizontal field of view in degrees (edge to edge)."""
         return math.degrees(2.0 * math.atan(0.5 * self.width / self.fx))
 
     @property
-    def K(self):   # noqa: N802 - the name of the matrix in CameraInfo and in every textbook
+    def K(self) -> Array:   # noqa: N802 - the matrix's name in CameraInfo, textbooks
         """Camera matrix (3, 3)."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
     @property
-    def P(self):   # noqa: N802 - CameraInfo's name
+    def P(self) -> Array:   # noqa: N802 - CameraInfo's name
         """Projection matrix (3, 4) of a monocular camera: [K | 0]."""
         return np.hstack([self.K, np.zeros((3, 1))])
 
-    def project(self, points):
+    def project(self, points: ArrayLike) -> Array:
         """Return pixel coordinates (N, 2) ``(u, v)`` of points (N, 3) in the optical frame."""
         p = np.atleast_2d(np.asarray(points, dtype=float))
         z = p[:, 2]
         return np.stack([self.fx * p[:, 0] / z + self.cx, self.fy * p[:, 1] / z + self.cy], axis=1)
 
-    def deproject(self, u, v, depth):
+    def deproject(self, u: ArrayLike, v: ArrayLike, depth: ArrayLike) -> Points3:
         """
         Return points (N, 3) in the optical frame seen at pixels ``(u, v)`` with depth z (metres).
 
@@ -107,10 +112,10 @@ class CameraPose:
     :attr:`rotation` maps optical-frame vectors to base_link: ``p_base = R p_cam + position``.
     """
 
-    position: tuple
-    orientation: tuple
+    position: Sequence[float] | Array
+    orientation: Sequence[float] | Array
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Validate and normalize (position finite, quaternion non-zero)."""
         position = np.asarray(self.position, dtype=float).reshape(-1)
         if position.shape != (3,) or not np.all(np.isfinite(position)):
@@ -125,7 +130,8 @@ class CameraPose:
                            tuple(quat.from_matrix(rotation).tolist()))
 
     @classmethod
-    def look_at(cls, eye, target, up=(0.0, 0.0, 1.0)):
+    def look_at(cls, eye: ArrayLike, target: ArrayLike,
+                up: ArrayLike = (0.0, 0.0, 1.0)) -> CameraPose:
         """Return the pose of a camera at ``eye`` looking at ``target``, image top towards up."""
         eye = np.asarray(eye, dtype=float)
         z = np.asarray(target, dtype=float) - eye
@@ -138,14 +144,14 @@ class CameraPose:
         return cls(tuple(eye), tuple(quat.from_matrix(np.stack([x, y, z], axis=1))))
 
     @property
-    def rotation(self):
+    def rotation(self) -> Rotations:
         """Rotation matrix (3, 3) from the optical frame to base_link."""
         return quat.to_matrix(quat.normalized(self.orientation))
 
-    def to_base(self, points):
+    def to_base(self, points: ArrayLike) -> Points3:
         """Return points (N, 3) given in the optical frame expressed in base_link."""
         return np.atleast_2d(points) @ self.rotation.T + np.asarray(self.position)
 
-    def from_base(self, points):
+    def from_base(self, points: ArrayLike) -> Points3:
         """Return points (N, 3) given in base_link expressed in the optical frame."""
         return (np.atleast_2d(points) - np.asarray(self.position)) @ self.rotation

@@ -9,7 +9,11 @@ them continuous by choosing, for each, the one of its lifts ``(a + 2 pi m) n`` n
 neighbour. Products are Hamilton products: ``multiply(p, q)`` is the rotation q followed by p.
 """
 
+from __future__ import annotations
+
+from etdmp_ros.geometry.arrays import Array, Quaternions, Rotations, RotationVectors
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Norm below which a quaternion counts as zero (no rotation can be read from it).
 MIN_NORM = 1e-9
@@ -18,7 +22,7 @@ SMALL_ANGLE = 1e-4
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 
-def unit_and_norm(v):
+def unit_and_norm(v: ArrayLike) -> tuple[Array, Array]:
     """
     Return ``(v / |v|, |v|)`` of vectors (..., k) without overflow; a zero vector stays zero.
 
@@ -36,7 +40,7 @@ def unit_and_norm(v):
     return scaled / np.where(length > 0.0, length, 1.0), norm
 
 
-def multiply(p, q):
+def multiply(p: ArrayLike, q: ArrayLike) -> Quaternions:
     """Return the Hamilton products ``p q`` of quaternions (..., 4) (broadcast)."""
     p = np.asarray(p, dtype=float)
     q = np.asarray(q, dtype=float)
@@ -48,7 +52,7 @@ def multiply(p, q):
                      pw * qw - px * qx - py * qy - pz * qz], axis=-1)
 
 
-def left_matrix(p):
+def left_matrix(p: ArrayLike) -> Array:
     """Return the matrices L (..., 4, 4) with ``p q = L q`` for quaternions ``p`` (..., 4)."""
     p = np.asarray(p, dtype=float)
     x, y, z, w = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
@@ -56,7 +60,7 @@ def left_matrix(p):
                      np.stack([-y, x, w, z], -1), np.stack([-x, -y, -z, w], -1)], axis=-2)
 
 
-def right_matrix(q):
+def right_matrix(q: ArrayLike) -> Array:
     """Return the matrices M (..., 4, 4) with ``p q = M p`` for quaternions ``q`` (..., 4)."""
     q = np.asarray(q, dtype=float)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -64,20 +68,20 @@ def right_matrix(q):
                      np.stack([y, -x, w, z], -1), np.stack([-x, -y, -z, w], -1)], axis=-2)
 
 
-def conjugate(q):
+def conjugate(q: ArrayLike) -> Quaternions:
     """Return the conjugates (the inverses, for unit quaternions) of ``q`` (..., 4)."""
     q = np.asarray(q, dtype=float)
     return np.concatenate([-q[..., :3], q[..., 3:]], axis=-1)
 
 
-def about_axis(axis, angle):
+def about_axis(axis: ArrayLike, angle: ArrayLike) -> Quaternions:
     """Return the quaternions (..., 4) of rotations by ``angle`` (...) about unit ``axis``."""
     half = 0.5 * np.asarray(angle, dtype=float)
     axis = np.asarray(axis, dtype=float)
     return np.concatenate([np.sin(half)[..., None] * axis, np.cos(half)[..., None]], axis=-1)
 
 
-def exp_map(r):
+def exp_map(r: ArrayLike) -> Quaternions:
     """Return the unit quaternions ``exp(r / 2)`` (..., 4) of rotation vectors ``r`` (..., 3)."""
     r = np.asarray(r, dtype=float)
     angle = np.linalg.norm(r, axis=-1, keepdims=True)
@@ -86,7 +90,7 @@ def exp_map(r):
     return np.concatenate([factor * r, np.cos(0.5 * angle)], axis=-1)
 
 
-def canonical(q):
+def canonical(q: ArrayLike) -> Quaternions:
     """
     Return ``q`` or ``-q`` (..., 4), whichever has ``w > 0``.
 
@@ -100,12 +104,12 @@ def canonical(q):
     return np.where((key < 0.0)[..., None], -q, q)
 
 
-def rotation_vector(q):
+def rotation_vector(q: ArrayLike) -> RotationVectors:
     """Return the shortest rotation vectors ``r`` (|r| <= pi) (..., 3) of quaternions (..., 4)."""
     return log_map(canonical(q))     # w >= 0: the shorter way round
 
 
-def log_map(q):
+def log_map(q: ArrayLike) -> RotationVectors:
     """
     Return the rotation vectors ``r`` with ``exp(r / 2) = q`` (..., 3), ``|r|`` in [0, 2 pi].
 
@@ -124,7 +128,7 @@ def log_map(q):
     return np.where((norm > SMALL_ANGLE) | (w <= 0.0), exact, series) * v
 
 
-def nearest_lift(r, reference):
+def nearest_lift(r: ArrayLike, reference: ArrayLike) -> RotationVectors:
     """
     Return the lift ``(a + 2 pi m) n`` of rotation vectors ``r`` nearest to ``reference``.
 
@@ -146,7 +150,7 @@ def nearest_lift(r, reference):
     return np.where(tiny & (m == 0.0), r, lift)
 
 
-def unwrap(r, backward=False):
+def unwrap(r: ArrayLike, backward: bool = False) -> RotationVectors:
     """
     Make a sequence of rotation vectors ``r`` (T, 3) continuous (each nearest to the previous).
 
@@ -163,20 +167,20 @@ def unwrap(r, backward=False):
     return r
 
 
-def angle_between(p, q):
+def angle_between(p: ArrayLike, q: ArrayLike) -> Array:
     """Return the rotation angles (rad, in [0, pi]) between quaternions ``p`` and ``q``."""
     d = multiply(conjugate(p), q)
     return 2.0 * np.arctan2(np.linalg.norm(d[..., :3], axis=-1), np.abs(d[..., 3]))
 
 
-def continuous(q):
+def continuous(q: ArrayLike) -> Quaternions:
     """Flip the signs of quaternions ``q`` (T, 4) so that neighbours have dot product >= 0."""
     q = np.asarray(q, dtype=float)
     flips = np.where(np.sum(q[1:] * q[:-1], axis=1) < 0.0, -1.0, 1.0)
     return q * np.cumprod(np.r_[1.0, flips])[:, None]
 
 
-def left_jacobian(r, r_dot):
+def left_jacobian(r: ArrayLike, r_dot: ArrayLike) -> Array:
     """
     Return ``omega = J(r) dr/dt`` (..., 3): the angular velocity of ``exp(r(t) / 2)``.
 
@@ -195,7 +199,7 @@ def left_jacobian(r, r_dot):
     return r_dot + c1 * rxd + c2 * np.cross(r, rxd)
 
 
-def normalized(q):
+def normalized(q: ArrayLike) -> Quaternions:
     """
     Return quaternions (..., 4) scaled to unit length; ValueError for a zero or non-finite one.
 
@@ -213,7 +217,7 @@ def normalized(q):
     return unit
 
 
-def from_rpy(roll, pitch, yaw):
+def from_rpy(roll: float, pitch: float, yaw: float) -> Quaternions:
     """Return the quaternion of URDF's roll, pitch, yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
     cr, sr = np.cos(roll / 2), np.sin(roll / 2)
     cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
@@ -222,7 +226,7 @@ def from_rpy(roll, pitch, yaw):
                      cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy])
 
 
-def to_matrix(q):
+def to_matrix(q: ArrayLike) -> Rotations:
     """Return the rotation matrices (..., 3, 3) of unit quaternions (..., 4)."""
     q = np.asarray(q, dtype=float)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
@@ -233,7 +237,7 @@ def to_matrix(q):
     ], axis=-2)
 
 
-def from_matrix(R):
+def from_matrix(R: ArrayLike) -> Quaternions:
     """
     Return unit quaternions (..., 4), ``w >= 0``, of rotation matrices ``R`` (..., 3, 3).
 

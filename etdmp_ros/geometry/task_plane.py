@@ -22,19 +22,23 @@ II = [90, 180), III = [180, 270), IV = [270, 360), so a vector exactly on an axi
 sector that begins there.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 import math
 
 from etdmp_ros import limits
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.arrays import Array, Points2, Points3, Quaternions, Rotations
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Largest ``|x_axis . y_axis|`` accepted for the (normalised) plane axes.
 ORTHOGONALITY_TOLERANCE = 1e-3
 QUADRANTS = ('I', 'II', 'III', 'IV')
 
 
-def quadrant(relative):
+def quadrant(relative: ArrayLike) -> str:
     """
     Return the relative quadrant, "I" to "IV", of a 2D vector such as ``x0 - g``.
 
@@ -57,13 +61,14 @@ class TaskPlane:
     Build it with :meth:`create`, which validates and normalises the axes.
     """
 
-    origin: np.ndarray
-    x_axis: np.ndarray
-    y_axis: np.ndarray
+    origin: Points3
+    x_axis: Points3
+    y_axis: Points3
     scale: float
 
     @classmethod
-    def create(cls, origin, x_axis, y_axis, scale=0.02):
+    def create(cls, origin: ArrayLike, x_axis: ArrayLike, y_axis: ArrayLike,
+               scale: float = 0.02) -> TaskPlane:
         """
         Validate and build a plane; raise ValueError saying what is wrong.
 
@@ -102,31 +107,31 @@ class TaskPlane:
         return cls(vectors['origin'], vectors['x_axis'], vectors['y_axis'], float(scale))
 
     @property
-    def normal(self):
+    def normal(self) -> Points3:
         """Return the unit normal ``x_axis x y_axis`` (3,)."""
         return np.cross(self.x_axis, self.y_axis)
 
     @property
-    def axes(self):
+    def axes(self) -> Array:
         """Return the (2, 3) matrix whose rows are ``x_axis`` and ``y_axis``."""
         return np.stack([self.x_axis, self.y_axis])
 
-    def to_plane(self, points):
+    def to_plane(self, points: ArrayLike) -> Points2:
         """Map base_link points (..., 3) to demo units on the plane (..., 2) (projection)."""
         points = np.asarray(points, dtype=float)
         return (points - self.origin) @ self.axes.T / self.scale
 
-    def from_plane(self, uv):
+    def from_plane(self, uv: ArrayLike) -> Points3:
         """Map demo-unit plane coordinates (..., 2) to base_link points (..., 3) on the plane."""
         uv = np.asarray(uv, dtype=float)
         return self.origin + (self.scale * uv) @ self.axes
 
-    def distance(self, points):
+    def distance(self, points: ArrayLike) -> Array:
         """Return the signed distances (...) of base_link points (..., 3) from the plane (m)."""
         return (np.asarray(points, dtype=float) - self.origin) @ self.normal
 
     @property
-    def rotation(self):
+    def rotation(self) -> Rotations:
         """
         Return the plane's frame in base_link (3, 3): columns x_axis, y_axis, normal.
 
@@ -137,10 +142,10 @@ class TaskPlane:
         y = y / np.linalg.norm(y)
         return np.stack([self.x_axis, y, np.cross(self.x_axis, y)], axis=1)
 
-    def orientation_to_plane(self, q):
+    def orientation_to_plane(self, q: ArrayLike) -> Quaternions:
         """Express base_link orientations (..., 4) (x, y, z, w) in the plane's frame."""
         return quat.multiply(quat.conjugate(quat.from_matrix(self.rotation)), q)
 
-    def orientation_from_plane(self, q):
+    def orientation_from_plane(self, q: ArrayLike) -> Quaternions:
         """Express orientations (..., 4) given in the plane's frame in base_link."""
         return quat.multiply(quat.from_matrix(self.rotation), q)

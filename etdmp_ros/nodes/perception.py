@@ -45,6 +45,7 @@ from etdmp_ros.ros import system
 from etdmp_ros.ros.conversions import (camera_image_from_msg, cylinder_markers, image_msg,
                                        intrinsics_from_camera_info, pose_array_from_numpy,
                                        stamp_to_ns)
+from etdmp_ros.ros.node_parameters import PerceptionParameters
 from etdmp_ros.ros.parameters import declare, plain, values as parameter_values
 from etdmp_ros.ros.spin import run
 from geometry_msgs.msg import PointStamped, PoseArray
@@ -85,22 +86,20 @@ class Settings:
 
     @classmethod
     def from_parameters(cls, p):
-        """Return the settings of flat parameter values; ValueError if one is invalid."""
-        detector = detector_from_parameters(p)
-        rates = {}
-        for name in ('max_rate', 'debug_image_rate'):
-            rates[name] = float(p[name])
-            if not rates[name] >= 0:
-                raise ValueError(f'{name} must be >= 0 Hz, got {p[name]}')
-        if not 0 <= float(p['stamp_tolerance']) <= 1.0:
-            raise ValueError(f'stamp_tolerance must be in [0, 1] s, got {p["stamp_tolerance"]}')
-        return cls(detector=detector,
-                   tolerance_ns=round(float(p['stamp_tolerance']) * 1e9),
-                   match_camera_info=bool(p['match_camera_info']),
-                   min_period=1.0 / rates['max_rate'] if rates['max_rate'] > 0 else 0.0,
-                   debug_period=(1.0 / rates['debug_image_rate']
-                                 if rates['debug_image_rate'] > 0 else -1.0),
-                   warn_period=float(p['warn_period']))
+        """
+        Return the settings of flat parameter values; ValueError if one is invalid.
+
+        Each value is checked by its description (type, range: PerceptionParameters), the
+        detector's colours and sizes together by :func:`detector_from_parameters`.
+        """
+        params = PerceptionParameters.from_values(p)
+        return cls(detector=detector_from_parameters(p),
+                   tolerance_ns=round(params.stamp_tolerance * 1e9),
+                   match_camera_info=params.match_camera_info,
+                   min_period=1.0 / params.max_rate if params.max_rate > 0 else 0.0,
+                   debug_period=(1.0 / params.debug_image_rate
+                                 if params.debug_image_rate > 0 else -1.0),
+                   warn_period=params.warn_period)
 
 
 class PerceptionNode(Node):

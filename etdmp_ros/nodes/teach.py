@@ -48,6 +48,7 @@ from etdmp_ros.nodes._web import one_line, WebServer
 from etdmp_ros.ros import system
 from etdmp_ros.ros.conversions import image_from_cdr, intrinsics_from_camera_info, path_from_cdr
 from etdmp_ros.ros.conversions._cdr import CdrReader
+from etdmp_ros.ros.node_parameters import TeachParameters
 from etdmp_ros.ros.parameters import declared_settings, InvalidConfiguration
 from etdmp_ros.ros.spin import run
 from etdmp_ros.skills.library import check_skill_name
@@ -114,19 +115,15 @@ class Settings:
     @classmethod
     def from_values(cls, values):
         """Build from {parameter name: value}; raise ValueError saying what is wrong."""
-        name = values['dmp_server']
+        p = TeachParameters.from_values(values)     # each value by its description
+        name = p.dmp_server
         if not name or not all(part and (part[0].isalpha() or part[0] == '_') and
                                part.replace('_', 'a').isalnum() for part in name.split('/')):
             raise ValueError(f'dmp_server must be a node name such as dmp_server, got {name!r}')
-        trace = values['trace_source']
-        if trace not in TRACE_TOPICS:
-            raise ValueError(f'trace_source must be one of {", ".join(TRACE_TOPICS)}, got '
-                             f'{trace!r}')
-        return cls(values['port'], values['address'], Canvas(values['canvas_width']), name,
-                   values['report_timeout'], 1.0 / values['camera_rate'],
-                   values['jpeg_quality'], values['watch_timeout'], TRACE_TOPICS[trace],
-                   TRACE_TYPES[trace],
-                   CameraPose(values['camera.position'], values['camera.orientation']))
+        return cls(p.port, p.address, Canvas(p.canvas_width), name, p.report_timeout,
+                   1.0 / p.camera_rate, p.jpeg_quality, p.watch_timeout,
+                   TRACE_TOPICS[p.trace_source], TRACE_TYPES[p.trace_source],
+                   CameraPose(p.camera_position, p.camera_orientation))
 
 
 def point_from_cdr(data):

@@ -61,25 +61,26 @@ blob: it is cut where the depth steps by more than ``occlusion_gap`` between nei
 Cylinders closer than that (touching or intersecting) stay one blob; its circle fit is poor and
 the detection is flagged (``Detection.single`` False). Several goal blobs: the largest is the
 goal, the others are rejected. Obstacles are reported in decreasing blob area.
-
-:class:`FrameSynchronizer` matches colour, depth and camera_info by stamp for the node (no
-message_filters): it keeps the newest complete set only, so processing never falls behind.
 """
 
-from collections import deque
-from dataclasses import dataclass, field
+from __future__ import annotations
+
+from collections.abc import Mapping
 import math
+from typing import Any
 
 import cv2
 from etdmp_ros import limits
+from etdmp_ros.geometry.arrays import Array as FloatArray
 from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
-from etdmp_ros.robot._scene import GOAL_MARKER_THICKNESS
+from etdmp_ros.perception._circle import fit_circle, fit_circle_and_radius, rim_arc
+from etdmp_ros.perception._frames import check_frame
+from etdmp_ros.perception._models import (_a, BOTTLE, Detection, Detections, DetectorSettings,
+                                          GOAL, HsvRange, ObjectModel, OBSTACLE, Rejection)
+from etdmp_ros.robot._scene import GOAL_MARKER_THICKNESS, SceneConfig
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-#: Kinds of detected objects, as in :attr:`Detection.kind`.
-GOAL = 'goal'
-OBSTACLE = 'obstacle'
-BOTTLE = 'bottle'
 _RIM_KERNEL = np.ones((3, 3), np.uint8)
 # An occluder this many pixels from an outline pixel makes it an occlusion edge (2: across the
 # one-pixel line that _split removes between two objects of one colour).
@@ -97,324 +98,6 @@ _DRAW = {GOAL: (255, 230, 0), OBSTACLE: (0, 230, 255), BOTTLE: (255, 0, 255),
          'rejected': (150, 150, 150)}
 
 
-def _a(noun):
-    """Return ``noun`` with its indefinite article (a goal, an obstacle)."""
-    return ('an ' if noun[:1] in 'aeiou' else 'a ') + noun
-
-
-@dataclass(frozen=True)
-class HsvRange:
-    """
-    A colour class as a box in OpenCV's HSV space: ``low`` and ``high`` are ``(h, s, v)``.
-
-    H is in 0..179 (degrees / 2), S and V in 0..255. When ``low[0] > high[0]`` the hue range wraps
-    through 0 (red: e.g. low h = 170, high h = 8).
-    """
-
-    low: tuple
-    high: tuple
-
-    def __post_init__(self):
-        """Validate: 3 integers each, H in 0..179, S and V in 0..255, S and V low <= high."""
-        bounds = (179, 255, 255)
-        values = []
-        for name, value in (('low', self.low), ('high', self.high)):
-            try:
-                triple = [float(v) for v in value]
-            except (TypeError, ValueError):
-                raise ValueError(f'HSV {name} must be 3 numbers [h, s, v], got {value!r}') \
-                    from None
-            if len(triple) != 3 or not all(v == int(v) and 0 <= v <= b
-                                           for v, b in zip(triple, bounds)):
-                raise ValueError(f'HSV {name} must be integers [h 0..179, s 0..255, v 0..255], '
-                                 f'got {list(value)}')
-            values.append(tuple(int(v) for v in triple))
-        low, high = values
-        if low[1] > high[1] or low[2] > high[2]:
-            raise ValueError(f'HSV range: S and V need low <= high, got low {list(low)}, '
-                             f'high {list(high)}')
-        object.__setattr__(self, 'low', low)
-        object.__setattr__(self, 'high', high)
-
-    @property
-    def wraps(self):
-        """Whether the hue range wraps through 0 (low h > high h)."""
-        return self.low[0] > self.high[0]
-
-    def mask(self, hsv):
-        """Return the uint8 image (255 inside the range) of an HSV image in OpenCV units."""
-        if not self.wraps:
-            return cv2.inRange(hsv, self.low, self.high)
-        upper = cv2.inRange(hsv, self.low, (179, self.high[1], self.high[2]))
-        lower = cv2.inRange(hsv, (0, self.low[1], self.low[2]), self.high)
-        return cv2.bitwise_or(upper, lower)
-
-
-@dataclass(frozen=True)
-class ObjectModel:
-    """
-    A class of objects: its colour and shape, an upright cylinder (radius, height) in metres.
-
-    The reported point of such an object is the centre of its top face. ``radius_range``:
-    ``(low, high)`` when each object's radius is measured (obstacles), ``radius`` then being
-    where the measurement starts and what is reported when the visible rim is too short to
-    measure it; None when every object has ``radius`` (the goal marker, the bottle).
-    """
-
-    kind: str
-    color: HsvRange
-    radius: float
-    height: float
-    radius_range: tuple = None
-
-    def __post_init__(self):
-        """Validate radius, height and radius_range (positive, finite, low < high)."""
-        for name in ('radius', 'height'):
-            value = float(getattr(self, name))
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f'{self.kind} {name} must be positive, got {value}')
-            object.__setattr__(self, name, value)
-        if self.radius_range is not None:
-            try:
-                low, high = (float(v) for v in self.radius_range)
-            except (TypeError, ValueError):
-                raise ValueError(f'{self.kind} radius range must be [low, high] (m), got '
-                                 f'{self.radius_range!r}') from None
-            if not (math.isfinite(high) and 0.0 < low < high):
-                raise ValueError(f'{self.kind} radius range must be 0 < low < high (m), got '
-                                 f'[{low}, {high}]')
-            object.__setattr__(self, 'radius_range', (low, high))
-
-    @property
-    def max_radius(self):
-        """Return the largest radius an object of this class can have (m)."""
-        return self.radius if self.radius_range is None else max(self.radius,
-                                                                 self.radius_range[1])
-
-    @property
-    def depth_extent(self):
-        """Largest depth difference between two points of the object, plus 2 cm (m)."""
-        return 2.0 * self.max_radius + self.height + 0.02
-
-
-@dataclass(frozen=True)
-class DetectorSettings:
-    """
-    Tuning of :class:`Detector` (pixels and metres).
-
-    ``min_blob_area``: smaller colour blobs are ignored (noise, far or mostly hidden objects).
-    ``min_depth_pixels``: a blob needs this many pixels with depth to be located.
-    ``top_band``: thickness of the band below the highest points taken as the top face (more
-    than the depth noise there). ``occlusion_gap``: an outline pixel next to something nearer to
-    the camera by more than this is an occlusion edge, not the object's rim. ``min_rim_points``:
-    fewer rim points than this and the top-face centroid is reported instead of the circle fit.
-    ``max_rim_rms``: a circle fit worse than this (RMS, m) flags the blob as not one object.
-    ``height_tolerance``: a located top face higher than this (m) above its object's height,
-    or lower below the table top, is refused.
-    """
-
-    min_blob_area: int = 40
-    min_depth_pixels: int = 20
-    top_band: float = 0.005
-    occlusion_gap: float = 0.01
-    min_rim_points: int = 8
-    max_rim_rms: float = 0.004
-    height_tolerance: float = 0.02
-
-    def __post_init__(self):
-        """Validate the values."""
-        for name in ('min_blob_area', 'min_depth_pixels', 'min_rim_points'):
-            value = getattr(self, name)
-            if int(value) != value or value < 1:
-                raise ValueError(f'{name} must be a positive integer, got {value}')
-            object.__setattr__(self, name, int(value))
-        for name in ('top_band', 'occlusion_gap', 'max_rim_rms', 'height_tolerance'):
-            value = float(getattr(self, name))
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f'{name} must be positive (m), got {value}')
-            object.__setattr__(self, name, value)
-
-
-@dataclass(frozen=True, eq=False)
-class Detection:
-    """
-    One located object.
-
-    ``position`` (3,): centre of the top face in base_link (m). ``pixel``: that point in the
-    image (u, v). ``area``: blob pixels; ``bbox``: (x, y, w, h) of the blob. ``depth``: the
-    blob's median depth (m); ``depth_fraction``: share of its pixels with depth. ``rim_points``:
-    outline points used by the circle fit (0: top-face centroid instead); ``rim_rms``: the fit's
-    RMS residual (m). ``single``: False when the fit is too poor for one cylinder (objects
-    overlapping in the image). ``radius`` (m): measured by the fit (``radius_measured``) when
-    its class's radius is measured and enough of the rim is seen, else its class's radius.
-    """
-
-    kind: str
-    position: np.ndarray
-    pixel: tuple
-    area: int
-    bbox: tuple
-    depth: float
-    depth_fraction: float
-    rim_points: int
-    rim_rms: float
-    single: bool = True
-    radius: float = float('nan')
-    radius_measured: bool = False
-
-
-@dataclass(frozen=True)
-class Rejection:
-    """A blob that was not reported: its kind, bbox (x, y, w, h), area and the reason."""
-
-    kind: str
-    bbox: tuple
-    area: int
-    reason: str
-
-
-@dataclass(eq=False)
-class Detections:
-    """Result of one frame: the goal and the bottle (or None), the obstacles, rejected blobs."""
-
-    goal: Detection = None
-    obstacles: list = field(default_factory=list)
-    rejected: list = field(default_factory=list)
-    bottle: Detection = None
-
-    def obstacle_positions(self):
-        """Return the obstacle points (N, 3) in base_link (N may be 0)."""
-        if not self.obstacles:
-            return np.zeros((0, 3))
-        return np.array([d.position for d in self.obstacles])
-
-    def obstacle_radii(self):
-        """Return the obstacles' radii (N,) in metres, in the order of obstacle_positions."""
-        return np.array([d.radius for d in self.obstacles], dtype=float)
-
-
-def check_frame(rgb, depth_mm, intrinsics):
-    """
-    Raise ValueError unless the frame can be processed.
-
-    ``rgb``: uint8 (H, W, 3); ``depth_mm``: uint16 (H, W) aligned to it; ``intrinsics``: a
-    :class:`CameraIntrinsics` of size W x H.
-    """
-    rgb = np.asarray(rgb)
-    depth_mm = np.asarray(depth_mm)
-    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f'colour image must be uint8 (H, W, 3), got {rgb.dtype} {rgb.shape}')
-    if depth_mm.dtype != np.uint16 or depth_mm.ndim != 2:
-        raise ValueError(f'depth image must be uint16 (H, W) millimetres, got {depth_mm.dtype} '
-                         f'{depth_mm.shape}')
-    if depth_mm.shape != rgb.shape[:2]:
-        raise ValueError(f'depth {depth_mm.shape[1]}x{depth_mm.shape[0]} is not aligned to the '
-                         f'colour image {rgb.shape[1]}x{rgb.shape[0]}')
-    check_intrinsics(intrinsics)
-    if (intrinsics.width, intrinsics.height) != (rgb.shape[1], rgb.shape[0]):
-        raise ValueError(f'camera_info is {intrinsics.width}x{intrinsics.height} but the images '
-                         f'are {rgb.shape[1]}x{rgb.shape[0]}')
-
-
-def check_intrinsics(intrinsics):
-    """
-    Raise ValueError unless ``intrinsics`` can be a RealSense D435 colour camera's.
-
-    Image size, the fields of view that fx and fy give, square pixels and a principal point
-    near the image centre, within the limits of :mod:`etdmp_ros.limits` (a dozen float
-    operations).
-    """
-    if not isinstance(intrinsics, CameraIntrinsics):
-        raise ValueError(f'intrinsics must be a CameraIntrinsics, got {type(intrinsics).__name__}')
-    k = intrinsics
-    (w_low, w_high), (h_low, h_high) = limits.CAMERA_WIDTH_RANGE, limits.CAMERA_HEIGHT_RANGE
-    if not (w_low <= k.width <= w_high and h_low <= k.height <= h_high):
-        raise ValueError(f'camera_info image size {k.width}x{k.height} is no D435 colour mode '
-                         f'({w_low}x{h_low} to {w_high}x{h_high})')
-    for axis, size, f, (low, high) in (('horizontal', k.width, k.fx, limits.CAMERA_HFOV_RANGE),
-                                       ('vertical', k.height, k.fy, limits.CAMERA_VFOV_RANGE)):
-        fov = math.degrees(2.0 * math.atan(0.5 * size / f))
-        if not low <= fov <= high:
-            name = 'fx' if axis == 'horizontal' else 'fy'
-            raise ValueError(f'camera_info {name} = {f:.6g} px gives a {axis} field of view of '
-                             f'{fov:.1f} deg at {k.width}x{k.height}; a D435 sees {low:g} to '
-                             f'{high:g} deg')
-    if abs(k.fx - k.fy) > limits.MAX_FOCAL_ASPECT_ERROR * k.fx:
-        raise ValueError(f'camera_info fx = {k.fx:.6g} and fy = {k.fy:.6g} px differ by more '
-                         f'than {limits.MAX_FOCAL_ASPECT_ERROR:.0%} (a D435 has square pixels)')
-    offset = limits.MAX_PRINCIPAL_POINT_OFFSET
-    if abs(k.cx - 0.5 * (k.width - 1)) > offset * k.width or \
-            abs(k.cy - 0.5 * (k.height - 1)) > offset * k.height:
-        raise ValueError(f'camera_info principal point ({k.cx:.6g}, {k.cy:.6g}) px is more than '
-                         f'{offset:.0%} of the image size from the centre of {k.width}x{k.height}')
-
-
-def fit_circle_and_radius(points, start, radius, iterations=30):
-    """
-    Return (centre (2,), radius, rms) of the circle fitted to points (N, 2), radius free.
-
-    Least squares of the radial residuals ``|p - c| - r`` by Gauss-Newton in (c, r) from
-    ``start`` (a point inside the circle) and ``radius``. Well posed only when the points
-    cover enough of the circle (:func:`rim_arc`): a short arc fits circles of many radii.
-    """
-    p = np.asarray(points, dtype=float)
-    cx, cy = (float(v) for v in start)
-    r = float(radius)
-    for _ in range(iterations):
-        dx, dy = p[:, 0] - cx, p[:, 1] - cy
-        n = np.maximum(np.hypot(dx, dy), 1e-12)
-        residual = n - r
-        # Residuals' Jacobian: -(ux, uy, 1); normal equations J^T J step = -J^T residual.
-        jac = np.stack([-dx / n, -dy / n, -np.ones_like(n)], axis=1)
-        normal = jac.T @ jac
-        if np.linalg.cond(normal) > 1e12:
-            break
-        step = np.linalg.solve(normal, -jac.T @ residual)
-        cx, cy, r = cx + step[0], cy + step[1], r + step[2]
-        if step @ step < 1e-14:
-            break
-    residual = np.hypot(p[:, 0] - cx, p[:, 1] - cy) - r
-    return np.array([cx, cy]), float(r), float(np.sqrt(np.mean(residual ** 2)))
-
-
-def rim_arc(points, centre):
-    """Return the angle (rad) of the circle about ``centre`` that points (N, 2) span."""
-    d = np.asarray(points, dtype=float) - centre
-    angles = np.sort(np.arctan2(d[:, 1], d[:, 0]))
-    if len(angles) < 2:
-        return 0.0
-    gaps = np.diff(np.append(angles, angles[0] + 2.0 * np.pi))
-    return float(2.0 * np.pi - gaps.max())
-
-
-def fit_circle(points, radius, start, iterations=20):
-    """
-    Return (centre (2,), rms) of the circle of given radius fitted to points (N, 2).
-
-    Least squares of the radial residuals ``|p - c| - radius`` by Gauss-Newton from ``start``
-    (a point inside the circle: with a short arc the other solution, mirrored across the
-    chord, is then never reached).
-    """
-    p = np.asarray(points, dtype=float)
-    cx, cy = (float(v) for v in start)
-    for _ in range(iterations):
-        dx, dy = p[:, 0] - cx, p[:, 1] - cy
-        n = np.maximum(np.hypot(dx, dy), 1e-12)
-        residual = n - radius
-        ux, uy = dx / n, dy / n          # the Jacobian of the residuals is -(ux, uy)
-        a, b, c = float(ux @ ux), float(ux @ uy), float(uy @ uy)
-        det = a * c - b * b
-        if det < 1e-12 * (a + c) ** 2:   # all points on one line through the centre
-            break
-        gx, gy = float(ux @ residual), float(uy @ residual)
-        step_x, step_y = (c * gx - b * gy) / det, (a * gy - b * gx) / det
-        cx, cy = cx + step_x, cy + step_y
-        if step_x * step_x + step_y * step_y < 1e-14:
-            break
-    residual = np.hypot(p[:, 0] - cx, p[:, 1] - cy) - radius
-    return np.array([cx, cy]), float(np.sqrt(np.mean(residual ** 2)))
-
-
 class Detector:
     """
     Locate the goal marker and the obstacles in colour + aligned depth frames.
@@ -427,7 +110,9 @@ class Detector:
     between frames.
     """
 
-    def __init__(self, goal, obstacle, camera_pose, table, settings=None, bottle=None):
+    def __init__(self, goal: ObjectModel, obstacle: ObjectModel, camera_pose: CameraPose,
+                 table: tuple[ArrayLike, ArrayLike], settings: DetectorSettings | None = None,
+                 bottle: ObjectModel | None = None) -> None:
         """Keep the object models, the camera pose, the table and the settings."""
         if not isinstance(camera_pose, CameraPose):
             raise ValueError(f'camera_pose must be a CameraPose, got {type(camera_pose).__name__}')
@@ -450,8 +135,10 @@ class Detector:
         self._position = np.asarray(camera_pose.position)
 
     @classmethod
-    def from_scene(cls, scene, goal_color, obstacle_color, settings=None, bottle_color=None,
-                   obstacle_radius_range=None):
+    def from_scene(cls, scene: SceneConfig, goal_color: HsvRange, obstacle_color: HsvRange,
+                   settings: DetectorSettings | None = None,
+                   bottle_color: HsvRange | None = None,
+                   obstacle_radius_range: tuple[float, float] | None = None) -> Detector:
         """
         Return a detector for a :class:`SceneConfig` (object sizes, camera pose).
 
@@ -465,7 +152,8 @@ class Detector:
                                scene.obstacle_height, obstacle_radius_range),
                    scene.camera_pose, (scene.table_center, scene.table_size), settings, bottle)
 
-    def detect(self, rgb, depth_mm, intrinsics, bgr=False):
+    def detect(self, rgb: NDArray[np.uint8], depth_mm: NDArray[np.uint16],
+               intrinsics: CameraIntrinsics, bgr: bool = False) -> Detections:
         """
         Return the :class:`Detections` of one frame.
 
@@ -499,13 +187,15 @@ class Detector:
                                                      'another bottle blob is larger'))
         return result
 
-    def _detect_class(self, model, hsv, depth_mm, intrinsics, rejected):
+    def _detect_class(self, model: ObjectModel, hsv: NDArray[Any],
+                      depth_mm: NDArray[np.uint16], intrinsics: CameraIntrinsics,
+                      rejected: list[Rejection]) -> list[Detection]:
         mask = model.color.mask(hsv)
         # Labelling costs ~1 ms on a full frame; the objects cover a small part of it. The
         # region is MARGIN pixels larger than the mask's bounding box (clipped to the image),
         # so that it holds the margin that _rim_points looks at around every blob.
         rx, ry, rw, rh = cv2.boundingRect(mask)
-        found = []
+        found: list[Detection] = []
         if rw == 0:
             return found
         height, width = mask.shape
@@ -534,7 +224,9 @@ class Detector:
                     found.append(detection)
         return found
 
-    def _implausible_blob(self, model, blob, depth, area, intrinsics):
+    def _implausible_blob(self, model: ObjectModel, blob: NDArray[np.bool_],
+                          depth: NDArray[np.uint16], area: int,
+                          intrinsics: CameraIntrinsics) -> str:
         """
         Return why a blob cannot be an object of ``model`` seen by a D435, or ''.
 
@@ -564,7 +256,8 @@ class Detector:
                     f'depth (at most {most:.0f} px)')
         return ''
 
-    def _implausible_position(self, model, points, position, single, radius):
+    def _implausible_position(self, model: ObjectModel, points: FloatArray,
+                              position: FloatArray, single: bool, radius: float) -> str:
         """
         Return why a located object does not fit the workcell, or ''.
 
@@ -598,7 +291,8 @@ class Detector:
                     f'{x0:.2f} to {x1:.2f} m, y {y0:.2f} to {y1:.2f} m)')
         return ''
 
-    def _split(self, model, blob, depth):
+    def _split(self, model: ObjectModel, blob: NDArray[np.bool_], depth: NDArray[np.uint16]
+               ) -> list[NDArray[np.bool_]]:
         """
         Return the blob cut at depth steps (objects of one colour overlapping in the image).
 
@@ -633,7 +327,8 @@ class Detector:
             return [blob]
         return [labels == i for i in sorted(big, key=lambda i: -stats[i, cv2.CC_STAT_AREA])]
 
-    def _locate(self, model, blob, depth, origin, intrinsics):
+    def _locate(self, model: ObjectModel, blob: NDArray[np.bool_], depth: NDArray[np.uint16],
+                origin: tuple[int, int], intrinsics: CameraIntrinsics) -> Detection | Rejection:
         """
         Return the Detection of one blob, or a Rejection saying why it cannot be located.
 
@@ -674,11 +369,10 @@ class Detector:
         position = np.array([centre[0], centre[1], z_top])
         single = rim_count == 0 or rim_rms <= s.max_rim_rms
         reason = self._implausible_position(model, points, position, single, radius)
-        if not reason and measured and not \
-                model.radius_range[0] <= radius <= model.radius_range[1]:
+        low, high = model.radius_range or (0.0, math.inf)   # measured: a range is given
+        if not reason and measured and not low <= radius <= high:
             reason = (f'its radius measures {radius * 1e3:.1f} mm, outside the range of '
-                      f'{_a(model.kind)} ({model.radius_range[0] * 1e3:g} to '
-                      f'{model.radius_range[1] * 1e3:g} mm)')
+                      f'{_a(model.kind)} ({low * 1e3:g} to {high * 1e3:g} mm)')
         if reason:
             return Rejection(model.kind, bbox, area, reason)
         pixel = intrinsics.project(self.camera_pose.from_base(position))[0]
@@ -686,7 +380,8 @@ class Detector:
                          bbox, median, float(np.count_nonzero(valid)) / area, rim_count,
                          rim_rms, single, radius, measured)
 
-    def _fit_rim(self, model, rim, inside):
+    def _fit_rim(self, model: ObjectModel, rim: FloatArray, inside: FloatArray
+                 ) -> tuple[FloatArray, FloatArray, float, float, bool]:
         """
         Return (rim points kept, centre (2,), radius, rms, radius measured) of a blob's rim.
 
@@ -699,7 +394,8 @@ class Detector:
         s = self.settings
         free = model.radius_range is not None
 
-        def fit(points, start, radius):
+        def fit(points: FloatArray, start: FloatArray, radius: float
+                ) -> tuple[FloatArray, float, float]:
             """Return (centre, radius, rms); the class's radius unless it is measured."""
             if free:
                 centre, radius, rms = fit_circle_and_radius(points, start, radius)
@@ -721,7 +417,9 @@ class Detector:
             centre, rms = fit_circle(rim, model.radius, inside)
         return rim, centre, model.radius, rms, False
 
-    def _rim_points(self, model, blob, depth, origin, median, z_top, intrinsics):
+    def _rim_points(self, model: ObjectModel, blob: NDArray[np.bool_], depth: NDArray[np.uint16],
+                    origin: tuple[int, int], median: float, z_top: float,
+                    intrinsics: CameraIntrinsics) -> FloatArray:
         """Return the blob's real outline points (N, 2): x, y in base_link, see module doc."""
         s = self.settings
         blob8 = blob.view(np.uint8)
@@ -773,13 +471,14 @@ class Detector:
         points[on_top] = self._position + edge_rays[on_top] * t[on_top, None]
         return points[has_depth | on_top, :2]
 
-    def _to_base(self, points_cam):
+    def _to_base(self, points_cam: FloatArray) -> FloatArray:
         return points_cam @ self._rotation.T + self._position
 
-    def _to_base_directions(self, vectors_cam):
+    def _to_base_directions(self, vectors_cam: FloatArray) -> FloatArray:
         return vectors_cam @ self._rotation.T
 
-    def annotate(self, rgb, detections, intrinsics, bgr=False):
+    def annotate(self, rgb: ArrayLike, detections: Detections, intrinsics: CameraIntrinsics,
+                 bgr: bool = False) -> NDArray[np.uint8]:
         """
         Return a copy of the colour image with the detections drawn on it (same channel order).
 
@@ -792,7 +491,7 @@ class Detector:
             list(detections.obstacles) + \
             ([detections.bottle] if detections.bottle is not None else [])
         angles = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
-        models = {GOAL: self.goal, OBSTACLE: self.obstacle, BOTTLE: self.bottle}
+        models = {m.kind: m for m in (self.goal, self.obstacle, self.bottle) if m is not None}
         for det in items:
             model = models[det.kind]
             color = palette[det.kind]
@@ -806,10 +505,10 @@ class Detector:
             centre = tuple(int(round(c)) for c in det.pixel)
             cv2.drawMarker(image, centre, color, cv2.MARKER_CROSS, 10, 1)
             x, y, w, h = det.bbox
-            label = '{} {:.0f} {:.0f} {:.0f} mm{}{}'.format(
-                det.kind, *(det.position * 1000.0),
-                f' r {det.radius * 1000.0:.1f}' if det.radius_measured else '',
-                '' if det.single else ' (merged?)')
+            x_mm, y_mm, z_mm = det.position * 1000.0
+            label = (f'{det.kind} {x_mm:.0f} {y_mm:.0f} {z_mm:.0f} mm'
+                     + (f' r {det.radius * 1000.0:.1f}' if det.radius_measured else '')
+                     + ('' if det.single else ' (merged?)'))
             cv2.putText(image, label, (x, max(y - 4, 10)), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                         color, 1, cv2.LINE_AA)
         for rejection in detections.rejected:
@@ -834,7 +533,7 @@ DETECTOR_PARAMETERS = (
 BOTTLE_PARAMETERS = ('bottle.radius', 'bottle.height', 'bottle_hsv_low', 'bottle_hsv_high')
 
 
-def detector_from_parameters(params):
+def detector_from_parameters(params: Mapping[str, Any]) -> Detector:
     """
     Return the :class:`Detector` described by flat parameters (see DETECTOR_PARAMETERS).
 
@@ -875,72 +574,3 @@ def detector_from_parameters(params):
             pose, (p['table.center'], p['table.size']), settings, bottle)
     except TypeError as exc:   # a list where a number belongs, None
         raise ValueError(f'perception parameters: {exc}') from None
-
-
-class FrameSynchronizer:
-    """
-    Match messages of several streams (colour, depth, camera_info) by their stamps.
-
-    :meth:`add` stores a message (keeping the last ``queue_size`` per stream) and returns the
-    NEWEST complete set whose stamps are all within ``tolerance_ns`` of each other and newer
-    than the last set returned, or None. Everything older than a returned set is dropped, so a
-    slow consumer only ever sees the latest frame. Stamps are integer nanoseconds; a stamp more
-    than ``reset_ns`` older than the last returned one means time went back (a restarted
-    simulation, a looping bag): the synchronizer starts over.
-    """
-
-    def __init__(self, streams, tolerance_ns, queue_size=4, reset_ns=1_000_000_000):
-        """Create empty queues for the named streams."""
-        if not streams:
-            raise ValueError('FrameSynchronizer needs at least one stream')
-        if tolerance_ns < 0:
-            raise ValueError(f'tolerance must be >= 0, got {tolerance_ns} ns')
-        self.streams = tuple(streams)
-        self.tolerance_ns = int(tolerance_ns)
-        self.reset_ns = int(reset_ns)
-        self._queues = {name: deque(maxlen=max(1, int(queue_size))) for name in self.streams}
-        self.last_stamp = None
-        self.dropped = 0
-
-    def reset(self):
-        """Forget all stored messages and the last returned stamp."""
-        for queue in self._queues.values():
-            queue.clear()
-        self.last_stamp = None
-
-    def add(self, stream, stamp_ns, message):
-        """Store a message; return ``(stamp_ns, {stream: message})`` when a set completes."""
-        stamp_ns = int(stamp_ns)
-        if self.last_stamp is not None and stamp_ns <= self.last_stamp:
-            if self.last_stamp - stamp_ns <= self.reset_ns:
-                self.dropped += 1
-                return None
-            self.reset()
-        self._queues[stream].append((stamp_ns, message))
-        return self._match()
-
-    def _match(self):
-        first = self.streams[0]
-        for stamp, message in sorted(self._queues[first], key=lambda item: -item[0]):
-            found = {first: message}
-            for name in self.streams[1:]:
-                best = min(self._queues[name], key=lambda item: abs(item[0] - stamp),
-                           default=None)
-                if best is None or abs(best[0] - stamp) > self.tolerance_ns:
-                    break
-                found[name] = best[1]
-            else:
-                self._drop_through(stamp)
-                return stamp, found
-        return None
-
-    def _drop_through(self, stamp):
-        limit = stamp + self.tolerance_ns
-        for queue in self._queues.values():
-            kept = [item for item in queue if item[0] > limit]
-            # Older sets that were never returned: the frames skipped to stay current.
-            if queue is self._queues[self.streams[0]]:
-                self.dropped += sum(item[0] < stamp - self.tolerance_ns for item in queue)
-            queue.clear()
-            queue.extend(kept)
-        self.last_stamp = stamp

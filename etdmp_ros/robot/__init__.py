@@ -7,7 +7,8 @@ shares is :class:`SceneConfig`; the robot description and its frame tree are wha
 and robot_state_publisher would publish.
 """
 
-from ._controller import Command, ControllerConfig, DelayEstimator, STATUSES, TrajectoryController
+from ._controller import Command, ControllerConfig, STATUSES, TrajectoryController
+from ._delay import DelayEstimator
 from ._description import (CAMERA_OPTICAL_FRAME, camera_transforms, chain_pose, FrameTree,
                            robot_description, Transform)
 from ._guide import GuidedMotion, GuideError

@@ -36,13 +36,17 @@ centre counts the tool's radius), which it does for the tool's whole length whil
 upright, as for writing; a tilted tool's body above its tip is not checked.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 
+from etdmp_ros.geometry.arrays import Array, Points3
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 import pinocchio as pin
 
 from ._scene import PEN_RADIUS, PEN_TIP_LENGTH, PEN_TIP_RADIUS
-from ._ur10 import robot_data_dir
+from ._ur10 import Joints, robot_data_dir, UR10Model
 
 #: Links whose meshes are covered (the base is fixed to the table).
 LINKS = ('shoulder_link', 'upper_arm_link', 'forearm_link', 'wrist_1_link', 'wrist_2_link',
@@ -67,7 +71,8 @@ class ArmViolation:
     gap: float
 
 
-def _slice_spheres(vertices, triangles, slice_length, margin):
+def _slice_spheres(vertices: Points3, triangles: NDArray[np.intp], slice_length: float,
+                   margin: float) -> tuple[Points3, Array]:
     """
     Return (centres (k, 3), radii (k,)) of spheres enclosing a convex hull slice by slice.
 
@@ -106,6 +111,89 @@ def _slice_spheres(vertices, triangles, slice_length, margin):
     return np.array(centres), np.array(radii)
 
 
+def _link_spheres(model: UR10Model, slice_length: float,
+                  margin: float) -> tuple[list[str], list[int], list[Points3], list[Array]]:
+    """Return the links' spheres: part names, joints, centres (k, 3) and radii per mesh."""
+    geometry = pin.buildGeomFromUrdf(model.model, str(model.urdf_path),
+                                     pin.GeometryType.COLLISION,
+                                     package_dirs=[str(robot_data_dir().parent.parent)])
+    parts: list[str] = []
+    joints: list[int] = []
+    local: list[Points3] = []
+    radii: list[Array] = []
+    for obj in geometry.geometryObjects:
+        link = model.model.frames[obj.parentFrame].name
+        if link not in LINKS or not hasattr(obj.geometry, 'vertices'):
+            continue
+        mesh = obj.geometry
+        mesh.buildConvexHull(True, 'Qt')        # what MuJoCo collides: the convex hull
+        hull = mesh.convex
+        vertices = np.asarray(hull.points()) * np.asarray(obj.meshScale)
+        triangles = np.array([[hull.polygons(i)[k] for k in range(3)]
+                              for i in range(hull.num_polygons)])
+        # In the frame of the joint that moves the link.
+        vertices = vertices @ obj.placement.rotation.T + obj.placement.translation
+        centres, r = _slice_spheres(vertices, triangles, slice_length, margin)
+        parts += [link] * len(r)
+        joints += [obj.parentJoint] * len(r)
+        local.append(centres)
+        radii.append(r)
+    missing = set(LINKS) - set(parts)
+    if missing:
+        raise RuntimeError(f'no collision mesh for {sorted(missing)} in {model.urdf_path}')
+    return parts, joints, local, radii
+
+
+def _tool_spheres(tool_offset: ArrayLike,
+                  tool_step: float) -> tuple[list[str], list[Points3], list[Array]]:
+    """
+    Return the tool's spheres: part names, centres (k, 3) and radii in pieces.
+
+    Along tool0's z axis to the tool tip (its tip: the last PEN_TIP_LENGTH); centres in the
+    tool tip's frame (tool0's axes, at the tip).
+    """
+    offset = np.asarray(tool_offset, dtype=float)
+    length = float(np.linalg.norm(offset))
+    tool_parts: list[str] = []
+    tool_local: list[Points3] = [np.zeros((0, 3))]
+    tool_radii: list[Array] = [np.zeros(0)]
+    if length > 1e-6:
+        direction = offset / length
+        tip_start = max(0.0, length - PEN_TIP_LENGTH)
+        for name, (a, b), radius in ((TOOL, (0.0, tip_start), PEN_RADIUS),
+                                     (TOOL_TIP, (tip_start, length), PEN_TIP_RADIUS)):
+            if b - a < 1e-6:
+                continue
+            n = max(1, int(np.ceil((b - a) / tool_step)))
+            half = 0.5 * (b - a) / n
+            along = a + half * (2 * np.arange(n) + 1)
+            tool_parts += [name] * n
+            tool_local.append(along[:, None] * direction[None] - offset)
+            tool_radii.append(np.full(n, np.hypot(radius, half)))
+    return tool_parts, tool_local, tool_radii
+
+
+def _chain(model: UR10Model) -> tuple[list[Array], list[int]]:
+    """
+    Return each joint's placement (4, 4) in its parent's frame and the axis (0-2) it turns about.
+
+    For forward kinematics of many configurations at once; RuntimeError unless the URDF is a
+    serial chain of revolute joints about x, y or z.
+    """
+    chain = model.model
+    placements, axes = [], []
+    for j in range(1, chain.njoints):
+        kind = chain.joints[j].shortname()
+        revolute = kind in ('JointModelRX', 'JointModelRY', 'JointModelRZ')
+        if chain.parents[j] != j - 1 or not revolute:
+            raise RuntimeError(f'unexpected joint {chain.names[j]} ({kind}) in '
+                               f'{model.urdf_path}: a serial chain of revolute joints '
+                               'about x, y or z was expected')
+        placements.append(chain.jointPlacements[j].homogeneous)
+        axes.append('XYZ'.index(kind[-1]))
+    return placements, axes
+
+
 class ArmGeometry:
     """
     Spheres enclosing the UR10's links and its tool, attached to the joints that move them.
@@ -117,74 +205,23 @@ class ArmGeometry:
     tip's frame), placed by :meth:`tool_centres`.
     """
 
-    def __init__(self, model, slice_length=0.03, margin=0.0005, tool_step=0.005):
+    def __init__(self, model: UR10Model, slice_length: float = 0.03, margin: float = 0.0005,
+                 tool_step: float = 0.005) -> None:
         """Cover the hulls (slices ``slice_length`` long, radii + ``margin``) and the tool."""
         self.model = model
-        geometry = pin.buildGeomFromUrdf(model.model, str(model.urdf_path),
-                                         pin.GeometryType.COLLISION,
-                                         package_dirs=[str(robot_data_dir().parent.parent)])
-        parts, joints, local, radii = [], [], [], []
-        for obj in geometry.geometryObjects:
-            link = model.model.frames[obj.parentFrame].name
-            if link not in LINKS or not hasattr(obj.geometry, 'vertices'):
-                continue
-            mesh = obj.geometry
-            mesh.buildConvexHull(True, 'Qt')        # what MuJoCo collides: the convex hull
-            hull = mesh.convex
-            vertices = np.asarray(hull.points()) * np.asarray(obj.meshScale)
-            triangles = np.array([[hull.polygons(i)[k] for k in range(3)]
-                                  for i in range(hull.num_polygons)])
-            # In the frame of the joint that moves the link.
-            vertices = vertices @ obj.placement.rotation.T + obj.placement.translation
-            centres, r = _slice_spheres(vertices, triangles, slice_length, margin)
-            parts += [link] * len(r)
-            joints += [obj.parentJoint] * len(r)
-            local.append(centres)
-            radii.append(r)
-        missing = set(LINKS) - set(parts)
-        if missing:
-            raise RuntimeError(f'no collision mesh for {sorted(missing)} in {model.urdf_path}')
+        parts, joints, local, radii = _link_spheres(model, slice_length, margin)
         self.parts = np.array(parts)
         self.joints = np.array(joints)
         self.local = np.vstack(local)
         self.radii = np.concatenate(radii)
-        # The tool, along tool0's z axis to the tool tip (its tip: the last PEN_TIP_LENGTH);
-        # centres in the tool tip's frame (tool0's axes, at the tip).
-        offset = np.asarray(model.tool_offset, dtype=float)
-        length = float(np.linalg.norm(offset))
-        tool_parts, tool_local, tool_radii = [], [np.zeros((0, 3))], [np.zeros(0)]
-        if length > 1e-6:
-            direction = offset / length
-            tip_start = max(0.0, length - PEN_TIP_LENGTH)
-            for name, (a, b), radius in ((TOOL, (0.0, tip_start), PEN_RADIUS),
-                                         (TOOL_TIP, (tip_start, length), PEN_TIP_RADIUS)):
-                if b - a < 1e-6:
-                    continue
-                n = max(1, int(np.ceil((b - a) / tool_step)))
-                half = 0.5 * (b - a) / n
-                along = a + half * (2 * np.arange(n) + 1)
-                tool_parts += [name] * n
-                tool_local.append(along[:, None] * direction[None] - offset)
-                tool_radii.append(np.full(n, np.hypot(radius, half)))
+        tool_parts, tool_local, tool_radii = _tool_spheres(model.tool_offset, tool_step)
         self.tool_parts = np.array(tool_parts)
         self.tool_local = np.vstack(tool_local)
         self.tool_radii = np.concatenate(tool_radii)
-        # The kinematic chain, for forward kinematics of many configurations at once: each
-        # joint's placement in its parent's frame and the axis it turns about.
-        chain = model.model
-        self._placements, self._axes = [], []
-        for j in range(1, chain.njoints):
-            kind = chain.joints[j].shortname()
-            revolute = kind in ('JointModelRX', 'JointModelRY', 'JointModelRZ')
-            if chain.parents[j] != j - 1 or not revolute:
-                raise RuntimeError(f'unexpected joint {chain.names[j]} ({kind}) in '
-                                   f'{model.urdf_path}: a serial chain of revolute joints '
-                                   'about x, y or z was expected')
-            self._placements.append(chain.jointPlacements[j].homogeneous)
-            self._axes.append('XYZ'.index(kind[-1]))
+        self._placements, self._axes = _chain(model)
         self._which = self.joints - 1           # joint index (0-5) of each sphere
 
-    def joint_frames(self, joints):
+    def joint_frames(self, joints: ArrayLike) -> Array:
         """Return each joint's frame (n, 6, 4, 4) in base_link for joint positions (n, 6)."""
         q = np.asarray(joints, dtype=float).reshape(-1, 6)
         frames = np.empty((len(q), 6, 4, 4))
@@ -200,20 +237,21 @@ class ArmGeometry:
             frames[:, j] = current
         return frames
 
-    def centres(self, joints):
+    def centres(self, joints: ArrayLike) -> Points3:
         """Place the spheres: return their centres' positions (n, k, 3) at joints (n, 6)."""
         frames = self.joint_frames(joints)[:, self._which]
         return np.matmul(frames[..., :3, :3], self.local[None, :, :, None])[..., 0] + \
             frames[..., :3, 3]
 
-    def tool_centres(self, positions, rotations):
+    def tool_centres(self, positions: ArrayLike, rotations: ArrayLike) -> Points3:
         """Return the tool's sphere centres (n, k, 3) for tool tip poses (n, 3), (n, 3, 3)."""
         positions = np.asarray(positions, dtype=float).reshape(-1, 3)
         rotations = np.broadcast_to(np.asarray(rotations, dtype=float), (len(positions), 3, 3))
         return np.matmul(rotations, self.tool_local.T).transpose(0, 2, 1) + positions[:, None]
 
 
-def cylinder_gaps(centres, radii, tops, obstacle_radii):
+def cylinder_gaps(centres: Points3, radii: ArrayLike, tops: ArrayLike,
+                  obstacle_radii: ArrayLike) -> Array:
     """
     Return the distances (n, k, m) from spheres to upright cylinders (negative: they overlap).
 
@@ -233,7 +271,8 @@ def cylinder_gaps(centres, radii, tops, obstacle_radii):
     return np.sqrt(outward * outward + vertical * vertical) - np.asarray(radii)[None, :, None]
 
 
-def densified(joints, times, displacement, step):
+def densified(joints: ArrayLike, times: ArrayLike, displacement: ArrayLike,
+              step: float) -> tuple[Joints, Array]:
     """
     Return joints (p, 6) and times (p,) with configurations added between the rows of ``joints``.
 
@@ -254,7 +293,8 @@ def densified(joints, times, displacement, step):
     return np.vstack(rows), np.concatenate(when)
 
 
-def checked_configurations(geometry, joints, times, step, rounds=4):
+def checked_configurations(geometry: ArmGeometry, joints: ArrayLike, times: ArrayLike, step: float,
+                           rounds: int = 4) -> tuple[Joints, Array, Points3]:
     """
     Return (joints (p, 6), times (p,), centres (p, k, 3)): the configurations the check uses.
 
@@ -275,7 +315,8 @@ def checked_configurations(geometry, joints, times, step, rounds=4):
     return rows, when, centres
 
 
-def _first(gaps, times, parts, clearance):
+def _first(gaps: Array, times: Array, parts: NDArray[np.str_],
+           clearance: float) -> ArmViolation | None:
     """Return the ArmViolation of the first row with a gap below ``clearance``, or None."""
     worst = gaps.min(axis=(1, 2))
     bad = np.flatnonzero(worst < clearance)
@@ -286,8 +327,10 @@ def _first(gaps, times, parts, clearance):
     return ArmViolation(str(parts[k]), int(j), float(times[i]), float(gaps[i, k, j]))
 
 
-def arm_obstacle_violation(geometry, joints, times, tops, obstacle_radii, clearance,
-                           tool_poses=None, step=0.02):
+def arm_obstacle_violation(geometry: ArmGeometry, joints: ArrayLike, times: ArrayLike,
+                           tops: ArrayLike, obstacle_radii: ArrayLike, clearance: float,
+                           tool_poses: tuple[ArrayLike, ArrayLike, ArrayLike] | None = None,
+                           step: float = 0.02) -> ArmViolation | None:
     """
     Return the earliest :class:`ArmViolation` of a plan, or None.
 
@@ -311,5 +354,5 @@ def arm_obstacle_violation(geometry, joints, times, tops, obstacle_radii, cleara
         found.append(_first(cylinder_gaps(geometry.tool_centres(positions, rotations),
                                           geometry.tool_radii, tops, obstacle_radii),
                             np.asarray(t, dtype=float), geometry.tool_parts, clearance))
-    found = [v for v in found if v is not None]
-    return min(found, key=lambda v: v.t) if found else None
+    violations = [v for v in found if v is not None]
+    return min(violations, key=lambda v: v.t) if violations else None

@@ -43,14 +43,20 @@ not asked to catch up with time it did not have. A tracking error that still sto
 after a gap says so in its reason.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass, fields
 import math
 
+from etdmp_ros.geometry.arrays import Array, Points3, Rotations
 from etdmp_ros.robot import _ik_fast
-from etdmp_ros.robot._ik import DEFAULT_ACCELERATION_LIMITS, DifferentialIK, HALT_SINGULARITY
-from etdmp_ros.robot._trajectory import MinimumJerkMove
-from etdmp_ros.robot._ur10 import JOINT_NAMES, UR10Model
+from etdmp_ros.robot._delay import DelayEstimator
+from etdmp_ros.robot._ik import (DEFAULT_ACCELERATION_LIMITS, DifferentialIK, HALT_SINGULARITY,
+                                 IKResult)
+from etdmp_ros.robot._trajectory import MinimumJerkMove, PoseTrajectory
+from etdmp_ros.robot._ur10 import JOINT_NAMES, Joints, UR10Model
 import numpy as np
+from numpy.typing import ArrayLike
 import pinocchio as pin
 
 IDLE = 'idle'
@@ -94,15 +100,15 @@ class ControllerConfig:
     rate: float = 125.0
     position_gain: float = 50.0
     orientation_gain: float = 50.0
-    actuation_delay: float = None
+    actuation_delay: float | None = None
     velocity_scale: float = 1.0
-    acceleration_limits: tuple = DEFAULT_ACCELERATION_LIMITS
+    acceleration_limits: tuple[float, ...] = DEFAULT_ACCELERATION_LIMITS
     joint_limit_margin: float = 0.05
     singular_value_threshold: float = 0.08
     max_damping: float = 0.08
     condition_slowdown: float = 20.0
     condition_halt: float = 50.0
-    posture: tuple = None
+    posture: tuple[float, ...] | None = None
     posture_gain: float = 0.0
     approach_speed: float = 0.1
     approach_angular_speed: float = 0.5
@@ -114,7 +120,7 @@ class ControllerConfig:
     max_tracking_error: float = 0.05
     estimate_delay: bool = True
 
-    def validate(self):
+    def validate(self) -> None:
         """Raise ValueError naming the first setting out of range."""
         positive = ('rate', 'position_gain', 'orientation_gain', 'approach_speed',
                     'approach_angular_speed', 'approach_acceleration', 'max_tracking_error')
@@ -135,7 +141,7 @@ class ControllerConfig:
                              f'{self.rate:g} Hz (gain * period > 1 is unstable)')
 
     @property
-    def period(self):
+    def period(self) -> float:
         """Return the control period in seconds."""
         return 1.0 / self.rate
 
@@ -152,105 +158,19 @@ class Command:
     reference position to the tool tip (m, NaN without reference).
     """
 
-    qd: np.ndarray
+    qd: Joints
     status: str
     reason: str
-    tool_position: np.ndarray
-    tool_rotation: np.ndarray
-    reference_position: np.ndarray = None
-    reference_rotation: np.ndarray = None
+    tool_position: Points3
+    tool_rotation: Rotations
+    reference_position: Points3 | None = None
+    reference_rotation: Rotations | None = None
     tracking_error: float = float('nan')
     condition: float = float('nan')
-    extra: dict = None
+    extra: dict[str, float] | None = None
 
 
-class DelayEstimator:
-    """
-    Estimate the actuation delay, in control periods, from how the joints actually moved.
-
-    Between two measurements one control period apart, the joints move by ``T u`` where ``u``
-    is the command in force. With a delay of ``d = i + f`` periods that is the blend
-    ``(1 - f) u_(k-1-i) + f u_(k-2-i)`` of the commands sent before; the delay (0 to 2 periods,
-    steps of 1/8, refined by a parabola) is the one whose predicted displacements matched best,
-    with exponential forgetting. A fractional delay also absorbs the lag of the joints' velocity
-    servos. Until the commands have changed enough to tell delays apart, ``prior`` is used.
-    """
-
-    GRID = np.linspace(0.0, 2.0, 17)
-    #: Accumulated squared command change (rad^2, times T^2) needed before estimates count.
-    MIN_EXCITATION = 1e-10
-
-    def __init__(self, prior, period, forgetting=0.98, fast=None):
-        """Start from ``prior`` periods; ``forgetting`` per step (0.98: about 50 steps)."""
-        self.fast = _ik_fast.AVAILABLE if fast is None else fast
-        self.period = float(period)
-        self.prior = float(prior)
-        self.delay = float(prior)
-        self.forgetting = float(forgetting)
-        self._index = np.floor(self.GRID).astype(np.int64)
-        self._frac = self.GRID - self._index
-        self.reset()
-
-    def reset(self):
-        """Forget the history (not the current estimate)."""
-        self._commands = np.zeros((4, 6))        # newest first: u_(k-1), u_(k-2), ...
-        self._costs = np.zeros(len(self.GRID))
-        self._excitation = 0.0
-        self._q = None
-        self._t = None
-
-    def update(self, q, t):
-        """Take the measurement ``q`` at ``t``; return the delay estimate in periods."""
-        T = self.period
-        if self._q is not None and abs(t - self._t - T) < 0.25 * T:
-            u = self._commands
-            if self.fast:
-                change, best = _ik_fast.delay_costs(u, self._index, self._frac, q - self._q, T,
-                                                    self.forgetting, self._costs)
-            else:
-                f = self._frac[:, None]
-                models = T * ((1.0 - f) * u[self._index] + f * u[self._index + 1])
-                residual = np.sum((models - (q - self._q)) ** 2, axis=1)
-                self._costs = self.forgetting * self._costs + residual
-                change = float(np.sum((T * (u[0] - u[1])) ** 2))
-                best = np.argmin(self._costs)
-            self._excitation = self.forgetting * self._excitation + change
-            if self._excitation > self.MIN_EXCITATION:
-                self.delay = self._refine(int(best))
-        self._q, self._t = q, t
-        return self.delay
-
-    def _refine(self, k):
-        if k == 0 or k == len(self.GRID) - 1:
-            return float(self.GRID[k])
-        c0, c1, c2 = self._costs[k - 1:k + 2]
-        curvature = c0 - 2.0 * c1 + c2
-        shift = 0.5 * (c0 - c2) / curvature if curvature > 0.0 else 0.0
-        return float(self.GRID[k] + np.clip(shift, -0.5, 0.5) * (self.GRID[1] - self.GRID[0]))
-
-    def in_flight(self, delay):
-        """
-        Return the joint motion still to come from commands already sent, until the next one acts.
-
-        With a delay of ``delay`` periods, command ``u_(k-1-m)`` acts over ``[(delay - 1 - m) T,
-        (delay - m) T]`` after the measurement; the part of it before ``delay T`` counts.
-        """
-        if self.fast:
-            out = np.empty(6)
-            _ik_fast.in_flight(self._commands, float(delay), self.period, out)
-            return out
-        m = np.arange(len(self._commands))
-        overlap = np.clip(np.minimum(delay - m, delay) - np.maximum(delay - 1.0 - m, 0.0), 0.0,
-                          1.0)
-        return self.period * (overlap @ self._commands)
-
-    def record(self, command):
-        """Note the command sent after the latest measurement."""
-        self._commands[1:] = self._commands[:-1].copy()
-        self._commands[0] = command
-
-
-def _ramp_integral(u, ramp):
+def _ramp_integral(u: float, ramp: float) -> float:
     """Return path time elapsed after ``u`` s of a clock whose rate ramps 0 -> 1 in ``ramp`` s."""
     if ramp <= 0.0 or u >= ramp:
         return u - 0.5 * ramp if ramp > 0.0 else u
@@ -267,7 +187,8 @@ class TrajectoryController:
     state changes under one lock. :meth:`check` uses its own model and may run concurrently.
     """
 
-    def __init__(self, model, config=None, fast=None):
+    def __init__(self, model: UR10Model, config: ControllerConfig | None = None,
+                 fast: bool | None = None) -> None:
         """
         Build the controller for a :class:`UR10Model` (its tool offset defines the tool tip).
 
@@ -283,27 +204,28 @@ class TrajectoryController:
                                               fast=self.fast)
         self.ik = self._make_ik(model)
         self._check_ik = self._make_ik(UR10Model(tool_offset=model.tool_offset))
-        self._previous = np.zeros(6)
+        self._previous: Joints = np.zeros(6)
         self._status, self._reason = IDLE, ''
-        self._path = None            # the PoseTrajectory being executed
-        self._approach = None        # MinimumJerkMove to the path (None: none needed)
+        self._path: PoseTrajectory | None = None       # the path being executed
+        self._approach: MinimumJerkMove | None = None  # the move to the path (None: none needed)
         self._path_start = 0.0       # path time at which the schedule enters the path
         self._ramp = 0.0             # duration of the path clock's ramp-in (resume)
-        self._t_start = None         # measurement time of the schedule's start
-        self._pending = None         # (path, path time, start stamp) to start at the next step
-        self._path_stamp = None      # stamp (s) of the path's first pose, if it has one
+        self._t_start = 0.0          # measurement time of the schedule's start
+        # (path, path time, start stamp) to start at the next step
+        self._pending: tuple[PoseTrajectory, float, float | None] | None = None
+        self._path_stamp: float | None = None      # stamp (s) of the path's first pose, if any
         #: Paths spliced in so far (continuations of the tracked one, taken without an approach).
         self.splices = 0
         self._paused = False
         self._last_theta = 0.0
-        self._t_last = None
-        self._slowed = None              # condition number while slowing for a singularity
+        self._t_last: float | None = None
+        self._slowed: float | None = None    # condition number while slowing for a singularity
         #: Times the path clock was re-synchronised after missed steps, and the last such gap
         #: as (measurement time, gap s, path time before, path time after).
         self.resyncs = 0
-        self.last_gap = None
+        self.last_gap: tuple[float, float, float, float] | None = None
 
-    def _make_ik(self, model):
+    def _make_ik(self, model: UR10Model) -> DifferentialIK:
         c = self.config
         return DifferentialIK(
             model, self.period, velocity_limits=model.velocity_limits * c.velocity_scale,
@@ -315,21 +237,21 @@ class TrajectoryController:
     # -- state changes ---------------------------------------------------------------------------
 
     @property
-    def status(self):
+    def status(self) -> str:
         """Return the current state (one of STATUSES)."""
         return self._status
 
     @property
-    def reason(self):
+    def reason(self) -> str:
         """Return why the controller halted or rejected a path ('' otherwise)."""
         return self._reason
 
     @property
-    def previous_command(self):
+    def previous_command(self) -> Joints:
         """Return a copy of the last joint velocity command (rad/s)."""
         return self._previous.copy()
 
-    def follow(self, path, stamp=None):
+    def follow(self, path: PoseTrajectory, stamp: float | None = None) -> None:
         """
         Execute ``path`` (a PoseTrajectory) from the next step on, replacing any other.
 
@@ -341,20 +263,20 @@ class TrajectoryController:
         """
         self._pending = (path, 0.0, stamp)
 
-    def cancel(self, reason=''):
+    def cancel(self, reason: str = '') -> None:
         """Stop following (brake to zero at the acceleration limits) and become idle."""
         self._pending = None
         self._path = None
         if self._status != PAUSED:
             self._set(IDLE, reason)
 
-    def reject(self, reason):
+    def reject(self, reason: str) -> None:
         """Refuse the path just received (``reason`` says why): brake to zero, ``unreachable``."""
         self._pending = None
         self._path = None
         self._set(UNREACHABLE, reason)
 
-    def set_paused(self, paused):
+    def set_paused(self, paused: bool) -> None:
         """Pause (zero command at once, path clock frozen) or resume (approach back, go on)."""
         if paused and not self._paused:
             self._paused = True
@@ -372,11 +294,11 @@ class TrajectoryController:
             self._set(APPROACHING if self._pending is not None else IDLE)
 
     @property
-    def paused(self):
+    def paused(self) -> bool:
         """Return True while paused."""
         return self._paused
 
-    def input_lost(self, reason):
+    def input_lost(self, reason: str) -> None:
         """Joint states went stale: zero command at once, drop the path, ``stale-input``."""
         self.delay_estimator.reset()
         self._pending = None
@@ -384,7 +306,7 @@ class TrajectoryController:
         self._previous = np.zeros(6)
         self._set(STALE_INPUT, reason)
 
-    def shutdown(self):
+    def shutdown(self) -> Joints:
         """Return the zero command to send before exiting (and forget everything)."""
         self._pending = None
         self._path = None
@@ -392,25 +314,26 @@ class TrajectoryController:
         self._set(IDLE, 'shutdown')
         return np.zeros(6)
 
-    def _set(self, status, reason=''):
+    def _set(self, status: str, reason: str = '') -> None:
         self._status, self._reason = status, reason
 
     # -- the schedule: approach, then the path (with a ramp-in on resume), then hold --------------
 
-    def _path_time(self, theta):
+    def _path_time(self, theta: float) -> float:
         t_app = self._approach.duration if self._approach is not None else 0.0
         return self._path_start + _ramp_integral(max(theta - t_app, 0.0), self._ramp)
 
-    def _reference(self, theta):
+    def _reference(self, theta: float) -> tuple[Points3, Rotations, str, float]:
         """Return (p, R, phase, path time) of the schedule at ``theta`` s after its start."""
         if self._approach is not None and theta < self._approach.duration:
             p, rot = self._approach.pose(theta)
             return p, rot, APPROACHING, self._path_start
         tau = self._path_time(theta)
+        assert self._path is not None        # called while a path is tracked
         p, rot = self._path.pose(tau, self.fast)
         return p, rot, TRACKING if tau < self._path.duration else HOLDING, tau
 
-    def continues(self, path, stamp):
+    def continues(self, path: PoseTrajectory, stamp: float | None) -> bool:
         """
         Return whether ``path`` stamped ``stamp`` would be spliced in now (see :meth:`follow`).
 
@@ -420,7 +343,7 @@ class TrajectoryController:
         return self._t_last is not None and self._splice_time(self._t_last, path,
                                                               stamp) is not None
 
-    def _splice_time(self, t, path, stamp):
+    def _splice_time(self, t: float, path: PoseTrajectory, stamp: float | None) -> float | None:
         """
         Return the path time of ``path`` at which it continues the current path at ``t``, or None.
 
@@ -449,7 +372,7 @@ class TrajectoryController:
             return None
         return tau_new
 
-    def _splice(self, t, path, stamp):
+    def _splice(self, t: float, path: PoseTrajectory, stamp: float | None) -> bool:
         """Continue on ``path`` from the current path time if it continues the current path."""
         tau_new = self._splice_time(t, path, stamp)
         if tau_new is None:
@@ -461,7 +384,8 @@ class TrajectoryController:
         self.splices += 1
         return True
 
-    def _start(self, t, p, rot, jac):
+    def _start(self, t: float, p: Points3, rot: Rotations, jac: Array) -> None:
+        assert self._pending is not None     # called when a path is pending
         path, tau0, stamp = self._pending
         self._pending = None
         if self._splice(t, path, stamp):
@@ -488,7 +412,7 @@ class TrajectoryController:
 
     # -- one control period ----------------------------------------------------------------------
 
-    def step(self, q, t, age=0.0):
+    def step(self, q: ArrayLike, t: float, age: float = 0.0) -> Command:
         """
         Return the :class:`Command` for joints ``q`` (rad) measured at time ``t`` (s).
 
@@ -502,7 +426,7 @@ class TrajectoryController:
         self.delay_estimator.record(self._previous)
         return command
 
-    def _step(self, q, t, age):
+    def _step(self, q: Joints, t: float, age: float) -> Command:
         """Compute the command (see :meth:`step`)."""
         if self._t_last is not None and t < self._t_last - 1e-9:
             self.input_lost(f'joint state time went back from {self._t_last:.3f} to {t:.3f} s')
@@ -532,19 +456,40 @@ class TrajectoryController:
         if phase == HOLDING and tau >= self._path.duration + c.hold_time:
             return self._stop(IDLE, '', p, rot, p_ref, rot_ref, error)
         if error > c.max_tracking_error:
-            too_far = (f'tracking error {error * 1000:.0f} mm exceeds max_tracking_error '
-                       f'{c.max_tracking_error * 1000:.0f} mm (at path time {tau:.2f} s)')
-            if self.last_gap is not None and t - self.last_gap[0] <= GAP_MEMORY:
-                too_far += (f', {t - self.last_gap[0]:.2f} s after {self.last_gap[1] * 1e3:.0f} '
-                            'ms without a control step (the arm moved on its last command '
-                            'meanwhile)')
-            if self._slowed is not None:    # the lag is the singularity slow-down's doing
-                return self._stop(HALTED_SINGULARITY, f'slowed down near a singularity (Jacobian'
-                                  f' condition number {self._slowed:.1f} > '
-                                  f'{c.condition_slowdown:g}): {too_far}', p, rot, p_ref, rot_ref,
-                                  error)
-            return self._stop(UNREACHABLE, too_far, p, rot, p_ref, rot_ref, error)
+            return self._lost(t, tau, p, rot, p_ref, rot_ref, error)
+        result = self._solve(q, theta, age)
+        self._previous = result.qd
+        self._slowed = result.condition if result.singularity_scale < 1.0 else None
+        if result.halt is not None:
+            self._path = None
+            self._set(HALTED_SINGULARITY if result.halt == HALT_SINGULARITY
+                      else HALTED_JOINT_LIMIT, result.reason)
+        else:
+            self._set(phase)
+        return Command(result.qd.copy(), self._status, self._reason, p, rot, p_ref, rot_ref,
+                       error, result.condition,
+                       {'scale': result.scale, 'damping': result.damping})
 
+    def _lost(self, t: float, tau: float, p: Points3, rot: Rotations, p_ref: Points3,
+              rot_ref: Rotations, error: float) -> Command:
+        """Stop for a tracking ``error`` (m) above max_tracking_error at path time ``tau``."""
+        c = self.config
+        too_far = (f'tracking error {error * 1000:.0f} mm exceeds max_tracking_error '
+                   f'{c.max_tracking_error * 1000:.0f} mm (at path time {tau:.2f} s)')
+        if self.last_gap is not None and t - self.last_gap[0] <= GAP_MEMORY:
+            too_far += (f', {t - self.last_gap[0]:.2f} s after {self.last_gap[1] * 1e3:.0f} '
+                        'ms without a control step (the arm moved on its last command '
+                        'meanwhile)')
+        if self._slowed is not None:    # the lag is the singularity slow-down's doing
+            return self._stop(HALTED_SINGULARITY, f'slowed down near a singularity (Jacobian'
+                              f' condition number {self._slowed:.1f} > '
+                              f'{c.condition_slowdown:g}): {too_far}', p, rot, p_ref, rot_ref,
+                              error)
+        return self._stop(UNREACHABLE, too_far, p, rot, p_ref, rot_ref, error)
+
+    def _solve(self, q: Joints, theta: float, age: float) -> IKResult:
+        """Return the IK's command for joints ``q``, ``theta`` s into the schedule (see above)."""
+        c = self.config
         age = min(max(age, 0.0), 0.5)
         lookahead = age + self.delay
         # Smith predictor: where the commands already sent take the joints before this one acts.
@@ -565,20 +510,9 @@ class TrajectoryController:
             xi[:3] = (p_b - p_a) / self.period + c.position_gain * (p_a - p_hat)
             xi[3:] = (pin.log3(rot_b @ rot_a.T) / self.period
                       + c.orientation_gain * pin.log3(rot_a @ rot_hat.T))
-        result = self.ik.solve(q_hat, jac, xi, self._previous, self.fast)
-        self._previous = result.qd
-        self._slowed = result.condition if result.singularity_scale < 1.0 else None
-        if result.halt is not None:
-            self._path = None
-            self._set(HALTED_SINGULARITY if result.halt == HALT_SINGULARITY
-                      else HALTED_JOINT_LIMIT, result.reason)
-        else:
-            self._set(phase)
-        return Command(result.qd.copy(), self._status, self._reason, p, rot, p_ref, rot_ref,
-                       error, result.condition,
-                       {'scale': result.scale, 'damping': result.damping})
+        return self.ik.solve(q_hat, jac, xi, self._previous, self.fast)
 
-    def missed_steps(self, t, gap, p):
+    def missed_steps(self, t: float, gap: float, p: Points3) -> None:
         """
         Re-synchronise the path clock after ``gap`` s without a step (see the module docstring).
 
@@ -588,6 +522,7 @@ class TrajectoryController:
         (searched every :data:`RESYNC_STEP` s). Elsewhere nothing changes (an approach is slow;
         holding is at rest). Noted in :attr:`last_gap` and :attr:`resyncs` either way.
         """
+        assert self._path is not None        # called while a path is tracked
         theta_then, theta_now = self._last_theta, t - self._t_start
         t_app = self._approach.duration if self._approach is not None else 0.0
         tau_then, tau_now = self._path_time(theta_then), self._path_time(theta_now)
@@ -604,7 +539,8 @@ class TrajectoryController:
             self.resyncs += 1
         self.last_gap = (t, gap, tau_now, tau)
 
-    def _stop(self, status, reason, p, rot, p_ref, rot_ref, error):
+    def _stop(self, status: str, reason: str, p: Points3, rot: Rotations, p_ref: Points3,
+              rot_ref: Rotations, error: float) -> Command:
         self._path = None
         self._set(status, reason)
         self._previous = self.ik.brake(self._previous)
@@ -612,7 +548,7 @@ class TrajectoryController:
 
     # -- feasibility of a path before it is executed ----------------------------------------------
 
-    def check(self, path, q, max_samples=200):
+    def check(self, path: PoseTrajectory, q: ArrayLike, max_samples: int = 200) -> str:
         """
         Return why ``path`` cannot be executed from joints ``q``, or '' if it can.
 

@@ -13,16 +13,22 @@ names them (``camera_link`` -> ``camera_color_frame`` -> ``camera_color_optical_
 Quaternions are ``[x, y, z, w]`` (ROS order).
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from xml.etree import ElementTree
 
 
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.arrays import Points3, Quaternions, Rotations
+from etdmp_ros.geometry.camera import CameraPose
 from etdmp_ros.robot._ur10 import (FLANGE_FRAME, JOINT_NAMES, robot_data_dir, TOOL_FRAME,
                                    ur10_urdf_path)
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Name of the fixed joint that carries the tool tip in :func:`robot_description`.
 TOOL_JOINT = f'{FLANGE_FRAME}-{TOOL_FRAME}_fixed_joint'
@@ -41,11 +47,11 @@ class Transform:
 
     parent: str
     child: str
-    translation: tuple
-    quaternion: tuple
+    translation: tuple[float, ...]
+    quaternion: tuple[float, ...]
 
 
-def robot_description(tool_offset=(0.0, 0.0, 0.0)):
+def robot_description(tool_offset: Sequence[float] = (0.0, 0.0, 0.0)) -> str:
     """Return the URDF text of the UR10 with the tool tip link ``tool_offset`` m from tool0."""
     tree = ElementTree.parse(ur10_urdf_path())
     robot = tree.getroot()
@@ -75,7 +81,7 @@ class FrameTree:
     :attr:`translations` do not change with the angles, :meth:`moving` returns the rotations.
     """
 
-    def __init__(self, urdf_text, joint_names=JOINT_NAMES):
+    def __init__(self, urdf_text: str, joint_names: Sequence[str] = JOINT_NAMES) -> None:
         """Read the joints of ``urdf_text``; ValueError if one of ``joint_names`` is missing."""
         joints = {j.get('name'): j for j in ElementTree.fromstring(urdf_text).iter('joint')
                   if j.find('parent') is not None}
@@ -92,8 +98,8 @@ class FrameTree:
         axes = []
         for name in joint_names:
             axis = joints[name].find('axis')
-            a = np.array([float(v) for v in (axis.get('xyz') if axis is not None
-                                             else '1 0 0').split()])
+            xyz = axis.get('xyz') if axis is not None else '1 0 0'
+            a = np.array([float(v) for v in xyz.split()])  # type: ignore[union-attr]
             axes.append(a / np.linalg.norm(a))
         self._axes = np.array(axes)
         # origin * (axis sin(q/2), cos(q/2)) is linear in sin and cos: = S sin(q/2) + C cos(q/2).
@@ -101,24 +107,25 @@ class FrameTree:
             [self._axes, np.zeros((len(axes), 1))], axis=1))
         self._c = self._origins
 
-    def moving(self, q):
+    def moving(self, q: ArrayLike) -> Quaternions:
         """Return the quaternions (n, 4) of the moving transforms at joint positions ``q``."""
         half = 0.5 * np.asarray(q, dtype=float)[:, None]
         return self._s * np.sin(half) + self._c * np.cos(half)
 
-    def moving_reference(self, q):
+    def moving_reference(self, q: ArrayLike) -> Quaternions:
         """Return :meth:`moving` computed plainly: origin times the joint's rotation (tests)."""
         half = 0.5 * np.asarray(q, dtype=float)[:, None]
         turn = np.concatenate([self._axes * np.sin(half), np.cos(half)], axis=1)
         return quat.multiply(self._origins, turn)
 
-    def transforms(self, q):
+    def transforms(self, q: ArrayLike) -> list[Transform]:
         """Return every transform, moving ones at ``q`` then the fixed ones (tests, tools)."""
         return [Transform(p, c, tuple(t), tuple(r)) for p, c, t, r in
                 zip(self.parents, self.children, self.translations, self.moving(q))] + self.fixed
 
 
-def chain_pose(transforms, source, target):
+def chain_pose(transforms: Iterable[Transform], source: str,
+               target: str) -> tuple[Points3, Rotations]:
     """
     Return (position (3,), rotation (3, 3)) of frame ``target`` in frame ``source``.
 
@@ -139,7 +146,7 @@ def chain_pose(transforms, source, target):
     return position, rotation
 
 
-def camera_transforms(pose, parent='base_link'):
+def camera_transforms(pose: CameraPose, parent: str = 'base_link') -> list[Transform]:
     """
     Return the static transforms of a camera whose colour optical frame has ``pose`` in ``parent``.
 
@@ -157,12 +164,15 @@ def camera_transforms(pose, parent='base_link'):
                       tuple(map(float, OPTICAL_ROTATION)))]
 
 
-def _joint_origin(joint):
+def _joint_origin(
+        joint: ElementTree.Element) -> tuple[str, str, tuple[float, ...], tuple[float, ...]]:
     """Return (parent, child, translation, quaternion) of a URDF joint element."""
     origin = joint.find('origin')
     xyz = [float(v) for v in (origin.get('xyz', '0 0 0') if origin is not None else '0 0 0')
            .split()]
     rpy = [float(v) for v in (origin.get('rpy', '0 0 0') if origin is not None else '0 0 0')
            .split()]
-    return (joint.find('parent').get('link'), joint.find('child').get('link'), tuple(xyz),
-            tuple(quat.from_rpy(*rpy)))
+    # A URDF joint names its parent and child links (a joint without them fails here).
+    ends = [joint.find(end) for end in ('parent', 'child')]
+    parent, child = (end.get('link') for end in ends)  # type: ignore[union-attr]
+    return parent, child, tuple(xyz), tuple(quat.from_rpy(*rpy))  # type: ignore[return-value]

@@ -15,10 +15,14 @@ What is recorded is what the arm did (the joint states), not the script: learnin
 recording (:func:`etdmp_ros.skills.library.joint_state_path`) never sees the script.
 """
 
+from __future__ import annotations
+
 import math
 
 from etdmp_ros.robot._trajectory import PoseTrajectory, TrajectoryError
+from etdmp_ros.robot._ur10 import Joints, UR10Model
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Proportional gain (1/s) pulling the joints back onto the script's joint path.
 GAIN = 20.0
@@ -41,7 +45,8 @@ class GuidedMotion:
     ``q0``. Raises GuideError for a script that cannot be followed.
     """
 
-    def __init__(self, model, q0, t, offsets, period, velocity_limits=None):
+    def __init__(self, model: UR10Model, q0: ArrayLike, t: ArrayLike, offsets: ArrayLike,
+                 period: float, velocity_limits: ArrayLike | None = None) -> None:
         """Compute the joint path of the script at every period; check it."""
         q0 = np.asarray(q0, dtype=float).reshape(6)
         offsets = np.asarray(offsets, dtype=float)
@@ -59,7 +64,8 @@ class GuidedMotion:
                              f'{MAX_DURATION:g} s')
         self.period = float(period)
         self.duration = path.duration
-        limits = model.velocity_limits if velocity_limits is None else velocity_limits
+        limits = model.velocity_limits if velocity_limits is None else np.asarray(
+            velocity_limits, dtype=float)
         steps = max(1, math.ceil(self.duration / self.period - 1e-9))
         joints = [q0]
         for k in range(1, steps + 1):
@@ -82,11 +88,11 @@ class GuidedMotion:
         self.tick = 0
 
     @property
-    def done(self):
+    def done(self) -> bool:
         """Whether the script has been played to its end."""
         return self.tick >= len(self.joints) - 1
 
-    def command(self, q):
+    def command(self, q: ArrayLike) -> Joints:
         """Return the joint velocities (6,) for the next period from measured joints ``q``."""
         k = self.tick
         if self.done:

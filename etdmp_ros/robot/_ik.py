@@ -31,11 +31,15 @@ Steps 1, 2 and 4-6 run as numba kernels (:mod:`._ik_fast`) when numba is there; 
 below is the same computation, kept as the oracle of the tests (``solve(..., fast=False)``).
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 
+from etdmp_ros.geometry.arrays import Array, Points3, Rotations
 from etdmp_ros.robot import _ik_fast
-from etdmp_ros.robot._ur10 import JOINT_NAMES
+from etdmp_ros.robot._ur10 import JOINT_NAMES, Joints, UR10Model
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Default joint acceleration limits (rad/s^2), shoulder pan ... wrist 3. UR publishes no
 #: acceleration limits (only torques: 330, 330, 150, 56, 56, 56 N m on the UR10); these are
@@ -59,11 +63,11 @@ class IKResult:
     ``singularity_scale``: the singularity factor alone.
     """
 
-    qd: np.ndarray
+    qd: Joints
     condition: float
     damping: float
     scale: float
-    halt: str = None
+    halt: str | None = None
     reason: str = ''
     singularity_scale: float = 1.0
 
@@ -71,10 +75,12 @@ class IKResult:
 class DifferentialIK:
     """Damped least-squares velocity IK with singularity, velocity, acceleration, joint limits."""
 
-    def __init__(self, model, period, velocity_limits=None,
-                 acceleration_limits=DEFAULT_ACCELERATION_LIMITS, joint_limit_margin=0.05,
-                 singular_value_threshold=0.08, max_damping=0.08, condition_slowdown=20.0,
-                 condition_halt=50.0, posture=None, posture_gain=0.0):
+    def __init__(self, model: UR10Model, period: float, velocity_limits: ArrayLike | None = None,
+                 acceleration_limits: ArrayLike = DEFAULT_ACCELERATION_LIMITS,
+                 joint_limit_margin: float = 0.05, singular_value_threshold: float = 0.08,
+                 max_damping: float = 0.08, condition_slowdown: float = 20.0,
+                 condition_halt: float = 50.0, posture: ArrayLike | None = None,
+                 posture_gain: float = 0.0) -> None:
         """
         Set up the IK for a :class:`UR10Model` stepping every ``period`` seconds.
 
@@ -96,14 +102,15 @@ class DifferentialIK:
         self.max_damping = float(max_damping)
         self.condition_slowdown = float(condition_slowdown)
         self.condition_halt = float(condition_halt)
-        self.posture = None if posture is None else np.asarray(posture, dtype=float).copy()
+        self.posture: Array | None = (None if posture is None
+                                      else np.asarray(posture, dtype=float).copy())
         self.posture_gain = float(posture_gain)
         self._max_dv = self.acceleration_limits * self.period
         self._no_posture = np.zeros(6)
         self.validate()
         _ik_fast.warm_up()
 
-    def validate(self):
+    def validate(self) -> None:
         """Raise ValueError if a setting is out of range."""
         checks = [
             ('period', self.period > 0.0),
@@ -123,20 +130,21 @@ class DifferentialIK:
                                          or not np.all(np.isfinite(self.posture))):
             raise ValueError('posture must be 6 finite joint positions')
 
-    def kinematics(self, q):
+    def kinematics(self, q: ArrayLike) -> tuple[Points3, Rotations, Array]:
         """Return the tool tip (position, rotation, Jacobian) at ``q``: the model's kinematics."""
         return self.model.kinematics(q)
 
-    def jacobian(self, q):
+    def jacobian(self, q: ArrayLike) -> Array:
         """Return the tool tip Jacobian (6, 6) at ``q``: the model's :meth:`tool_jacobian`."""
         return self.model.tool_jacobian(q)
 
-    def condition(self, q):
+    def condition(self, q: ArrayLike) -> float:
         """Return the Jacobian condition number at ``q`` (inf when singular)."""
         s = np.linalg.svd(self.kinematics(q)[2], compute_uv=False)
         return s[0] / s[-1] if s[-1] > 0.0 else np.inf
 
-    def solve(self, q, jacobian, twist, previous, fast=None):
+    def solve(self, q: Joints, jacobian: Array, twist: Array, previous: Joints,
+              fast: bool | None = None) -> IKResult:
         """
         Return the :class:`IKResult` for the twist ``(v, w)`` at joint positions ``q``.
 
@@ -144,25 +152,7 @@ class DifferentialIK:
         ``fast``: numba kernels (default when numba is there) or numpy (the oracle in tests).
         """
         fast = _ik_fast.AVAILABLE if fast is None else fast
-        posture = self.posture_gain > 0.0 and self.posture is not None
-        if fast:
-            z = self.posture_gain * (self.posture - q) if posture else self._no_posture
-            qd = np.empty(6)
-            kappa, lam2 = _ik_fast.dls(jacobian, twist, z, self.singular_value_threshold,
-                                       self.max_damping, qd)
-        else:
-            u_svd, s, vt = np.linalg.svd(jacobian)
-            s_min = s[-1]
-            kappa = s[0] / s_min if s_min > 0.0 else np.inf
-            lam2 = 0.0
-            if s_min < self.singular_value_threshold:
-                lam2 = self.max_damping ** 2 * (1.0 - (s_min / self.singular_value_threshold)
-                                                ** 2)
-            denom = s * s + lam2
-            qd = vt.T @ (s / denom * (u_svd.T @ twist))
-            if posture and lam2 > 0.0:
-                qd += vt.T @ (lam2 / denom * (vt @ (self.posture_gain * (self.posture - q))))
-
+        qd, kappa, lam2 = self._damped(q, jacobian, twist, fast)
         scale = 1.0
         if kappa > self.condition_slowdown:
             ahead = self.condition(q + qd * self.period)
@@ -176,24 +166,7 @@ class DifferentialIK:
                                                          - self.condition_slowdown)
                 qd = qd * scale
         singularity_scale = scale
-
-        if fast:
-            out = np.empty(6)
-            factor, j, stop = _ik_fast.limit(qd, previous, q, self.velocity_limits, self._max_dv,
-                                             self.acceleration_limits, self.lower, self.upper,
-                                             self.period, out)
-            qd, scale, joint = out, scale * factor, (None if j < 0 else (j, stop))
-        else:
-            ratio = np.max(np.abs(qd) / self.velocity_limits)
-            if ratio > 1.0:
-                qd = qd / ratio
-                scale /= ratio
-            change = qd - previous
-            ratio = np.max(np.abs(change) / self._max_dv)
-            if ratio > 1.0:
-                qd = previous + change / ratio
-                scale /= ratio
-            joint = self._joint_limit_violation(q, qd)
+        qd, scale, joint = self._limited(q, qd, previous, scale, fast)
         if joint is not None:
             j, stop = joint
             if qd[j] > 0:
@@ -207,7 +180,54 @@ class DifferentialIK:
         return IKResult(qd, float(kappa), float(np.sqrt(lam2)), float(scale),
                         singularity_scale=float(singularity_scale))
 
-    def _joint_limit_violation(self, q, qd):
+    def _damped(self, q: Joints, jacobian: Array, twist: Array,
+                fast: bool) -> tuple[Joints, float, float]:
+        """Return steps 1 and 2 (module docstring): ``qd``, the condition number, ``lambda^2``."""
+        posture = self.posture if self.posture_gain > 0.0 else None
+        if fast:
+            z = self.posture_gain * (posture - q) if posture is not None else self._no_posture
+            qd = np.empty(6)
+            kappa, lam2 = _ik_fast.dls(jacobian, twist, z, self.singular_value_threshold,
+                                       self.max_damping, qd)
+            return qd, kappa, lam2
+        u_svd, s, vt = np.linalg.svd(jacobian)
+        s_min = s[-1]
+        kappa = s[0] / s_min if s_min > 0.0 else np.inf
+        lam2 = 0.0
+        if s_min < self.singular_value_threshold:
+            lam2 = self.max_damping ** 2 * (1.0 - (s_min / self.singular_value_threshold) ** 2)
+        denom = s * s + lam2
+        qd = vt.T @ (s / denom * (u_svd.T @ twist))
+        if posture is not None and lam2 > 0.0:
+            qd += vt.T @ (lam2 / denom * (vt @ (self.posture_gain * (posture - q))))
+        return qd, kappa, lam2
+
+    def _limited(self, q: Joints, qd: Joints, previous: Joints, scale: float,
+                 fast: bool) -> tuple[Joints, float, tuple[int, float] | None]:
+        """
+        Return steps 4 to 6 (module docstring): ``qd`` limited, ``scale`` times the factors.
+
+        The third result is (joint, stopping position) of a joint that could not stop before
+        its limit, or None.
+        """
+        if fast:
+            out = np.empty(6)
+            factor, j, stop = _ik_fast.limit(qd, previous, q, self.velocity_limits, self._max_dv,
+                                             self.acceleration_limits, self.lower, self.upper,
+                                             self.period, out)
+            return out, scale * factor, (None if j < 0 else (j, stop))
+        ratio = np.max(np.abs(qd) / self.velocity_limits)
+        if ratio > 1.0:
+            qd = qd / ratio
+            scale /= ratio
+        change = qd - previous
+        ratio = np.max(np.abs(change) / self._max_dv)
+        if ratio > 1.0:
+            qd = previous + change / ratio
+            scale /= ratio
+        return qd, scale, self._joint_limit_violation(q, qd)
+
+    def _joint_limit_violation(self, q: Joints, qd: Joints) -> tuple[int, float] | None:
         """Return (joint, stopping position) of the first joint that could not stop in time."""
         # Braking by common factor takes t_s = max |qd_i| / a_i; joint i then travels
         # |qd_i| t_s / 2, after this period and one more of command delay.
@@ -219,11 +239,12 @@ class DifferentialIK:
         j = int(np.argmax(bad))
         return j, float(stop[j])
 
-    def _halt(self, previous, kappa, lam2, kind, reason):
+    def _halt(self, previous: Joints, kappa: float, lam2: float, kind: str,
+              reason: str) -> IKResult:
         return IKResult(self.brake(previous), float(kappa), float(np.sqrt(lam2)), 0.0, kind,
                         reason)
 
-    def brake(self, previous):
+    def brake(self, previous: ArrayLike) -> Joints:
         """Return the next command of a controlled stop from ``previous`` (zeros once stopped)."""
         previous = np.asarray(previous, dtype=float)
         ratio = np.max(np.abs(previous) / self._max_dv)

@@ -26,24 +26,31 @@ Why this module stays (measured against its numpy twins, 2 shared cores, other w
   0.2 s loading the cache.
 """
 
-import math
+from __future__ import annotations
 
+from collections.abc import Callable
+import math
+from typing import Any, cast, TypeVar
+
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
+from numpy.typing import NDArray
 
 try:  # The fast path is optional: without numba the numpy path serves.
     import numba
 except ImportError:  # pragma: no cover - numba is pinned in requirements
-    numba = None
+    numba = None  # type: ignore[assignment]
 
 AVAILABLE = numba is not None
+_F = TypeVar('_F', bound=Callable[..., Any])
 
 
-def _njit(function):
-    return numba.njit(cache=True, fastmath=False)(function) if AVAILABLE else function
+def _njit(function: _F) -> _F:
+    return cast(_F, numba.njit(cache=True, fastmath=False)(function)) if AVAILABLE else function
 
 
 @_njit
-def jacobi_svd(jac, av, v):
+def jacobi_svd(jac: Array, av: Array, v: Array) -> Array:
     """
     Fill ``av`` = J V (orthogonal columns) and ``v`` = V; return the singular values (6,).
 
@@ -95,7 +102,8 @@ def jacobi_svd(jac, av, v):
 
 
 @_njit
-def dls(jac, xi, z, threshold, max_damping, out):
+def dls(jac: Array, xi: Array, z: Array, threshold: float, max_damping: float,
+        out: Array) -> tuple[float, float]:
     """
     Write the damped least-squares solution (plus null-space term of ``z``) to ``out``.
 
@@ -132,8 +140,9 @@ def dls(jac, xi, z, threshold, max_damping, out):
 
 
 @_njit
-def limit(qd, previous, q, velocity_limits, max_dv, acceleration_limits, lower, upper, period,
-          out):
+def limit(qd: Array, previous: Array, q: Array, velocity_limits: Array, max_dv: Array,
+          acceleration_limits: Array, lower: Array, upper: Array, period: float,
+          out: Array) -> tuple[float, int, float]:
     """
     Scale ``qd`` into the velocity, then acceleration limits (common factors) into ``out``.
 
@@ -163,7 +172,7 @@ def limit(qd, previous, q, velocity_limits, max_dv, acceleration_limits, lower, 
 
 
 @_njit
-def log3(r, out, offset):
+def log3(r: Array, out: Array, offset: int) -> None:
     """Write the rotation vector (axis times angle) of rotation ``r`` to ``out[offset:+3]``."""
     cos = 0.5 * (r[0, 0] + r[1, 1] + r[2, 2] - 1.0)
     cos = min(1.0, max(-1.0, cos))
@@ -202,7 +211,7 @@ def log3(r, out, offset):
 
 
 @_njit
-def mul_transposed(a, b, out):
+def mul_transposed(a: Array, b: Array, out: Array) -> None:
     """Write ``a b^T`` of 3x3 matrices to ``out`` (numba's ``@`` needs SciPy's BLAS)."""
     for i in range(3):
         for j in range(3):
@@ -210,7 +219,8 @@ def mul_transposed(a, b, out):
 
 
 @_njit
-def twist(p_a, r_a, p_b, r_b, p_hat, r_hat, period, kp, ko, out):
+def twist(p_a: Array, r_a: Array, p_b: Array, r_b: Array, p_hat: Array, r_hat: Array,
+          period: float, kp: float, ko: float, out: Array) -> None:
     """Write the commanded tool twist: secant feed-forward plus pose-error feedback."""
     rel = np.empty((3, 3))
     mul_transposed(r_b, r_a, rel)
@@ -224,7 +234,7 @@ def twist(p_a, r_a, p_b, r_b, p_hat, r_hat, period, kp, ko, out):
 
 
 @_njit
-def exp3(w, out):
+def exp3(w: Array, out: Array) -> None:
     """Write the rotation matrix exp([w]x) (Rodrigues) to ``out``."""
     angle = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
     if angle < 1e-8:
@@ -246,7 +256,8 @@ def exp3(w, out):
 
 
 @_njit
-def hermite_pose(times, positions, coeffs, rotations, twists, t, p_out, r_out):
+def hermite_pose(times: Array, positions: Array, coeffs: Array, rotations: Array, twists: Array,
+                 t: float, p_out: Array, r_out: Array) -> None:
     """Write the pose of a PoseTrajectory at ``t`` (see ``PoseTrajectory.pose``)."""
     n = times.shape[0]
     if t <= 0.0 or n == 1:
@@ -274,7 +285,8 @@ def hermite_pose(times, positions, coeffs, rotations, twists, t, p_out, r_out):
 
 
 @_njit
-def delay_costs(commands, index, frac, dq, period, forgetting, costs):
+def delay_costs(commands: Array, index: NDArray[np.int64], frac: Array, dq: Array, period: float,
+                forgetting: float, costs: Array) -> tuple[float, np.intp]:
     """
     Update the delay candidates' forgetting costs with one measured displacement.
 
@@ -297,7 +309,7 @@ def delay_costs(commands, index, frac, dq, period, forgetting, costs):
 
 
 @_njit
-def in_flight(commands, delay, period, out):
+def in_flight(commands: Array, delay: float, period: float, out: Array) -> None:
     """Write the joint motion still to come from sent commands (see DelayEstimator)."""
     for k in range(6):
         out[k] = 0.0
@@ -309,7 +321,7 @@ def in_flight(commands, delay, period, out):
                 out[k] += period * overlap * commands[m, k]
 
 
-def warm_up():
+def warm_up() -> None:
     """Compile (or load from the cache) every kernel now, not in the first control step."""
     if not AVAILABLE:
         return

@@ -20,10 +20,15 @@ Objects and the point that stands for each (all in base_link, metres; table top 
   at the mouth).
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
+from typing import Any
 
 from etdmp_ros import limits
+from etdmp_ros.geometry.arrays import Array, Points3
 from etdmp_ros.geometry.camera import CameraPose
 import numpy as np
 
@@ -50,7 +55,8 @@ PEN_TIP_RADIUS = 0.003
 PEN_TIP_LENGTH = 0.02
 
 
-def _vector(name, value, size=None, multiple_of=None):
+def _vector(name: str, value: object, size: int | None = None,
+            multiple_of: int | None = None) -> Array:
     try:
         array = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -65,21 +71,21 @@ def _vector(name, value, size=None, multiple_of=None):
     return array
 
 
-def _positive(name, value):
+def _positive(name: str, value: float) -> float:
     value = float(value)
     if not math.isfinite(value) or value <= 0.0:
         raise ValueError(f'{name} must be a positive number, got {value}')
     return value
 
 
-def _color(name, value):
+def _color(name: str, value: object) -> Array:
     rgb = _vector(name, value)
     if rgb.size not in (3, 4) or np.any(rgb < 0.0) or np.any(rgb > 1.0):
         raise ValueError(f'{name} must be [r, g, b] (or rgba) in 0..1, got {rgb.tolist()}')
     return np.append(rgb[:3], rgb[3] if rgb.size == 4 else 1.0)
 
 
-def _in_workcell(name, array):
+def _in_workcell(name: str, array: Array) -> Array:
     big = np.flatnonzero(np.abs(array) > limits.MAX_REQUEST_COORDINATE)
     if big.size:
         raise ValueError(f'{name} has a coordinate of {array[big[0]]:.3g} m, beyond '
@@ -88,17 +94,17 @@ def _in_workcell(name, array):
     return array
 
 
-def parse_goal_position(value):
+def parse_goal_position(value: object) -> Points3:
     """Return ``goal_position`` as a float array (3,); ValueError if not 3 bounded numbers."""
     return _in_workcell('goal_position', _vector('goal_position', value, size=3))
 
 
-def parse_bottle_position(value):
+def parse_bottle_position(value: object) -> Array:
     """Return ``bottle.position`` as a float array (2,) [x, y]; ValueError if not 2 bounded."""
     return _in_workcell('bottle.position', _vector('bottle.position', value, size=2))
 
 
-def parse_obstacle_radii(value):
+def parse_obstacle_radii(value: object) -> Array:
     """
     Return ``obstacle_radii`` (flat [r1, r2, ...], m) as an array (N,); [] means none given.
 
@@ -110,13 +116,13 @@ def parse_obstacle_radii(value):
     return radii
 
 
-def obstacle_radii_for(count, radii, default):
+def obstacle_radii_for(count: int, radii: Array, default: float) -> Array:
     """Return the radius (count,) of each of ``count`` obstacles: ``radii``, then ``default``."""
     radii = np.asarray(radii, dtype=float).reshape(-1)[:count]
     return np.concatenate([radii, np.full(count - len(radii), float(default))])
 
 
-def parse_obstacle_positions(value):
+def parse_obstacle_positions(value: object) -> Points3:
     """
     Return ``obstacle_positions`` (flat [x1, y1, z1, x2, ...]) as an array (N, 3).
 
@@ -170,7 +176,7 @@ class SceneConfig:
     obstacle_color: np.ndarray
 
     @classmethod
-    def from_parameters(cls, params):
+    def from_parameters(cls, params: Mapping[str, Any]) -> SceneConfig:
         """
         Return the scene from flat parameter names (those of :data:`SCENE_PARAMETERS`).
 
@@ -219,7 +225,7 @@ class SceneConfig:
             scene.placed(name, p[name])
         return scene
 
-    def placed(self, name, value):
+    def placed(self, name: str, value: object) -> Array:
         """
         Return the position of movable object ``name`` (a key of MOVABLE) parsed and checked.
 

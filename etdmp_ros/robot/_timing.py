@@ -14,10 +14,13 @@ underestimated: the check is necessary, not sufficient (the controller's trackin
 word). The module needs no ROS.
 """
 
+from __future__ import annotations
+
 from dataclasses import dataclass
 
-from etdmp_ros.robot._ur10 import JOINT_NAMES
+from etdmp_ros.robot._ur10 import JOINT_NAMES, Joints, UR10Model
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 #: Pose error (m and rad) above which a pose counts as out of reach of the IK.
 IK_RESIDUAL = 1e-4
@@ -31,7 +34,9 @@ class TimingViolation:
     slowdown: float
 
 
-def plan_joints(model, positions, rotation, t, q_seed, samples=64, iterations=1):
+def plan_joints(model: UR10Model, positions: ArrayLike, rotation: ArrayLike, t: ArrayLike,
+                q_seed: ArrayLike, samples: int = 64,
+                iterations: int = 1) -> tuple[NDArray[np.intp], Joints, TimingViolation | None]:
     """
     Return ``(idx, joints, violation)``: the arm's joints at poses of a path, by pose IK.
 
@@ -71,17 +76,20 @@ def plan_joints(model, positions, rotation, t, q_seed, samples=64, iterations=1)
     return idx, joints, None
 
 
-def joint_timing_violation(times, joints, velocity_limits, acceleration_limits):
+def joint_timing_violation(times: ArrayLike, joints: Joints, velocity_limits: ArrayLike,
+                           acceleration_limits: ArrayLike) -> TimingViolation | None:
     """
     Return a TimingViolation if joints (k, 6) at ``times`` (k,) exceed the limits, or None.
 
     Velocities and accelerations are finite differences between the rows.
     """
     times = np.asarray(times, dtype=float)
+    velocity_limits = np.asarray(velocity_limits, dtype=float)
+    acceleration_limits = np.asarray(acceleration_limits, dtype=float)
     qd = np.diff(joints, axis=0) / np.diff(times)[:, None]
     qdd = np.diff(qd, axis=0) / (0.5 * (times[2:] - times[:-2]))[:, None]
-    v_ratio = np.abs(qd) / np.asarray(velocity_limits, dtype=float)
-    a_ratio = np.abs(qdd) / np.asarray(acceleration_limits, dtype=float)
+    v_ratio = np.abs(qd) / velocity_limits
+    a_ratio = np.abs(qdd) / acceleration_limits
     rv, ra = float(v_ratio.max()), float(a_ratio.max())
     if rv <= 1.0 and ra <= 1.0:
         return None
@@ -99,8 +107,9 @@ def joint_timing_violation(times, joints, velocity_limits, acceleration_limits):
                            max(rv, float(np.sqrt(ra))))
 
 
-def timing_violation(model, positions, rotation, t, q_seed, velocity_limits,
-                     acceleration_limits, samples=64, iterations=1):
+def timing_violation(model: UR10Model, positions: ArrayLike, rotation: ArrayLike, t: ArrayLike,
+                     q_seed: ArrayLike, velocity_limits: ArrayLike, acceleration_limits: ArrayLike,
+                     samples: int = 64, iterations: int = 1) -> TimingViolation | None:
     """
     Return a TimingViolation if the joints cannot follow ``positions`` at times ``t``, or None.
 

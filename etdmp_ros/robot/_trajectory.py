@@ -6,14 +6,19 @@ tool tip position (3,) and ``R`` the tool rotation (3, 3), both in base_link. Th
 nothing else: its feed-forward velocity is the secant of ``pose`` over one control period.
 """
 
+from __future__ import annotations
+
 from bisect import bisect_right
+from collections.abc import Sequence
 
 
 from etdmp_ros import limits
 from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.geometry.arrays import Array, Points3, Rotations
 from etdmp_ros.robot import _ik_fast
 
 import numpy as np
+from numpy.typing import ArrayLike
 import pinocchio as pin
 
 #: Smallest step between two time stamps (s); closer stamps are a malformed path.
@@ -24,7 +29,7 @@ class TrajectoryError(ValueError):
     """A trajectory that cannot be followed (malformed input); the message says why."""
 
 
-def _as_rotations(rotations, n):
+def _as_rotations(rotations: ArrayLike, n: int) -> Rotations:
     rot = np.asarray(rotations, dtype=float)
     if rot.shape != (n, 3, 3):
         raise TrajectoryError(f'rotations must have shape ({n}, 3, 3), got {rot.shape}')
@@ -36,7 +41,7 @@ def _as_rotations(rotations, n):
     return rot
 
 
-def quaternions_to_rotations(quaternions):
+def quaternions_to_rotations(quaternions: ArrayLike) -> Rotations:
     """
     Convert (n, 4) quaternions ``(x, y, z, w)`` (ROS order) to (n, 3, 3) rotation matrices.
 
@@ -59,7 +64,7 @@ class PoseTrajectory:
     A single pose is a trajectory of duration 0.
     """
 
-    def __init__(self, t, positions, rotations):
+    def __init__(self, t: ArrayLike, positions: ArrayLike, rotations: ArrayLike) -> None:
         """Check and store samples: ``t`` (n,) strictly increasing, (n, 3), (n, 3, 3)."""
         t = np.asarray(t, dtype=float).reshape(-1)
         n = len(t)
@@ -97,12 +102,14 @@ class PoseTrajectory:
                                  zip(self.rotations[:-1], self.rotations[1:])])
 
     @classmethod
-    def from_quaternions(cls, t, positions, quaternions):
+    def from_quaternions(cls, t: ArrayLike, positions: ArrayLike,
+                         quaternions: ArrayLike) -> PoseTrajectory:
         """Build from ``(x, y, z, w)`` quaternions (ROS order)."""
         return cls(t, positions, quaternions_to_rotations(quaternions))
 
     @classmethod
-    def timed_by_speed(cls, positions, rotations, speed, angular_speed, min_duration=0.1):
+    def timed_by_speed(cls, positions: ArrayLike, rotations: ArrayLike, speed: float,
+                       angular_speed: float, min_duration: float = 0.1) -> PoseTrajectory:
         """
         Time an untimed path: a minimum-jerk speed profile along its length.
 
@@ -135,7 +142,7 @@ class PoseTrajectory:
             return cls([0.0], p, rot)
         return cls(duration * _inverse_minimum_jerk(progress), p, rot)
 
-    def _segment(self, t):
+    def _segment(self, t: float) -> tuple[int | None, float]:
         if t <= 0.0 or len(self._times) == 1:
             return None, 0
         if t >= self.duration:
@@ -143,7 +150,7 @@ class PoseTrajectory:
         i = min(bisect_right(self._times, t) - 1, len(self._times) - 2)
         return i, (t - self._times[i]) / (self._times[i + 1] - self._times[i])
 
-    def pose(self, t, fast=None):
+    def pose(self, t: float, fast: bool | None = None) -> tuple[Points3, Rotations]:
         """
         Return (p (3,), R (3, 3)) at time ``t`` (s, clamped to the path's span).
 
@@ -156,12 +163,12 @@ class PoseTrajectory:
             return p, rot
         i, s = self._segment(t)
         if i is None:
-            return self.positions[s].copy(), self.rotations[s].copy()
+            return self.positions[int(s)].copy(), self.rotations[int(s)].copy()
         c = self._coeffs[i]
         p = c[0] + s * (c[1] + s * (c[2] + s * c[3]))
         return p, pin.exp3(s * self._twists[i]) @ self.rotations[i]
 
-    def velocity(self, t):
+    def velocity(self, t: float) -> Points3:
         """Return the tool tip velocity in m/s, shape (3,), at ``t`` (zero outside the span)."""
         i, s = self._segment(t)
         if i is None:
@@ -171,7 +178,7 @@ class PoseTrajectory:
         return (c[1] + s * (2.0 * c[2] + s * 3.0 * c[3])) / h
 
 
-def _inverse_minimum_jerk(progress):
+def _inverse_minimum_jerk(progress: Array) -> Array:
     """Return u in [0, 1] with 10u^3 - 15u^4 + 6u^5 = progress (monotone; bisection)."""
     lo, hi = np.zeros_like(progress), np.ones_like(progress)
     for _ in range(60):
@@ -183,7 +190,7 @@ def _inverse_minimum_jerk(progress):
     return u
 
 
-def _quintic(s):
+def _quintic(s: float | Array) -> tuple[tuple[float | Array, ...], tuple[float | Array, ...]]:
     """Return the quintic Hermite basis (h00, h01, h10, h11) and its s-derivative at s."""
     s2, s3 = s * s, s * s * s
     basis = (1.0 - s3 * (10.0 - 15.0 * s + 6.0 * s2),     # start position
@@ -205,8 +212,9 @@ class MinimumJerkMove:
     acceleration: from rest, the minimum-jerk profile ``10 s^3 - 15 s^4 + 6 s^5``.
     """
 
-    def __init__(self, p0, rotation0, p1, rotation1, duration, v0=(0.0, 0.0, 0.0),
-                 w0=(0.0, 0.0, 0.0)):
+    def __init__(self, p0: ArrayLike, rotation0: ArrayLike, p1: ArrayLike, rotation1: ArrayLike,
+                 duration: float, v0: ArrayLike = (0.0, 0.0, 0.0),
+                 w0: ArrayLike = (0.0, 0.0, 0.0)) -> None:
         """Plan over ``duration`` seconds; ``v0`` (m/s) and ``w0`` (rad/s) are start velocities."""
         if not (np.isfinite(duration) and duration > 0.0):
             raise TrajectoryError(f'duration must be positive, got {duration!r}')
@@ -220,8 +228,10 @@ class MinimumJerkMove:
         self.angle = pin.log3(self.rotation1 @ self.rotation0.T)
 
     @classmethod
-    def plan(cls, p0, rotation0, p1, rotation1, speed, angular_speed, acceleration,
-             v0=(0.0, 0.0, 0.0), w0=(0.0, 0.0, 0.0), min_duration=0.2):
+    def plan(cls, p0: ArrayLike, rotation0: ArrayLike, p1: ArrayLike, rotation1: ArrayLike,
+             speed: float, angular_speed: float, acceleration: float,
+             v0: ArrayLike = (0.0, 0.0, 0.0), w0: ArrayLike = (0.0, 0.0, 0.0),
+             min_duration: float = 0.2) -> MinimumJerkMove:
         """
         Choose the shortest duration that keeps the move safe and return the move.
 
@@ -245,7 +255,7 @@ class MinimumJerkMove:
             duration *= 1.1
         return move
 
-    def _profile(self, s):
+    def _profile(self, s: Array) -> tuple[Array, Array, Array]:
         """Return sampled |velocity|, |angular rate| and |acceleration| at phases ``s``."""
         _, (_, d01, d10, _) = _quintic(s[:, None])
         T = self.duration
@@ -255,7 +265,7 @@ class MinimumJerkMove:
         return (np.linalg.norm(vel, axis=1), np.linalg.norm(rate, axis=1),
                 np.linalg.norm(acc, axis=1))
 
-    def pose(self, t):
+    def pose(self, t: float) -> tuple[Points3, Rotations]:
         """Return (p (3,), R (3, 3)) at time ``t`` (s, clamped to ``[0, duration]``)."""
         if t >= self.duration:
             return self.p1.copy(), self.rotation1.copy()
@@ -266,7 +276,7 @@ class MinimumJerkMove:
         r = h01 * self.angle + h10 * T * self.w0
         return p, pin.exp3(r) @ self.rotation0
 
-    def velocity(self, t):
+    def velocity(self, t: float) -> Points3:
         """Return the tool tip velocity in m/s, shape (3,), at time ``t``."""
         if t >= self.duration or t < 0.0:
             return np.zeros(3) if t >= self.duration else self.v0.copy()
@@ -274,8 +284,9 @@ class MinimumJerkMove:
         return d01 * (self.p1 - self.p0) / self.duration + d10 * self.v0
 
 
-def trajectory_from_path(stamps_ns, positions, quaternions, tool_rotation, speed=0.05,
-                         angular_speed=0.5):
+def trajectory_from_path(stamps_ns: Sequence[int] | None, positions: ArrayLike,
+                         quaternions: ArrayLike | None, tool_rotation: Rotations,
+                         speed: float = 0.05, angular_speed: float = 0.5) -> PoseTrajectory:
     """
     Return the PoseTrajectory of a received path (the rules of the controller's /etdmp/path).
 

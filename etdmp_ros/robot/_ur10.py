@@ -9,11 +9,15 @@ Joint velocity limits are the stricter of the URDF's and the official UR10 (CB3)
 120 deg/s for the two shoulder joints, 180 deg/s for the others.
 """
 
+from __future__ import annotations
+
 from importlib import metadata
 import os
 from pathlib import Path
 
+from etdmp_ros.geometry.arrays import Array, Points3, Rotations
 import numpy as np
+from numpy.typing import ArrayLike
 import pinocchio as pin
 
 JOINT_NAMES = ('shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint', 'wrist_1_joint',
@@ -21,9 +25,11 @@ JOINT_NAMES = ('shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint', 'wris
 OFFICIAL_VELOCITY_LIMITS = np.radians([120.0, 120.0, 180.0, 180.0, 180.0, 180.0])
 TOOL_FRAME = 'tool_tip'
 FLANGE_FRAME = 'tool0'
+#: Joint positions (rad) or velocities (rad/s), (6,) in the order of JOINT_NAMES, or (n, 6).
+Joints = Array
 
 
-def robot_data_dir():
+def robot_data_dir() -> Path:
     """
     Return the ``example-robot-data`` robots folder (holding ``ur_description/``).
 
@@ -34,7 +40,8 @@ def robot_data_dir():
     candidates = [Path(env)] if env else []
     try:
         dist = metadata.distribution('example-robot-data')
-        candidates.append(Path(dist.locate_file('cmeel.prefix/share/example-robot-data/robots')))
+        candidates.append(Path(str(dist.locate_file(
+            'cmeel.prefix/share/example-robot-data/robots'))))
     except metadata.PackageNotFoundError:
         pass
     try:
@@ -51,7 +58,7 @@ def robot_data_dir():
         f'(looked in: {", ".join(str(c) for c in candidates) or "nothing"})')
 
 
-def ur10_urdf_path():
+def ur10_urdf_path() -> Path:
     """Return the path of the UR10 URDF shipped by ``example-robot-data``."""
     return robot_data_dir() / 'ur_description' / 'urdf' / 'ur10_robot.urdf'
 
@@ -68,7 +75,7 @@ class UR10Model:
     (or give each thread its own UR10Model).
     """
 
-    def __init__(self, tool_offset=(0.0, 0.0, 0.0)):
+    def __init__(self, tool_offset: ArrayLike = (0.0, 0.0, 0.0)) -> None:
         """Load the URDF and add the ``tool_tip`` frame ``tool_offset`` metres from tool0."""
         self.urdf_path = ur10_urdf_path()
         self.model = pin.buildModelFromUrdf(str(self.urdf_path))
@@ -89,18 +96,18 @@ class UR10Model:
         self.upper = self.model.upperPositionLimit.copy()
         self.velocity_limits = np.minimum(self.model.velocityLimit, OFFICIAL_VELOCITY_LIMITS)
 
-    def frame_pose(self, q, frame_id=None):
+    def frame_pose(self, q: ArrayLike, frame_id: int | None = None) -> tuple[Points3, Rotations]:
         """Return (position (3,), rotation (3, 3)) of a frame (default: tool tip) in base_link."""
         frame_id = self.tool_frame_id if frame_id is None else frame_id
         pin.forwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
         pose = pin.updateFramePlacement(self.model, self.data, frame_id)
         return pose.translation.copy(), pose.rotation.copy()
 
-    def tool_position(self, q):
+    def tool_position(self, q: ArrayLike) -> Points3:
         """Return the tool tip position (3,) in base_link."""
         return self.frame_pose(q)[0]
 
-    def tool_jacobian(self, q):
+    def tool_jacobian(self, q: ArrayLike) -> Array:
         """
         Return the 6x6 Jacobian of the tool tip (linear; angular) in base_link axes.
 
@@ -111,7 +118,7 @@ class UR10Model:
         return pin.computeFrameJacobian(self.model, self.data, np.asarray(q, dtype=float),
                                         self.tool_frame_id, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
 
-    def kinematics(self, q):
+    def kinematics(self, q: ArrayLike) -> tuple[Points3, Rotations, Array]:
         """
         Return the tool tip (position (3,), rotation (3, 3), Jacobian (6, 6)) at ``q``.
 
@@ -122,7 +129,9 @@ class UR10Model:
         pose = self.data.oMf[self.tool_frame_id]   # updated by computeFrameJacobian
         return pose.translation.copy(), pose.rotation.copy(), jac
 
-    def solve_pose(self, position, rotation, q0, iterations=60, tolerance=1e-6, max_step=0.3):
+    def solve_pose(self, position: Points3, rotation: Rotations, q0: ArrayLike,
+                   iterations: int = 60, tolerance: float = 1e-6,
+                   max_step: float = 0.3) -> tuple[Joints, Array]:
         """
         Return joints putting the tool tip at ``position`` with ``rotation``, and the error.
 

@@ -12,15 +12,22 @@ description (:mod:`etdmp_ros.ros.system`), the table of ``docs/limits.md`` from
     python -m etdmp_ros.ros.config_files --check    # exit 1 naming the files that are out of date
 """
 
+from __future__ import annotations
+
 import argparse
 import ast
+from collections.abc import Iterable, Mapping, Sequence
 import json
+import keyword
+import os
 from pathlib import Path
 import sys
 import textwrap
+from typing import Any
 
 from etdmp_ros import limits
 from etdmp_ros.ros import system
+from etdmp_ros.ros.specs import NodeSpec, Parameter
 import yaml
 
 WIDTH = 99
@@ -32,7 +39,8 @@ SERVICES_BEGIN = '<!-- services: written by `make config` from etdmp_ros/ros/sys
 SERVICES_END = '<!-- end of services -->'
 
 
-def read_parameter_file(path, node_name=None):
+def read_parameter_file(path: str | os.PathLike[str], node_name: str | None = None
+                        ) -> dict[str, Any]:
     """
     Return the parameters of a ROS 2 parameter file as a flat dict ``{'a.b': value}``.
 
@@ -44,15 +52,15 @@ def read_parameter_file(path, node_name=None):
     sections = ['/**']
     if node_name:
         sections += [node_name, '/' + node_name]
-    flat = {}
+    flat: dict[str, Any] = {}
     for section in sections:
         params = (doc.get(section) or {}).get('ros__parameters') or {}
         flat.update(_flatten(params))
     return flat
 
 
-def _flatten(tree, prefix=''):
-    flat = {}
+def _flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    flat: dict[str, Any] = {}
     for key, value in tree.items():
         name = f'{prefix}{key}'
         if isinstance(value, dict):
@@ -62,31 +70,32 @@ def _flatten(tree, prefix=''):
     return flat
 
 
-def read_node_parameters(name, config_dir=None):
+def read_node_parameters(name: str, config_dir: str | os.PathLike[str] | None = None
+                         ) -> dict[str, Any]:
     """Return node ``name``'s values from its parameter files, in the system's order."""
-    values = {}
+    values: dict[str, Any] = {}
     for path in system.parameter_files(name, config_dir):
         values.update(read_parameter_file(path, name))
     return values
 
 
 # ---------------------------------------------------------------------------------- writing
-def _yaml_value(value):
+def _yaml_value(value: Any) -> str:
     """Return a value as flow-style YAML (lists inline, floats as floats)."""
     text = yaml.safe_dump(value, default_flow_style=True, width=10_000).strip()
     return text.removesuffix('...').strip()
 
 
-def _comment(text, indent):
+def _comment(text: str, indent: int) -> list[str]:
     prefix = ' ' * indent + '# '
     return textwrap.wrap(text, WIDTH - len(prefix), initial_indent=prefix,
                          subsequent_indent=prefix, break_on_hyphens=False)
 
 
-def _parameter_lines(parameters, indent):
+def _parameter_lines(parameters: Iterable[Parameter], indent: int) -> list[str]:
     """Return YAML lines for ``parameters`` (nested keys grouped), comments above each."""
-    lines = []
-    open_groups = []
+    lines: list[str] = []
+    open_groups: list[str] = []
     section = None
     for p in parameters:
         if p.section and p.section != section:
@@ -113,7 +122,7 @@ def _parameter_lines(parameters, indent):
     return lines
 
 
-def scene_file_text():
+def scene_file_text() -> str:
     """Return the text of ``config/scene.yaml``."""
     header = [
         "# The workcell, shared by every node: pass it before the node's own file",
@@ -129,7 +138,7 @@ def scene_file_text():
     return '\n'.join(header + _parameter_lines(system.SCENE, 4)) + '\n'
 
 
-def node_file_text(spec):
+def node_file_text(spec: NodeSpec) -> str:
     """Return the text of ``config/<node>.yaml``: the node's own parameters."""
     scene = ', '.join(p.name for p in spec.scene) or 'nothing'
     header = [f'# {spec.name}: {spec.summary}.',
@@ -145,11 +154,11 @@ def node_file_text(spec):
     return '\n'.join(lines + _parameter_lines(spec.parameters, 4)) + '\n'
 
 
-def _cell(text):
+def _cell(text: str) -> str:
     return str(text).replace('|', '\\|')
 
 
-def _default_cell(p):
+def _default_cell(p: Parameter) -> str:
     if p.array_type and not p.default:
         return '[]'
     value = json.dumps(p.default) if isinstance(p.default, list) else str(p.default)
@@ -158,7 +167,7 @@ def _default_cell(p):
     return f'`{value}`' if value != '' else "''"
 
 
-def _range_cell(p):
+def _range_cell(p: Parameter) -> str:
     if p.choices:
         return ', '.join(p.choices)
     if p.value_range is not None:
@@ -166,7 +175,7 @@ def _range_cell(p):
     return ''
 
 
-def parameter_table(spec):
+def parameter_table(spec: NodeSpec) -> str:
     """Return the markdown table of node ``spec``'s parameters (scene ones marked)."""
     rows = ['| parameter | type | default | unit | range | runtime | meaning |',
             '|---|---|---|---|---|---|---|']
@@ -178,7 +187,7 @@ def parameter_table(spec):
     return '\n'.join(rows)
 
 
-def services_text(spec):
+def services_text(spec: NodeSpec) -> str:
     """Return the markdown of node ``spec``'s request services and their arguments."""
     parameters = {p.name for p in spec.all_parameters}
     blocks = []
@@ -198,7 +207,7 @@ def services_text(spec):
     return '\n\n'.join(blocks)
 
 
-def docs_text(spec, current):
+def docs_text(spec: NodeSpec, current: str) -> str:
     """Return ``current`` (a docs page) with its parameter table replaced by the generated one."""
     text = replace_block(current, TABLE_BEGIN, TABLE_END, parameter_table(spec),
                          f'docs/{spec.name}.md')
@@ -208,7 +217,7 @@ def docs_text(spec, current):
     return text
 
 
-def _limit_value(value):
+def _limit_value(value: object) -> str:
     if isinstance(value, tuple):
         return ' – '.join(_limit_value(v) for v in value)
     if isinstance(value, int) and abs(value) >= 10000:
@@ -216,7 +225,7 @@ def _limit_value(value):
     return f'{value:g}' if isinstance(value, float) else str(value)
 
 
-def limits_table():
+def limits_table() -> str:
     """
     Return the markdown tables of :mod:`etdmp_ros.limits`: one per section of the module.
 
@@ -225,11 +234,12 @@ def limits_table():
     """
     source = Path(limits.__file__).read_text(encoding='utf-8')
     lines = source.splitlines()
-    out = []
+    out: list[tuple[str, list[str]]] = []
     for node in ast.parse(source).body:
         if not isinstance(node, ast.Assign) or not isinstance(node.targets[0], ast.Name):
             continue
-        k, comment = node.lineno - 2, []
+        k = node.lineno - 2
+        comment: list[str] = []
         while k >= 0 and lines[k].startswith('#:'):
             comment.insert(0, lines[k][2:].strip())
             k -= 1
@@ -244,7 +254,7 @@ def limits_table():
                        + '\n'.join(rows) for section, rows in out)
 
 
-def replace_block(current, begin, end, table, where):
+def replace_block(current: str, begin: str, end: str, table: str, where: str) -> str:
     """
     Return ``current`` with the text between the lines ``begin`` and ``end`` replaced by ``table``.
 
@@ -259,28 +269,82 @@ def replace_block(current, begin, end, table, where):
     return f'{head}{begin}\n{table}\n{end}{tail}'
 
 
-def generated_files(root):
-    """Return ``{path: text}`` of every file written from the system description."""
-    root = Path(root)
-    files = {root / 'config' / system.SCENE_FILE: scene_file_text()}
+# ------------------------------------------------------------------------- typed parameters
+#: The module of every node's typed parameters, written from the description.
+NODE_PARAMETERS_MODULE = Path('etdmp_ros') / 'ros' / 'node_parameters.py'
+
+
+def parameters_class_name(spec: NodeSpec) -> str:
+    """Return the name of a node's typed parameters class (``ur10_sim``: Ur10SimParameters)."""
+    return ''.join(part.capitalize() for part in spec.name.split('_')) + 'Parameters'
+
+
+def node_parameters_text() -> str:
+    """Return the text of ``etdmp_ros/ros/node_parameters.py``: a frozen dataclass per node."""
+    lines = [
+        '"""',
+        "Each node's parameters as one typed, frozen object: written by ``make config``, do not "
+        'edit.',
+        '',
+        "Made from the node's description in :mod:`etdmp_ros.ros.system`: a field per parameter "
+        '(its',
+        'name with ``_`` for ``.``), typed as declared (lists as tuples). ``from_values`` checks '
+        'every',
+        'value by its description (:meth:`etdmp_ros.ros.specs.Parameter.typed`) and raises '
+        'ValueError',
+        'naming the first wrong one. What each parameter means: ``docs/<node>.md``.',
+        '"""',
+        '',
+        'from __future__ import annotations',
+        '',
+        'from collections.abc import Mapping',
+        'from dataclasses import dataclass',
+        'from typing import Any, ClassVar',
+        '',
+        'from etdmp_ros.ros import system',
+        'from etdmp_ros.ros.specs import NodeSpec, typed_values',
+    ]
     for spec in system.ALL_NODES:
-        files[root / 'config' / f'{spec.name}.yaml'] = node_file_text(spec)
-        docs = root / 'docs' / f'{spec.name}.md'
+        name = parameters_class_name(spec)
+        fields = [p.field_name for p in spec.all_parameters]
+        clash = {f for f in fields if fields.count(f) > 1 or keyword.iskeyword(f)}
+        if clash:
+            raise ValueError(f'{spec.name}: parameters {sorted(clash)} make no distinct fields')
+        lines += ['', '', '@dataclass(frozen=True)', f'class {name}:',
+                  f'    """The parameters of {spec.name} (docs/{spec.name}.md)."""', '',
+                  f"    SPEC: ClassVar[NodeSpec] = system.node('{spec.name}')", '']
+        lines += [f'    {p.field_name}: {p.python_type}' for p in spec.all_parameters]
+        lines += ['', '    @classmethod',
+                  f'    def from_values(cls, values: Mapping[str, Any]) -> {name}:',
+                  '        """Return the typed parameters of ``values`` ({name: value}); '
+                  'ValueError: a bad one."""',
+                  '        return cls(**typed_values(cls.SPEC, values))']
+    return '\n'.join(lines) + '\n'
+
+
+def generated_files(root: str | os.PathLike[str]) -> dict[Path, str]:
+    """Return ``{path: text}`` of every file written from the system description."""
+    folder = Path(root)
+    files = {folder / 'config' / system.SCENE_FILE: scene_file_text()}
+    for spec in system.ALL_NODES:
+        files[folder / 'config' / f'{spec.name}.yaml'] = node_file_text(spec)
+        docs = folder / 'docs' / f'{spec.name}.md'
         files[docs] = docs_text(spec, docs.read_text(encoding='utf-8'))
-    page = root / 'docs' / 'limits.md'
+    files[folder / NODE_PARAMETERS_MODULE] = node_parameters_text()
+    page = folder / 'docs' / 'limits.md'
     files[page] = replace_block(page.read_text(encoding='utf-8'), LIMITS_BEGIN, LIMITS_END,
                                 limits_table(), 'docs/limits.md')
     return files
 
 
-def main(argv=None):
+def main(argv: Sequence[str] | None = None) -> int:
     """Write (or with --check, compare) config/*.yaml and the docs' parameter tables."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--check', action='store_true', help='only report stale files')
     parser.add_argument('--root', default=Path(__file__).resolve().parents[2], type=Path,
                         help='repository root (default: this checkout)')
     args = parser.parse_args(argv)
-    stale = []
+    stale: list[Path] = []
     for path, text in generated_files(args.root).items():
         if not path.is_file() or path.read_text(encoding='utf-8') != text:
             stale.append(path)

@@ -12,14 +12,21 @@ declared with before rclpy checks the type; any other type is refused by rclpy w
 (``Wrong parameter type, expected 'Type.DOUBLE_ARRAY' got 'Type.STRING'``).
 """
 
-import math
+from __future__ import annotations
 
-from etdmp_ros.ros.system import DOUBLE_ARRAY, STRING_ARRAY
+from collections.abc import Callable, Iterable
+import math
+from typing import Any, TypeVar
+
+from etdmp_ros.ros.specs import DOUBLE_ARRAY, NodeSpec, Parameter as ParameterSpec, STRING_ARRAY
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
                               ParameterUninitializedException)
+from rclpy.node import Node
 from rclpy.parameter import Parameter
+
+T = TypeVar('T')
 
 _ARRAY_TYPES = {STRING_ARRAY: Parameter.Type.STRING_ARRAY,
                 DOUBLE_ARRAY: Parameter.Type.DOUBLE_ARRAY}
@@ -29,7 +36,7 @@ _LISTS = (Parameter.Type.BOOL_ARRAY, Parameter.Type.BYTE_ARRAY, Parameter.Type.I
           Parameter.Type.DOUBLE_ARRAY, Parameter.Type.STRING_ARRAY)
 
 
-def descriptor(parameter):
+def descriptor(parameter: ParameterSpec) -> ParameterDescriptor:
     """Return the rcl ParameterDescriptor of a :class:`~etdmp_ros.ros.system.Parameter`."""
     d = ParameterDescriptor(name=parameter.name, description=parameter.full_description,
                             read_only=not parameter.dynamic,
@@ -46,7 +53,7 @@ def descriptor(parameter):
     return d
 
 
-def list_type(parameter):
+def list_type(parameter: ParameterSpec) -> Parameter.Type | None:
     """Return the rclpy list type of a :class:`~etdmp_ros.ros.system.Parameter` (None: scalar)."""
     if parameter.array_type:
         return _ARRAY_TYPES[parameter.array_type]
@@ -58,7 +65,7 @@ def list_type(parameter):
     return None
 
 
-def as_declared(spec, parameters):
+def as_declared(spec: NodeSpec, parameters: Iterable[Parameter]) -> list[Parameter]:
     """
     Return rclpy ``parameters`` with list values in the list type ``spec`` declares for them.
 
@@ -70,7 +77,7 @@ def as_declared(spec, parameters):
     return [_converted(parameter, declared.get(parameter.name)) for parameter in parameters]
 
 
-def _converted(parameter, target):
+def _converted(parameter: Parameter, target: Parameter.Type | None) -> Parameter:
     given = parameter.type_
     if target is None or given == target or given not in _LISTS:
         return parameter
@@ -85,7 +92,7 @@ def _converted(parameter, target):
     return parameter
 
 
-def declare(node, spec):
+def declare(node: Node, spec: NodeSpec) -> dict[str, Any]:
     """
     Declare every parameter of ``spec`` (a NodeSpec) on ``node``; return their values.
 
@@ -113,7 +120,7 @@ def declare(node, spec):
     return declared
 
 
-def in_range(spec, parameters):
+def in_range(spec: NodeSpec, parameters: Iterable[Parameter]) -> SetParametersResult:
     """
     Return the SetParametersResult of checking rclpy ``parameters`` against ``spec``'s ranges.
 
@@ -130,7 +137,8 @@ def in_range(spec, parameters):
     return SetParametersResult(successful=True)
 
 
-def values(node, spec, changes=()):
+def values(node: Node, spec: NodeSpec, changes: Iterable[Parameter] = ()
+           ) -> dict[str, Any]:
     """
     Return ``{name: value}`` of the node's parameters, arrays as lists, unset lists empty.
 
@@ -148,7 +156,7 @@ def values(node, spec, changes=()):
     return result
 
 
-def plain(value):
+def plain(value: Any) -> Any:
     """Return a parameter value as plain Python (arrays as lists)."""
     if value is None or isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
         return value
@@ -159,7 +167,7 @@ class InvalidConfiguration(Exception):
     """A node's start-up configuration is unusable (the reason has been logged as FATAL)."""
 
 
-def declared_settings(node, spec, build):
+def declared_settings(node: Node, spec: NodeSpec, build: Callable[[dict[str, Any]], T]) -> T:
     """
     Declare ``spec``'s parameters on ``node`` and return ``build({name: value})``.
 

@@ -5,7 +5,7 @@ from pathlib import Path
 PACKAGE = 'etdmp_ros'
 
 
-def share_dir():
+def share_dir() -> Path:
     """
     Return the folder holding ``config/`` and ``launch/``.
 
@@ -22,7 +22,7 @@ def share_dir():
         raise FileNotFoundError(f'cannot find the {PACKAGE} share folder: {exc}') from None
 
 
-def config_path(name):
+def config_path(name: str) -> Path:
     """Return the path of ``config/<name>`` (e.g. ``scene.yaml``)."""
     path = share_dir() / 'config' / name
     if not path.is_file():

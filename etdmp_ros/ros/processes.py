@@ -16,6 +16,9 @@ One launcher for the demo, the tests and the benchmarks:
 No ROS here: processes and environment variables only.
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
 import os
 from pathlib import Path
 import signal
@@ -25,6 +28,11 @@ import time
 
 from etdmp_ros.ros import fastdds_files, system
 
+#: A file path.
+PathLike = str | os.PathLike[str]
+#: The argv of one node from its name and parameter files.
+Command = Callable[[str, Iterable[PathLike]], list[str]]
+
 #: Environment variables that would widen discovery beyond this machine's private domain.
 DISCOVERY_VARIABLES = ('ROS_LOCALHOST_ONLY', 'ROS_STATIC_PEERS')
 
@@ -33,7 +41,8 @@ class NodeExited(RuntimeError):
     """A node process ended while it should be running; the message has the end of its log."""
 
 
-def isolated_environment(domain_id=None, base=None):
+def isolated_environment(domain_id: int | None = None, base: Mapping[str, str] | None = None
+                         ) -> dict[str, str]:
     """
     Return an environment for a private DDS domain: ``ROS_DOMAIN_ID`` and localhost discovery.
 
@@ -49,25 +58,27 @@ def isolated_environment(domain_id=None, base=None):
     return env
 
 
-def ros_arguments(param_files, extra_args=()):
+def ros_arguments(param_files: Iterable[PathLike], extra_args: Iterable[str] = ()) -> list[str]:
     """Return ``--ros-args --params-file <f> ...`` for ``param_files``, then ``extra_args``."""
     return ['--ros-args', *[a for f in param_files for a in ('--params-file', str(f))],
             *extra_args]
 
 
-def module_argv(node, param_files, extra_args=()):
+def module_argv(node: str, param_files: Iterable[PathLike], extra_args: Iterable[str] = ()
+                ) -> list[str]:
     """Return the argv starting ``node`` with this Python (what ``ros2 run`` runs)."""
     return [sys.executable, '-m', system.node(node).module,
             *ros_arguments(param_files, extra_args)]
 
 
-def sourced(install, command):
+def sourced(install: PathLike, command: str) -> list[str]:
     """Return an argv that runs a shell command after sourcing the install, as a user would."""
     # local_setup.sh: colcon-core always writes it (setup.bash needs the colcon-bash extension).
     return ['sh', '-c', f'. "{install}/local_setup.sh" && exec {command}']
 
 
-def installed_argv(install, node, param_files, extra_args=''):
+def installed_argv(install: PathLike, node: str, param_files: Iterable[PathLike],
+                   extra_args: str = '') -> list[str]:
     """
     Return the argv running the colcon install's executable of ``node`` after sourcing it.
 
@@ -78,9 +89,9 @@ def installed_argv(install, node, param_files, extra_args=''):
     return sourced(install, command + (f' {extra_args}' if extra_args else ''))
 
 
-def installed_command(install):
+def installed_command(install: PathLike) -> Command:
     """Return a ``command(node, param_files)`` that runs the installed executable."""
-    def command(node, param_files):
+    def command(node: str, param_files: Iterable[PathLike]) -> list[str]:
         return installed_argv(install, node, param_files)
     return command
 
@@ -88,39 +99,40 @@ def installed_command(install):
 class NodeProcess:
     """One node in its own process, its output (stdout and stderr) in ``log_path``."""
 
-    def __init__(self, argv, log_path, env, new_session=False):
+    def __init__(self, argv: list[str], log_path: PathLike, env: Mapping[str, str],
+                 new_session: bool = False) -> None:
         """
         Start ``argv`` with ``env`` (unbuffered, uncoloured output; MUJOCO_GL egl default).
 
         ``new_session``: in a process group of its own, as a command in a terminal of its own.
         """
-        env = dict(env, PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0')
-        env.setdefault('MUJOCO_GL', 'egl')
+        variables = dict(env, PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0')
+        variables.setdefault('MUJOCO_GL', 'egl')
         self.log_path = Path(log_path)
         self._log = open(self.log_path, 'w')
-        self.process = subprocess.Popen(argv, env=env, stdout=self._log,
+        self.process = subprocess.Popen(argv, env=variables, stdout=self._log,
                                         stderr=subprocess.STDOUT, start_new_session=new_session)
 
     @property
-    def pid(self):
+    def pid(self) -> int:
         """Return the process id."""
         return self.process.pid
 
     @property
-    def returncode(self):
+    def returncode(self) -> int | None:
         """Return the exit code, None while it runs."""
         return self.process.poll()
 
-    def log(self):
+    def log(self) -> str:
         """Return the node's output so far."""
         return self.log_path.read_text(errors='replace')
 
-    def interrupt(self):
+    def interrupt(self) -> None:
         """Send SIGINT (Ctrl-C: a clean shutdown) if it still runs."""
         if self.process.poll() is None:
             self.process.send_signal(signal.SIGINT)
 
-    def wait(self, timeout=10.0):
+    def wait(self, timeout: float = 10.0) -> int:
         """
         Wait up to ``timeout`` s for the exit, then kill; close the log; return the code.
 
@@ -135,7 +147,7 @@ class NodeProcess:
         self._log.close()
         return self.process.returncode
 
-    def stop(self, timeout=10.0):
+    def stop(self, timeout: float = 10.0) -> int:
         """SIGINT, then kill after ``timeout`` s; return the exit code."""
         self.interrupt()
         return self.wait(timeout)
@@ -144,7 +156,8 @@ class NodeProcess:
 class SystemProcesses:
     """The system's nodes, each in its own process, output in ``<log_dir>/<node>.log``."""
 
-    def __init__(self, param_files, log_dir, env, command=module_argv):
+    def __init__(self, param_files: Callable[[str, Path], Iterable[PathLike]], log_dir: PathLike,
+                 env: Mapping[str, str], command: Command = module_argv) -> None:
         """
         Start every node of :data:`etdmp_ros.ros.system.NODES` in order.
 
@@ -153,28 +166,28 @@ class SystemProcesses:
         """
         self.log_dir = Path(log_dir)
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        self.processes = {}
+        self.processes: dict[str, NodeProcess] = {}
         for node in system.NODE_NAMES:
             argv = command(node, param_files(node, self.log_dir))
             self.processes[node] = NodeProcess(argv, self.log_dir / f'{node}.log', env)
 
-    def log(self, node):
+    def log(self, node: str) -> str:
         """Return the output of ``node`` so far."""
         return self.processes[node].log()
 
-    def check_alive(self):
+    def check_alive(self) -> None:
         """Raise NodeExited naming a node that has exited, with the end of its log."""
         for node, process in self.processes.items():
             if process.returncode is not None:
                 tail = '\n'.join(self.log(node).splitlines()[-15:])
                 raise NodeExited(f'{node} exited with code {process.returncode}:\n{tail}')
 
-    def last_error(self, node):
+    def last_error(self, node: str) -> str:
         """Return the last ERROR line of ``node``'s log, or ''."""
         lines = [line for line in self.log(node).splitlines() if '[ERROR]' in line]
         return lines[-1] if lines else ''
 
-    def stop(self, timeout=10.0, interrupted=False):
+    def stop(self, timeout: float = 10.0, interrupted: bool = False) -> dict[str, int]:
         """
         SIGINT (Ctrl-C) to every node, the simulation last; kill stragglers; return exit codes.
 
@@ -187,7 +200,7 @@ class SystemProcesses:
                     p.returncode is None for p in self.processes.values()):
                 time.sleep(0.05)
         first, last = system.NODE_NAMES[1:], system.NODE_NAMES[:1]
-        codes = {}
+        codes: dict[str, int] = {}
         for group in (first, last):
             for node in group:
                 self.processes[node].interrupt()

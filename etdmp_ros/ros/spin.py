@@ -19,16 +19,26 @@ MultiThreadedExecutor is never used: next to the simulation's 125 Hz topics it k
 (rclpy issues #1223, #1452).
 """
 
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping, Sequence
 import contextlib
 import gc
 import os
+from pathlib import Path
 import signal
 import threading
+from types import FrameType
+from typing import Any
 
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.context import Context
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
+EventsExecutor: Any
 try:
     from rclpy.experimental import EventsExecutor
 except ImportError:   # rclpy before 7.1.4
@@ -44,7 +54,7 @@ EXECUTOR_VARIABLE = 'ETDMP_EXECUTOR'
 DDS_PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
 
 
-def make_executor(context=None):
+def make_executor(context: Context | None = None) -> Executor:
     """Return the executor every node program and tool of this package spins with (above)."""
     choice = os.environ.get(EXECUTOR_VARIABLE, 'events')
     if choice not in ('events', 'single'):
@@ -64,7 +74,7 @@ DDS_PROFILES = {(True, False): 'fastdds.xml', (False, False): 'fastdds_udp.xml',
 DISCOVERY_RANGE = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 
 
-def _localhost_only(environ):
+def _localhost_only(environ: Mapping[str, str]) -> bool:
     """Return whether rcl will use localhost-only discovery without static peers."""
     if environ.get('ROS_LOCALHOST_ONLY') == '1':
         return True     # rcl then ignores ROS_STATIC_PEERS
@@ -72,7 +82,8 @@ def _localhost_only(environ):
             and not environ.get('ROS_STATIC_PEERS', '').strip(';'))
 
 
-def dds_profile(shared_memory=True, environ=None):
+def dds_profile(shared_memory: bool = True, environ: Mapping[str, str] | None = None
+                ) -> Path | None:
     """
     Return the package's Fast DDS profile file for a process (a Path), None to keep another.
 
@@ -95,7 +106,7 @@ def dds_profile(shared_memory=True, environ=None):
         return None
 
 
-def use_dds_profile(shared_memory=True):
+def use_dds_profile(shared_memory: bool = True) -> Path | None:
     """
     Have Fast DDS load the package's profile (:func:`dds_profile`); return its path or None.
 
@@ -112,7 +123,7 @@ def use_dds_profile(shared_memory=True):
 
 
 @contextlib.contextmanager
-def dds_settings(shared_memory=True):
+def dds_settings(shared_memory: bool = True) -> Iterator[list[str]]:
     """
     Prepare the middleware for an rclpy.init inside: the DDS profile, /dev/shm cleaned.
 
@@ -123,7 +134,7 @@ def dds_settings(shared_memory=True):
     discovery itself (config/fastdds*_localhost.xml) and rcl sees SYSTEM_DEFAULT inside this
     block; the environment is as before after it. Yields the names of the files removed.
     """
-    removed = []
+    removed: list[str] = []
     if os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp').startswith('rmw_fastrtps'):
         from etdmp_ros.ros import fastdds_files
         removed = fastdds_files.clean()
@@ -143,7 +154,7 @@ def dds_settings(shared_memory=True):
                 os.environ[name] = value
 
 
-def cleaned_message(removed):
+def cleaned_message(removed: Sequence[str]) -> str:
     """Return the log line about the files :func:`dds_settings` removed ('' if none)."""
     if not removed:
         return ''
@@ -151,7 +162,7 @@ def cleaned_message(removed):
             'earlier had left in /dev/shm (docs/reliability.md)')
 
 
-def init(args=None, shared_memory=True):
+def init(args: list[str] | None = None, shared_memory: bool = True) -> list[str]:
     """
     Initialise rclpy (with the package's DDS profile) without its signal handlers.
 
@@ -162,7 +173,7 @@ def init(args=None, shared_memory=True):
     return removed
 
 
-def spin_until_signal(nodes, stop=None):
+def spin_until_signal(nodes: Sequence[Node], stop: threading.Event | None = None) -> None:
     """
     Spin ``nodes`` on one executor (:func:`make_executor`) until SIGINT or SIGTERM.
 
@@ -170,10 +181,10 @@ def spin_until_signal(nodes, stop=None):
     set. On return, further SIGINT/SIGTERM are ignored, so a second Ctrl-C cannot interrupt the
     caller's clean-up (stopping the simulation, sending zero velocity, destroying the nodes).
     """
-    stop = threading.Event() if stop is None else stop
+    event = threading.Event() if stop is None else stop
 
-    def request_stop(signum, frame):
-        stop.set()
+    def request_stop(signum: int, frame: FrameType | None) -> None:
+        event.set()
 
     for signum in SIGNALS:
         signal.signal(signum, request_stop)
@@ -181,7 +192,7 @@ def spin_until_signal(nodes, stop=None):
     try:
         for node in nodes:
             executor.add_node(node)
-        while not stop.is_set() and executor.context.ok():
+        while not event.is_set() and executor.context.ok():
             executor.spin_once(timeout_sec=SLICE)
     finally:
         for signum in SIGNALS:
@@ -190,7 +201,7 @@ def spin_until_signal(nodes, stop=None):
             executor.remove_node(node)
 
 
-def freeze_heap():
+def freeze_heap() -> None:
     """
     Collect garbage once, then exempt every object alive now from Python's cycle collector.
 
@@ -211,7 +222,7 @@ def freeze_heap():
 HISTORY_SECONDS = 1.0
 
 
-def rate_qos(rate):
+def rate_qos(rate: float) -> QoSProfile:
     """
     Return the QoS of a reliable publisher at ``rate`` Hz: a history of :data:`HISTORY_SECONDS`.
 
@@ -223,11 +234,10 @@ def rate_qos(rate):
     0.1 s watchdog. A second of history leaves a slow reader that much time; the samples are
     a few hundred bytes.
     """
-    from rclpy.qos import QoSProfile
     return QoSProfile(depth=max(10, int(round(rate * HISTORY_SECONDS))))
 
 
-def set_realtime_priority(priority):
+def set_realtime_priority(priority: int) -> str:
     """
     Put the calling thread under SCHED_FIFO at ``priority`` (1-99); 0 changes nothing.
 
@@ -250,13 +260,15 @@ def set_realtime_priority(priority):
     return ''
 
 
-def normal_scheduling():
+def normal_scheduling() -> None:
     """Return the calling thread to normal scheduling (SCHED_OTHER), e.g. a worker thread."""
     if hasattr(os, 'sched_getscheduler') and os.sched_getscheduler(0) != os.SCHED_OTHER:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
-def run(make_nodes, name, args=None, startup_errors=(), shared_memory=None):
+def run(make_nodes: Callable[[list[Node]], None], name: str, args: list[str] | None = None,
+        startup_errors: tuple[type[Exception], ...] = (), shared_memory: bool | None = None
+        ) -> int:
     """
     Run a node program: init, create the nodes, spin until a signal, stop them in order.
 
@@ -270,6 +282,8 @@ def run(make_nodes, name, args=None, startup_errors=(), shared_memory=None):
     node called ``name`` (:attr:`etdmp_ros.ros.system.NodeSpec.shared_memory`; True for others).
     """
     from rclpy.exceptions import ParameterException
+    bad_configuration: tuple[type[Exception], ...] = (ValueError, ParameterException,
+                                                      *startup_errors)
     if shared_memory is None:
         from etdmp_ros.ros import system
         try:
@@ -279,7 +293,7 @@ def run(make_nodes, name, args=None, startup_errors=(), shared_memory=None):
     removed = init(args, shared_memory)
     if removed:
         rclpy.logging.get_logger(name).info(cleaned_message(removed))
-    nodes = []
+    nodes: list[Node] = []
     code = 0
     # A signal during start-up is remembered, not raised: a KeyboardInterrupt raised inside a
     # library callback (numba compiling the controller's kernels calls back from C) is printed
@@ -293,7 +307,7 @@ def run(make_nodes, name, args=None, startup_errors=(), shared_memory=None):
         spin_until_signal(nodes, stop)
     except KeyboardInterrupt:   # Ctrl-C before our handler was installed (during start-up)
         pass
-    except (ValueError, ParameterException, *startup_errors) as exc:
+    except bad_configuration as exc:
         rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
         code = 1
     finally:

@@ -52,114 +52,28 @@ Shadows and multisampling are off by default: on a software renderer (llvmpipe) 
 maps cost ~40 ms a frame instead of ~2 ms.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
-import os
-import sys
-import xml.etree.ElementTree as ElementTree
+from typing import Any
 
+from etdmp_ros.geometry.arrays import Array as FloatArray
 from etdmp_ros.geometry.camera import CameraIntrinsics
-from etdmp_ros.robot._scene import (GOAL_MARKER_THICKNESS, obstacle_radii_for,
-                                    parse_bottle_position, parse_goal_position,
-                                    parse_obstacle_positions, parse_obstacle_radii, PEN_RADIUS,
-                                    PEN_TIP_LENGTH, PEN_TIP_RADIUS, SceneConfig)
-from etdmp_ros.robot._ur10 import JOINT_NAMES, robot_data_dir, ur10_urdf_path, UR10Model
+from etdmp_ros.robot._scene import (obstacle_radii_for, parse_bottle_position,
+                                    parse_goal_position, parse_obstacle_positions,
+                                    parse_obstacle_radii, SceneConfig)
+from etdmp_ros.robot._ur10 import JOINT_NAMES, UR10Model
+from etdmp_ros.sim._camera import OffscreenCamera
+from etdmp_ros.sim._workcell import (build_model, CAMERA_NAME, DEFAULT_KV, has_geom,
+                                     HIDDEN_GROUP, import_mujoco, MAX_OBSTACLES, VISIBLE_GROUP,
+                                     WRITING_DEPTH)
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-mujoco = None   # imported by _import_mujoco() when the first simulation is built
-
-
-def _import_mujoco():
-    """
-    Import MuJoCo once, headless by default.
-
-    MuJoCo chooses its OpenGL platform when it is imported; without a display only EGL works.
-    So when nobody chose one (``MUJOCO_GL``) and there is no display, choose EGL, as the Makefile
-    does: here, when a simulation is first built, not when a module is imported.
-    """
-    global mujoco
-    if mujoco is None:
-        if sys.platform.startswith('linux') and not os.environ.get('DISPLAY'):
-            os.environ.setdefault('MUJOCO_GL', 'egl')
-        import mujoco as module
-        mujoco = module
-    return mujoco
-
-
-CAMERA_NAME = 'd435_color'
-MAX_OBSTACLES = 8
-# Velocity-servo gains (N m s/rad): time constants M_ii / kv of about 10 ms for the big joints.
-DEFAULT_KV = (2000.0, 2000.0, 1000.0, 100.0, 100.0, 100.0)
-ARMATURE = 0.1   # kg m^2
-ROBOT_COLOR = (0.72, 0.74, 0.78, 1.0)
-PEN_COLOR = (0.15, 0.15, 0.18, 1.0)
-WHITEBOARD_THICKNESS = 0.0005
-BOTTLE_WALL = 0.004
-BOTTLE_FLOOR = 0.01
-#: Boxes making the bottle's wall for collisions: the polygon's faces lie at most
-#: (radius - wall) (1 / cos(pi / n) - 1), 0.35 mm, outside the round wall's inner surface.
-BOTTLE_WALL_BOXES = 24
-#: A tool tip pressed into the table deeper than this (m) is a contact; less is writing.
-WRITING_DEPTH = 0.002
-# Collision bitmasks (contype of the robot's geoms, conaffinity of the objects'): a pair
-# collides when the robot geom's bit is in the object's mask. Objects have contype 0 and robot
-# geoms conaffinity 0, so neither two objects nor two robot geoms are ever a pair.
-_ARM, _TIP, _BASE = 1, 2, 4
-_ANY_ROBOT = _ARM | _TIP | _BASE
-TABLE_THICKNESS = 0.04
-# Geom groups: MjvOption shows groups 0-2 by default; obstacles not in use go to group 3.
-VISIBLE_GROUP = 0
-HIDDEN_GROUP = 3
-
-
-def _urdf_for_mujoco():
-    """Return the UR10 URDF text with absolute mesh paths, collision geometry only."""
-    tree = ElementTree.parse(ur10_urdf_path())
-    robot = tree.getroot()
-    package_root = robot_data_dir().parent   # holds robots/ : package://example-robot-data/...
-    for link in robot.iter('link'):
-        for visual in link.findall('visual'):   # .dae visual meshes: MuJoCo reads STL/OBJ
-            link.remove(visual)
-    for mesh in robot.iter('mesh'):
-        filename = mesh.get('filename', '')
-        prefix = 'package://example-robot-data/'
-        if not filename.startswith(prefix):
-            raise ValueError(f'unexpected mesh path in the UR10 URDF: {filename}')
-        mesh.set('filename', str(package_root / filename[len(prefix):]))
-    # Keep the massless frames (tool0, base) as bodies instead of fusing them into their parents.
-    mujoco_element = ElementTree.SubElement(robot, 'mujoco')
-    ElementTree.SubElement(mujoco_element, 'compiler', fusestatic='false', strippath='false',
-                           discardvisual='false')
-    return ElementTree.tostring(robot, encoding='unicode')
-
-
-def _tube_mesh(radius, height, wall, floor, segments=32):
-    """Return (vertices, faces) of an open container: a cylinder wall and a floor, watertight."""
-    angles = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
-    ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    inner = radius - wall
-    rings = [np.column_stack([ring * r, np.full(segments, z)])
-             for r, z in ((radius, 0.0), (radius, height), (inner, height), (inner, floor))]
-    vertices = np.vstack(rings + [[[0.0, 0.0, 0.0]], [[0.0, 0.0, floor]]])
-    bottom, top_out, top_in, floor_in = (k * segments for k in range(4))
-    centre_bottom, centre_floor = 4 * segments, 4 * segments + 1
-    faces = []
-    for i in range(segments):
-        j = (i + 1) % segments
-        for a, b in ((bottom, top_out), (top_out, top_in), (top_in, floor_in)):
-            # Quad between two rings, counter-clockwise seen from outside the solid.
-            faces += [[a + i, a + j, b + j], [a + i, b + j, b + i]]
-        faces.append([floor_in + i, floor_in + j, centre_floor])
-        faces.append([bottom + j, bottom + i, centre_bottom])
-    return vertices, np.asarray(faces)
-
-
-def _mujoco_camera_quat(pose):
-    """Return the MuJoCo camera orientation (w, x, y, z) for a ROS optical-frame pose."""
-    rotation = pose.rotation @ np.diag([1.0, -1.0, -1.0])   # optical (z fwd, y down) -> GL
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, rotation.ravel())
-    return quat
+#: The mujoco module, imported when the first simulation is built (:func:`import_mujoco`).
+mujoco: Any = None
 
 
 @dataclass(frozen=True)
@@ -173,11 +87,11 @@ class CameraState:
     """
 
     time: float
-    qpos: np.ndarray
-    mocap_pos: np.ndarray
-    mocap_quat: np.ndarray
+    qpos: FloatArray
+    mocap_pos: FloatArray
+    mocap_quat: FloatArray
     obstacles: int
-    obstacle_radii: np.ndarray = None
+    obstacle_radii: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -193,7 +107,7 @@ class Contact:
 
     part: str
     item: str
-    position: np.ndarray
+    position: FloatArray
     depth: float
 
 
@@ -207,10 +121,11 @@ class UR10Sim:
     :meth:`render_rgb_depth` call and is current in the thread that made that call.
     """
 
-    def __init__(self, scene, *, timestep=0.002, watchdog_timeout=0.1,
-                 image_size=(640, 480), fovy_deg=42.5, depth_range=(0.1, 3.0),
-                 depth_noise=0.0, seed=None, multisamples=0, kv=DEFAULT_KV,
-                 detect_contacts=True):
+    def __init__(self, scene: SceneConfig, *, timestep: float = 0.002,
+                 watchdog_timeout: float = 0.1, image_size: tuple[int, int] = (640, 480),
+                 fovy_deg: float = 42.5, depth_range: tuple[float, float] = (0.1, 3.0),
+                 depth_noise: float = 0.0, seed: int | None = None, multisamples: int = 0,
+                 kv: ArrayLike = DEFAULT_KV, detect_contacts: bool = True) -> None:
         """
         Build the model of the workcell ``scene``, a :class:`SceneConfig`.
 
@@ -225,8 +140,9 @@ class UR10Sim:
         ``kv``: velocity-servo gains per joint (N m s/rad). ``detect_contacts``: find the
         contacts after each :meth:`step` call (False: :attr:`contacts` stays empty; benchmarks).
         """
+        global mujoco
+        mujoco = import_mujoco()
         self.scene = scene
-        _import_mujoco()
         if not timestep > 0:
             raise ValueError(f'timestep must be positive, got {timestep}')
         self.watchdog_timeout = float(watchdog_timeout)
@@ -243,141 +159,22 @@ class UR10Sim:
         self.joint_names = JOINT_NAMES
         self._rng = np.random.default_rng(seed)
         self.contacts_enabled = bool(detect_contacts)
-        self.contacts = ()
-        self.model = self._build(timestep, multisamples, np.broadcast_to(kv, (6,)))
+        self.contacts: tuple[Contact, ...] = ()
+        self.model = build_model(scene, self.intrinsics, timestep, multisamples, kv)
         self.data = mujoco.MjData(self.model)
         self._ids()
-        self._camera = None
-        self._render_data = None
+        self._camera: OffscreenCamera | None = None
+        self._render_data: Any = None
         self._command = np.zeros(6)
         self._command_time = -math.inf
-        self.braked_at = None
+        self.braked_at: float | None = None
+        self._obstacles: FloatArray   # set by reset(), like the radii
+        self._radii: FloatArray
         self.watchdog_active = self.watchdog_timeout > 0
         self.reset()
 
-    # ----------------------------------------------------------------------------- model build
-    def _build(self, timestep, multisamples, kv):
-        s = self.scene
-        spec = mujoco.MjSpec.from_string(_urdf_for_mujoco())
-        spec.modelname = 'ur10_workcell'
-        spec.option.timestep = timestep
-        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-        spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
-        spec.stat.extent = 2.0      # sets the clipping planes: near 0.02 m, far 20 m
-        spec.stat.center = [0.5, 0.0, 0.3]
-        spec.visual.map.znear = 0.01
-        spec.visual.map.zfar = 10.0
-        spec.visual.global_.offwidth = self.intrinsics.width
-        spec.visual.global_.offheight = self.intrinsics.height
-        spec.visual.quality.shadowsize = 0
-        spec.visual.quality.offsamples = int(multisamples)
-        spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
-        spec.visual.headlight.diffuse = [0.45, 0.45, 0.45]
-        spec.visual.headlight.specular = [0.05, 0.05, 0.05]
-
-        for geom in spec.geoms:      # the robot: URDF collision meshes, drawn in one colour
-            geom.rgba = ROBOT_COLOR
-            geom.group = VISIBLE_GROUP
-            # The base is bolted to the table; every other link may touch it.
-            geom.contype = _BASE if geom.parent.name in ('base_link', 'base') else _ARM
-            geom.conaffinity = 0
-        for name in JOINT_NAMES:
-            # Reflected rotor inertia of the geared joints (MuJoCo Menagerie's UR10e value);
-            # the bare wrist links (~5e-4 kg m^2) would make the servo needlessly stiff.
-            joint = spec.joint(name)
-            joint.armature = ARMATURE
-            # The importer turns the URDF effort into a joint torque limit: lift it (above).
-            joint.actfrclimited = mujoco.mjtLimited.mjLIMITED_FALSE
-        for name, gain in zip(JOINT_NAMES, kv):
-            actuator = spec.add_actuator(name=name, target=name,
-                                         trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            actuator.set_to_velocity(kv=float(gain))
-
-        tool0 = spec.body('tool0')
-        tool0.add_site(name='tool0', size=[0.005] * 3)
-        offset = np.asarray(s.tool_offset, dtype=float)
-        tool0.add_site(name='tool_tip', pos=offset, size=[0.003] * 3, rgba=[0, 0, 0, 0])
-        length = np.linalg.norm(offset)
-        if length > 1e-6:
-            tip_start = offset * max(0.0, 1.0 - PEN_TIP_LENGTH / length)
-            if np.linalg.norm(tip_start) > 1e-6:
-                tool0.add_geom(name='pen', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                               fromto=[0, 0, 0, *tip_start], size=[PEN_RADIUS, 0, 0],
-                               rgba=PEN_COLOR, contype=_ARM, conaffinity=0)
-            tool0.add_geom(name='pen_tip', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                           fromto=[*tip_start, *offset], size=[PEN_TIP_RADIUS, 0, 0],
-                           rgba=PEN_COLOR, contype=_TIP, conaffinity=0)
-
-        world = spec.worldbody
-        world.add_light(name='sun', pos=[0.5, 0.0, 3.0], dir=[0.0, 0.0, -1.0],
-                        diffuse=[0.5, 0.5, 0.5], specular=[0.1, 0.1, 0.1], castshadow=False)
-        # Objects: contype 0; conaffinity says which parts of the robot they collide with.
-        world.add_geom(name='floor', type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1],
-                       pos=[0, 0, -s.table_height], rgba=[0.35, 0.36, 0.38, 1],
-                       contype=0, conaffinity=_ANY_ROBOT)
-        half = np.asarray(s.table_size) / 2
-        # The tip collides with the table top too: contacts() keeps it past WRITING_DEPTH only.
-        world.add_geom(name='table', type=mujoco.mjtGeom.mjGEOM_BOX,
-                       size=[*half, TABLE_THICKNESS / 2],
-                       pos=[*s.table_center, -TABLE_THICKNESS / 2], rgba=s.table_color,
-                       contype=0, conaffinity=_ARM | _TIP)
-        leg = (s.table_height - TABLE_THICKNESS) / 2
-        for k, (sx, sy) in enumerate(((-1, -1), (-1, 1), (1, -1), (1, 1))):
-            world.add_geom(name=f'table_leg_{k}', type=mujoco.mjtGeom.mjGEOM_BOX,
-                           size=[0.03, 0.03, leg],
-                           pos=[s.table_center[0] + sx * (half[0] - 0.05),
-                                s.table_center[1] + sy * (half[1] - 0.05),
-                                -TABLE_THICKNESS - leg], rgba=s.table_color,
-                           contype=0, conaffinity=_ANY_ROBOT)
-        if np.all(s.whiteboard_size > 0):
-            world.add_geom(name='whiteboard', type=mujoco.mjtGeom.mjGEOM_BOX,
-                           size=[*(s.whiteboard_size / 2), WHITEBOARD_THICKNESS / 2],
-                           pos=[*s.task_plane_origin[:2], WHITEBOARD_THICKNESS / 2],
-                           rgba=s.whiteboard_color, contype=0, conaffinity=_ARM)
-        vertices, faces = _tube_mesh(s.bottle_radius, s.bottle_height, wall=BOTTLE_WALL,
-                                     floor=BOTTLE_FLOOR)
-        spec.add_mesh(name='bottle', uservert=vertices.ravel(), userface=faces.ravel())
-        # A mocap body: it moves at runtime (set_bottle), its collision geometry with it. The
-        # mesh is drawn only; the wall's boxes and the floor's disc collide, undrawn.
-        bottle = world.add_body(name='bottle', mocap=True, pos=[*s.bottle_position, 0.0])
-        bottle.add_geom(name='bottle', type=mujoco.mjtGeom.mjGEOM_MESH, meshname='bottle',
-                        rgba=s.bottle_color, contype=0, conaffinity=0)
-        n = BOTTLE_WALL_BOXES
-        middle = s.bottle_radius - BOTTLE_WALL / 2
-        for k in range(n):
-            a = 2.0 * math.pi * k / n
-            bottle.add_geom(name=f'bottle_wall_{k}', type=mujoco.mjtGeom.mjGEOM_BOX,
-                            size=[BOTTLE_WALL / 2, s.bottle_radius * math.tan(math.pi / n),
-                                  s.bottle_height / 2],
-                            pos=[middle * math.cos(a), middle * math.sin(a),
-                                 s.bottle_height / 2],
-                            quat=[math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)],
-                            group=HIDDEN_GROUP, rgba=[0, 0, 0, 0], contype=0,
-                            conaffinity=_ANY_ROBOT)
-        bottle.add_geom(name='bottle_floor', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                        size=[s.bottle_radius, BOTTLE_FLOOR / 2, 0],
-                        pos=[0.0, 0.0, BOTTLE_FLOOR / 2], group=HIDDEN_GROUP, rgba=[0, 0, 0, 0],
-                        contype=0, conaffinity=_ANY_ROBOT)
-
-        # The goal marker lies on the table: the pen writes on it, a link would touch the table.
-        goal = world.add_body(name='goal_marker', mocap=True, pos=s.goal_position)
-        goal.add_geom(name='goal_marker', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                      size=[s.goal_radius, GOAL_MARKER_THICKNESS / 2, 0],
-                      pos=[0, 0, -GOAL_MARKER_THICKNESS / 2], rgba=s.goal_color,
-                      contype=0, conaffinity=_ARM)
-        for i in range(MAX_OBSTACLES):
-            body = world.add_body(name=f'obstacle_{i}', mocap=True)
-            body.add_geom(name=f'obstacle_{i}', type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                          size=[s.obstacle_radius, s.obstacle_height / 2, 0],
-                          pos=[0, 0, -s.obstacle_height / 2], rgba=s.obstacle_color,
-                          contype=0, conaffinity=_ANY_ROBOT)
-
-        world.add_camera(name=CAMERA_NAME, pos=self.camera_pose.position,
-                         quat=_mujoco_camera_quat(self.camera_pose),
-                         fovy=self.intrinsics.fovy_deg)
-        return spec.compile()
-
-    def _ids(self):
+    # ----------------------------------------------------------------------------- model ids
+    def _ids(self) -> None:
         m = self.model
         self._qpos_adr = np.array([m.jnt_qposadr[m.joint(n).id] for n in JOINT_NAMES])
         self._dof_adr = np.array([m.jnt_dofadr[m.joint(n).id] for n in JOINT_NAMES])
@@ -395,7 +192,7 @@ class UR10Sim:
         # What a contact's geoms are called: the robot's by link (tool, tool_tip), the
         # objects' by name (a table leg is the table, the bottle's wall boxes the bottle).
         tool = {'pen': 'tool', 'pen_tip': 'tool_tip'}
-        self._contact_names = []
+        self._contact_names: list[str] = []
         for g in range(m.ngeom):
             name = m.geom(g).name
             if m.geom_contype[g]:
@@ -405,11 +202,11 @@ class UR10Sim:
             elif name.startswith('bottle_'):
                 name = 'bottle'
             self._contact_names.append(name)
-        self._tip_geom = m.geom('pen_tip').id if _has_geom(m, 'pen_tip') else -1
+        self._tip_geom = m.geom('pen_tip').id if has_geom(m, 'pen_tip') else -1
         self._table_geom = m.geom('table').id
 
     # ------------------------------------------------------------------------------- state
-    def reset(self, q=None):
+    def reset(self, q: ArrayLike | None = None) -> None:
         """Reset time to 0, joints to ``q`` (default: the scene's initial positions) at rest."""
         mujoco.mj_resetData(self.model, self.data)
         q = self.scene.initial_joint_positions if q is None else q
@@ -428,41 +225,41 @@ class UR10Sim:
         self.contacts = self.detect_contacts() if self.contacts_enabled else ()
 
     @property
-    def time(self):
+    def time(self) -> float:
         """Return the simulated time in seconds since :meth:`reset`."""
         return self.data.time
 
     @property
-    def timestep(self):
+    def timestep(self) -> float:
         """Physics time step in seconds."""
         return self.model.opt.timestep
 
     @property
-    def q(self):
+    def q(self) -> FloatArray:
         """Joint positions (6,) in rad, UR order (a copy)."""
         return self.data.qpos[self._qpos_adr].copy()
 
     @property
-    def qd(self):
+    def qd(self) -> FloatArray:
         """Joint velocities (6,) in rad/s, UR order (a copy)."""
         return self.data.qvel[self._dof_adr].copy()
 
     @property
-    def command(self):
+    def command(self) -> FloatArray:
         """Velocity command in force (6,): the last accepted one, or 0 if the watchdog braked."""
         return self.data.ctrl[self._actuator_ids].copy()
 
     @property
-    def tool_tip_position(self):
+    def tool_tip_position(self) -> FloatArray:
         """Tool tip position (3,) in base_link."""
         return self.data.site_xpos[self.tool_tip_site].copy()
 
-    def site_pose(self, site_id):
+    def site_pose(self, site_id: int) -> tuple[FloatArray, FloatArray]:
         """Return (position (3,), rotation (3, 3)) of a site (e.g. :attr:`tool0_site`)."""
         return (self.data.site_xpos[site_id].copy(),
                 self.data.site_xmat[site_id].reshape(3, 3).copy())
 
-    def set_joint_positions(self, q):
+    def set_joint_positions(self, q: ArrayLike) -> None:
         """Teleport the joints to ``q`` (6,) at rest; update kinematics and contacts (tests)."""
         q = np.asarray(q, dtype=float).reshape(6)
         self.data.qpos[self._qpos_adr] = q
@@ -472,7 +269,7 @@ class UR10Sim:
             self.contacts = self.detect_contacts()
 
     # ------------------------------------------------------------------------------ commands
-    def validate_velocity_command(self, qd):
+    def validate_velocity_command(self, qd: ArrayLike) -> FloatArray:
         """
         Return ``qd`` as a float array (6,) clamped to the velocity limits.
 
@@ -489,7 +286,7 @@ class UR10Sim:
             raise ValueError(f'velocity command must be finite, got {qd.tolist()}')
         return np.clip(qd, -self.velocity_limits, self.velocity_limits)
 
-    def set_velocity_command(self, qd):
+    def set_velocity_command(self, qd: ArrayLike) -> FloatArray:
         """
         Command joint velocities ``qd`` (6,) rad/s, UR order, from now on; return them as applied.
 
@@ -504,18 +301,18 @@ class UR10Sim:
         return qd.copy()
 
     @property
-    def command_time(self):
+    def command_time(self) -> float:
         """Return the simulated time (s) of the last accepted velocity command (-inf: none)."""
         return self._command_time
 
-    def _check_watchdog(self):
+    def _check_watchdog(self) -> None:
         if (not self.watchdog_active and self.watchdog_timeout > 0
                 and self.data.time - self._command_time > self.watchdog_timeout):
             self.watchdog_active = True
             self.braked_at = self.data.time     # simulated s; see command_time
             self.data.ctrl[self._actuator_ids] = 0.0
 
-    def step(self, n=1):
+    def step(self, n: int = 1) -> None:
         """
         Advance ``n`` physics steps (watchdog checked at every step), then find the contacts.
 
@@ -536,7 +333,7 @@ class UR10Sim:
         if self.contacts_enabled:
             self.contacts = self.detect_contacts()
 
-    def detect_contacts(self):
+    def detect_contacts(self) -> tuple[Contact, ...]:
         """
         Return the contacts of the robot with the workcell now: a tuple of :class:`Contact`.
 
@@ -559,7 +356,8 @@ class UR10Sim:
         geoms, depths = contact.geom[:n], np.maximum(0.0, -contact.dist[:n])
         positions = contact.pos[:n].copy()
         d.ncon = 0              # the dynamics have none (the next step would clear them too)
-        names, found = self._contact_names, {}
+        names = self._contact_names
+        found: dict[tuple[str, str], Contact] = {}
         for (a, b), depth, position in zip(geoms, depths, positions):
             robot, other = (a, b) if m.geom_contype[a] else (b, a)
             if robot == self._tip_geom and other == self._table_geom and \
@@ -571,47 +369,47 @@ class UR10Sim:
                 found[pair] = Contact(*pair, position, float(depth))
         return tuple(found.values())
 
-    def advance(self, duration):
+    def advance(self, duration: float) -> None:
         """Advance ``duration`` seconds of simulated time (rounded to whole physics steps)."""
         self.step(max(0, round(duration / self.model.opt.timestep)))
 
     # ------------------------------------------------------------------ goal and obstacles
     @property
-    def goal_position(self):
+    def goal_position(self) -> FloatArray:
         """Goal marker position (3,): centre of its top face, base_link."""
         return self.data.mocap_pos[self._goal_mocap].copy()
 
-    def set_goal(self, position):
+    def set_goal(self, position: ArrayLike) -> None:
         """Move the goal marker (top face centre) to ``position`` [x, y, z]; ValueError if bad."""
         self.data.mocap_pos[self._goal_mocap] = parse_goal_position(position)
         mujoco.mj_kinematics(self.model, self.data)   # the camera sees it at once
 
     @property
-    def bottle_position(self):
+    def bottle_position(self) -> FloatArray:
         """Bottle position (2,): [x, y] of its axis on the table, base_link."""
         return self.data.mocap_pos[self._bottle_mocap, :2].copy()
 
     @property
-    def bottle_mouth(self):
+    def bottle_mouth(self) -> FloatArray:
         """Centre of the bottle's mouth (3,): on its axis at z = its height, base_link."""
         return np.array([*self.bottle_position, self.scene.bottle_height])
 
-    def set_bottle(self, position):
+    def set_bottle(self, position: ArrayLike) -> None:
         """Move the bottle (its axis) to ``position`` [x, y] on the table; ValueError if bad."""
         self.data.mocap_pos[self._bottle_mocap] = [*parse_bottle_position(position), 0.0]
         mujoco.mj_kinematics(self.model, self.data)
 
     @property
-    def obstacle_positions(self):
+    def obstacle_positions(self) -> FloatArray:
         """Obstacle positions (N, 3): centres of the cylinders' top faces, base_link."""
         return self._obstacles.copy()
 
     @property
-    def obstacle_radii(self):
+    def obstacle_radii(self) -> FloatArray:
         """Obstacle radii (N,) in metres, in the order of :attr:`obstacle_positions`."""
         return self._radii[:len(self._obstacles)].copy()
 
-    def set_obstacles(self, positions, radii=None):
+    def set_obstacles(self, positions: ArrayLike, radii: ArrayLike | None = None) -> None:
         """
         Place obstacles at ``positions`` ((N, 3) or flat [x1, y1, z1, ...]); ValueError if bad.
 
@@ -623,10 +421,10 @@ class UR10Sim:
         if len(points) > MAX_OBSTACLES:
             raise ValueError(f'at most {MAX_OBSTACLES} obstacles, got {len(points)}')
         if radii is not None:
-            radii = obstacle_radii_for(MAX_OBSTACLES, parse_obstacle_radii(radii),
+            sizes = obstacle_radii_for(MAX_OBSTACLES, parse_obstacle_radii(radii),
                                        self.scene.obstacle_radius)
-            self._set_radii(self.model, radii)
-            self._radii = radii
+            self._set_radii(self.model, sizes)
+            self._radii = sizes
         for i, (mocap, geom) in enumerate(zip(self._obstacle_mocap, self._obstacle_geoms)):
             used = i < len(points)
             # Unused ones are hidden from the camera and parked far below the floor.
@@ -635,11 +433,11 @@ class UR10Sim:
         self._obstacles = points
         mujoco.mj_kinematics(self.model, self.data)
 
-    def set_obstacle_radii(self, radii):
+    def set_obstacle_radii(self, radii: ArrayLike) -> None:
         """Size the obstacles: ``radii`` as in :meth:`set_obstacles`; ValueError if bad."""
         self.set_obstacles(self._obstacles, radii)
 
-    def _set_radii(self, model, radii):
+    def _set_radii(self, model: Any, radii: FloatArray) -> None:
         """Give the obstacle cylinders of ``model`` these radii (MAX_OBSTACLES,)."""
         half = 0.5 * self.scene.obstacle_height
         for geom, r in zip(self._obstacle_geoms, radii):
@@ -652,7 +450,7 @@ class UR10Sim:
             model.bvh_aabb[model.body_bvhadr[body], 3:] = (r, r, half)
 
     # -------------------------------------------------------------------------------- camera
-    def camera_state(self):
+    def camera_state(self) -> CameraState:
         """
         Return a copy of what the camera would see now, to render later (elsewhere).
 
@@ -664,7 +462,8 @@ class UR10Sim:
         return CameraState(float(d.time), d.qpos.copy(), d.mocap_pos.copy(),
                            d.mocap_quat.copy(), len(self._obstacles), self._radii.copy())
 
-    def render_rgb_depth(self, state=None):
+    def render_rgb_depth(self, state: CameraState | None = None
+                         ) -> tuple[NDArray[np.uint8], NDArray[np.uint16]]:
         """
         Render the camera: return ``(rgb, depth_mm)``.
 
@@ -675,7 +474,7 @@ class UR10Sim:
         arrays (safe to keep). Row 0 is the top of the image.
         """
         if self._camera is None:
-            self._camera = _OffscreenCamera(self.model, self.camera_id, self.intrinsics)
+            self._camera = OffscreenCamera(self.model, self.camera_id, self.intrinsics)
         data = self.data
         if state is not None:
             if self._render_data is None:
@@ -702,14 +501,14 @@ class UR10Sim:
         depth_mm = np.where(valid, np.rint(depth * np.float32(1000.0)), 0).astype(np.uint16)
         return rgb, depth_mm
 
-    def close(self):
+    def close(self) -> None:
         """Free the OpenGL resources of the camera (also done when garbage-collected)."""
         if self._camera is not None:
             self._camera.close()
             self._camera = None
 
     @classmethod
-    def from_parameters(cls, p):
+    def from_parameters(cls, p: Mapping[str, Any]) -> UR10Sim:
         """Return the simulation of ur10_sim's parameter values ``p`` (name -> value)."""
         if p['depth_min'] >= p['depth_max']:
             raise ValueError(f'depth_min ({p["depth_min"]}) must be below depth_max '
@@ -720,80 +519,10 @@ class UR10Sim:
                    fovy_deg=p['fovy_deg'], depth_range=(p['depth_min'], p['depth_max']),
                    depth_noise=p['depth_noise'], multisamples=p['multisamples'])
 
-    def __enter__(self):
+    def __enter__(self) -> UR10Sim:
         """Return self (``with UR10Sim() as sim:`` closes the camera at the end)."""
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         """Close the camera."""
         self.close()
-
-
-def _has_geom(model, name):
-    """Return whether ``model`` has a geom called ``name``."""
-    try:
-        model.geom(name)
-    except KeyError:
-        return False
-    return True
-
-
-class _OffscreenCamera:
-    """One offscreen render pass reading colour AND depth (mujoco.Renderer needs two)."""
-
-    def __init__(self, model, camera_id, intrinsics):
-        self.model = model
-        w, h = intrinsics.width, intrinsics.height
-        self._gl = mujoco.GLContext(w, h)
-        self._gl.make_current()
-        self._context = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_100)
-        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._context)
-        # Reversed z (1 at near, 0 at far) with a float depth buffer: precise at any distance.
-        self._context.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
-        self._scene = mujoco.MjvScene(model, maxgeom=1000)
-        self._option = mujoco.MjvOption()
-        self._option.geomgroup[:] = 0
-        self._option.geomgroup[VISIBLE_GROUP] = 1
-        self._option.sitegroup[:] = 0
-        self._camera = mujoco.MjvCamera()
-        self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
-        self._camera.fixedcamid = camera_id
-        self._rect = mujoco.MjrRect(0, 0, w, h)
-        self._rgb = np.empty((h, w, 3), dtype=np.uint8)
-        self._depth = np.empty((h, w), dtype=np.float32)
-        near = model.vis.map.znear * model.stat.extent
-        far = model.vis.map.zfar * model.stat.extent
-        # OpenGL projection z_ndc = (c z + d) / -z (glFrustum), remapped to reversed z in
-        # [0, 1]: window depth = (c' z + d') / -z, so the distance -z = d' / (depth + c').
-        c = -(far + near) / (far - near)
-        d = -2.0 * far * near / (far - near)
-        self._c = np.float32(-0.5 * c - 0.5)
-        self._d = np.float32(-0.5 * d)
-
-    def render(self, data):
-        """Return rgb uint8 (H, W, 3) and depth float32 metres (H, W) (inf where nothing)."""
-        self._gl.make_current()
-        mujoco.mjv_updateScene(self.model, data, self._option, None, self._camera,
-                               mujoco.mjtCatBit.mjCAT_ALL, self._scene)
-        mujoco.mjr_render(self._rect, self._scene, self._context)
-        mujoco.mjr_readPixels(self._rgb, self._depth, self._rect, self._context)
-        # OpenGL rows start at the bottom of the image.
-        rgb = self._rgb[::-1].copy()
-        with np.errstate(divide='ignore'):
-            depth = self._d / (self._depth[::-1] + self._c)
-        return rgb, depth
-
-    def close(self):
-        """Free the OpenGL context."""
-        if self._gl is not None:
-            self._gl.make_current()
-            self._context.free()
-            self._gl.free()
-            self._gl = None
-
-    def __del__(self):
-        """Free the OpenGL context if still held."""
-        try:
-            self.close()
-        except Exception:   # noqa: B902 - interpreter shutdown: nothing left to free
-            pass

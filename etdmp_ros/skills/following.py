@@ -28,6 +28,7 @@ import math
 from typing import Callable, Optional, Tuple
 
 from etdmp_ros.dmp import GeneralizationError, Skill
+from etdmp_ros.geometry.arrays import Array as FloatArray
 from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.skills.planning import (checked_points, format_point, obstacle_clearances, Plan,
                                        PlanningError, PlanSettings, pose_orientations,
@@ -50,7 +51,7 @@ FOLLOW_AFTER_END = 1.0
 
 #: ``differ(before, now, threshold)``: whether ``now`` lies more than ``threshold`` from
 #: ``before`` (True when ``before`` is None).
-Differ = Callable[[Optional[NDArray[np.float64]], NDArray[np.float64], float], bool]
+Differ = Callable[[Optional[FloatArray], FloatArray, float], bool]
 
 
 class FollowedPlan:
@@ -113,7 +114,7 @@ class FollowedPlan:
         if traj is not None and len(traj.t) == len(plan.t) and len(traj.t) > 1:
             self._kept = self._run.replay(traj.x[1:], traj.v[1:], traj.a[1:])
 
-    def placed(self, points: ArrayLike) -> NDArray[np.float64]:
+    def placed(self, points: ArrayLike) -> FloatArray:
         """Return base_link ``points`` (..., 3) as the plan uses them (on the task plane, 2D)."""
         points = np.asarray(points, dtype=float)
         return self._space.outward(self._space.inward(points.reshape(-1, 3))).reshape(
@@ -128,7 +129,7 @@ class FollowedPlan:
         """Return the index of the pose at path time ``t`` (the last one at or before it)."""
         return int(np.clip(np.searchsorted(self.t, t + 1e-9) - 1, 0, len(self.t) - 1))
 
-    def orientations_at(self, t: ArrayLike) -> NDArray[np.float64]:
+    def orientations_at(self, t: ArrayLike) -> FloatArray:
         """Return the plan's orientations (len(t), 4) at path times ``t`` (its last after it)."""
         i = np.clip(np.searchsorted(self._plan_t, np.asarray(t) + 1e-9) - 1, 0,
                     len(self._plan_t) - 1)
@@ -294,11 +295,11 @@ class MovedInput:
         if confirmations < 1:
             raise ValueError(f'confirmations must be >= 1, got {confirmations!r}')
         self.differ, self.confirmations = differ, confirmations
-        self.candidate: Optional[NDArray[np.float64]] = None
+        self.candidate: Optional[FloatArray] = None
         self.count = 0
-        self.refused: Optional[NDArray[np.float64]] = None
+        self.refused: Optional[FloatArray] = None
 
-    def see(self, seen: NDArray[np.float64], used: Optional[ArrayLike], threshold: float) -> bool:
+    def see(self, seen: FloatArray, used: Optional[ArrayLike], threshold: float) -> bool:
         """
         Note the value ``seen`` of a message; return whether to follow it now.
 
@@ -323,7 +324,7 @@ class MovedInput:
 
 def merged_obstacles(used: ArrayLike, used_radii: ArrayLike, seen: ArrayLike,
                      seen_radii: ArrayLike, threshold: float
-                     ) -> Tuple[NDArray[np.float64], NDArray[np.float64]]:
+                     ) -> Tuple[FloatArray, FloatArray]:
     """
     Return the obstacles (m, 3) and radii (m,) a plan in execution follows: ``used`` updated.
 
@@ -352,7 +353,7 @@ def merged_obstacles(used: ArrayLike, used_radii: ArrayLike, seen: ArrayLike,
 
 def sized_obstacles(seen: ArrayLike, volume_tops: Optional[ArrayLike],
                     volume_radii: Optional[ArrayLike]
-                    ) -> Tuple[NDArray[np.float64], NDArray[np.bool_]]:
+                    ) -> Tuple[FloatArray, NDArray[np.bool_]]:
     """
     Return each seen obstacle's radius (m,) and whether it has one (m,) (bools).
 
@@ -398,7 +399,7 @@ class Following:
         return tau_now > self.plan.duration + FOLLOW_AFTER_END
 
     def goal_to_follow(self, goal: ArrayLike, threshold: float
-                       ) -> Optional[NDArray[np.float64]]:
+                       ) -> Optional[FloatArray]:
         """
         Note a perceived goal (3,); return it if the plan is to follow it now, else None.
 
@@ -413,7 +414,7 @@ class Following:
         return None
 
     def obstacles_to_follow(self, seen: ArrayLike, seen_radii: ArrayLike, threshold: float
-                            ) -> Optional[Tuple[NDArray[np.float64], NDArray[np.float64]]]:
+                            ) -> Optional[Tuple[FloatArray, FloatArray]]:
         """
         Note the perceived obstacles (m, 3) with radii (m,); return the set to follow or None.
 

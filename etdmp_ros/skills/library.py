@@ -13,6 +13,8 @@ Where demonstrations come from:
   the controller uses (:func:`joint_state_path`), trimmed to where the tool moves;
 - paths taught at runtime (the DMP server's ``/etdmp/demonstrations`` topic), persisted as CSV.
 
+Recordings are read by :mod:`etdmp_ros.skills.recorded` (its names are imported here too).
+
 What a demonstration's coordinates mean is given by its dimension, one rule for every source:
 
 - 2 coordinates: a 2D skill in demo units (letters, wiping), executed in the task plane;
@@ -34,39 +36,34 @@ message default (0, 0, 0, 1), which mean "no orientation recorded": such a path 
 position-only demonstration it always was.
 """
 
+from __future__ import annotations
+
+from collections.abc import Container, Iterable, Mapping
 from dataclasses import dataclass, field
-import itertools
 import os
 from pathlib import Path
 import re
 import threading
+from typing import TYPE_CHECKING
 
 from etdmp_ros import limits
-from etdmp_ros.dmp import (check_file_size, Demonstration, DemonstrationError, FORMULATIONS, learn,
-                           load_demo, save_demo, unit_quaternions)
-from etdmp_ros.geometry import quaternion as quat
+from etdmp_ros.dmp import (Demonstration, DemonstrationError, FORMULATIONS, learn, load_demo,
+                           save_demo, Skill, unit_quaternions)
+from etdmp_ros.geometry.task_plane import TaskPlane
+# Recorded paths are read there; these names are imported from here too.
+from etdmp_ros.skills.recorded import (BASE_FRAMES, joint_state_path,  # noqa: F401
+                                       MOTION_THRESHOLD, read_mcap_path, recorded_orientations,
+                                       RecordedPath, SETTLED_THRESHOLD)
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:   # the robot package loads Pinocchio: imported where joint states are read
+    from etdmp_ros.robot import UR10Model
 
 #: File types a demonstration can be read from.
 SUFFIXES = ('.csv', '.npy', '.npz', '.mcap')
 #: How a recorded base_link path becomes a skill (see the module docstring).
 RECORDED_DIMS = ('auto', '2d', '3d')
-#: rosbag2 schema names of the message types a demonstration can be recorded as.
-POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
-PATH = 'nav_msgs/msg/Path'
-JOINT_STATE = 'sensor_msgs/msg/JointState'
-RECORDED_TYPES = (POSE_STAMPED, PATH, JOINT_STATE)
-_TYPES_TEXT = f'{POSE_STAMPED}, {PATH} or {JOINT_STATE}'
-#: A joint-state recording starts and ends with the arm at rest (the user takes hold of it, lets
-#: go): the motion is where the tool tip is farther than MOTION_THRESHOLD (m) from both the
-#: first and the last sample's position, and the demonstration is trimmed to it, widened to
-#: the last sample before it within SETTLED_THRESHOLD (m) of the start and the first after it
-#: within that of the end, so that it starts and ends (nearly) at rest.
-MOTION_THRESHOLD = 1e-3
-SETTLED_THRESHOLD = 1e-4
-BASE_FRAMES = ('', 'base_link')
-#: Orientations that mean "none recorded" when every pose carries one of them.
-UNSET_ORIENTATIONS = ((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
 
 # Skill names become file names in the skills folder: keep them portable and path-free.
 _NAME = re.compile(r'[A-Za-z0-9][A-Za-z0-9_-]{0,63}\Z')
@@ -84,7 +81,7 @@ class UnknownSkillError(ValueError):
     """A skill name that the library does not know (the message lists the known ones)."""
 
 
-def check_skill_name(name):
+def check_skill_name(name: object) -> str:
     """Return ``name`` if it is a valid skill name, else raise ValueError saying why."""
     if not isinstance(name, str) or not _NAME.match(name):
         raise ValueError(f'skill name {name!r} is not valid: use 1-64 letters, digits, "_" or '
@@ -92,7 +89,7 @@ def check_skill_name(name):
     return name
 
 
-def default_skills_dir(environ=None):
+def default_skills_dir(environ: Mapping[str, str] | None = None) -> Path:
     """Return where taught skills are kept: ``$ROS_HOME/etdmp_ros/skills`` or ``~/.ros/...``."""
     environ = os.environ if environ is None else environ
     ros_home = environ.get('ROS_HOME')
@@ -100,7 +97,7 @@ def default_skills_dir(environ=None):
     return base / 'etdmp_ros' / 'skills'
 
 
-def demonstration_files(paths):
+def demonstration_files(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
     """
     Expand files and folders into the list of demonstration files to read, in order.
 
@@ -108,7 +105,7 @@ def demonstration_files(paths):
     skipped). A file is kept as given whatever its suffix, so that loading it reports a clear
     error; a missing path raises DemonstrationError.
     """
-    files = []
+    files: list[Path] = []
     for entry in paths:
         path = Path(entry).expanduser()
         if path.is_dir():
@@ -121,38 +118,9 @@ def demonstration_files(paths):
     return files
 
 
-@dataclass(frozen=True, eq=False)
-class RecordedPath:
-    """
-    Positions (n, 3) in base_link recorded on ``topic``, with times ``t`` (n,) or None.
-
-    ``orientations`` (n, 4) (x, y, z, w) in base_link, or None when none were recorded
-    (:func:`recorded_orientations`).
-    """
-
-    positions: np.ndarray
-    t: np.ndarray | None
-    topic: str
-    orientations: np.ndarray | None = None
-
-
-def recorded_orientations(values, where='path'):
-    """
-    Return the recorded orientations (n, 4) of a path's poses, normalised, or None for none.
-
-    ``values`` (n, 4) are the poses' quaternions (x, y, z, w). None when every one is the zero
-    quaternion or every one exactly the message default (0, 0, 0, 1) (UNSET_ORIENTATIONS);
-    otherwise a zero or non-finite one raises DemonstrationError naming its pose.
-    """
-    q = np.asarray(values, dtype=float).reshape(-1, 4)
-    for unset in UNSET_ORIENTATIONS:
-        if len(q) and np.all(q == np.array(unset)):
-            return None
-    return unit_quaternions(q, len(q), where, lambda row: f'pose {row}')
-
-
-def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tolerance=0.01,
-                       orientations=None):
+def recorded_path_demo(name: str, positions: ArrayLike, t: ArrayLike | None, plane: TaskPlane,
+                       recorded_dim: str = 'auto', plane_tolerance: float = 0.01,
+                       orientations: ArrayLike | None = None) -> Demonstration:
     """
     Turn a base_link path (n, 3) with times ``t`` (n,) or None into a Demonstration.
 
@@ -165,219 +133,37 @@ def recorded_path_demo(name, positions, t, plane, recorded_dim='auto', plane_tol
     if recorded_dim not in RECORDED_DIMS:
         raise DemonstrationError(f'recorded_dim must be one of {RECORDED_DIMS}, '
                                  f'got {recorded_dim!r}')
-    positions = np.asarray(positions, dtype=float)
+    x = np.asarray(positions, dtype=float)
     where = f'demonstration {name!r}'
-    if positions.ndim != 2 or positions.shape[1] != 3:
+    if x.ndim != 2 or x.shape[1] != 3:
         raise DemonstrationError(f'{where}: expected (n, 3) base_link positions, got shape '
-                                 f'{positions.shape}')
-    if not np.all(np.isfinite(positions)):
+                                 f'{x.shape}')
+    if not np.all(np.isfinite(x)):
         raise DemonstrationError(f'{where}: positions contain NaN or inf')
-    if t is not None:
-        t = np.asarray(t, dtype=float)
-        if t.size and np.all(t == t.flat[0]):
-            t = None
-        elif t.size:
-            t = t - t.flat[0]
+    times = None if t is None else np.asarray(t, dtype=float)
+    if times is not None:
+        if times.size and np.all(times == times.flat[0]):
+            times = None
+        elif times.size:
+            times = times - times.flat[0]
     dim = recorded_dim
     if dim == 'auto':
-        heights = plane.distance(positions) if len(positions) else np.zeros(1)
+        heights = plane.distance(x) if len(x) else np.zeros(1)
         dim = '2d' if np.ptp(heights) <= plane_tolerance else '3d'
-    if orientations is not None:
-        orientations = unit_quaternions(orientations, len(positions), where,
-                                        lambda row: f'pose {row}')
+    quats = None if orientations is None else unit_quaternions(
+        orientations, len(x), where, lambda row: f'pose {row}')
     if dim == '2d':
-        positions = plane.to_plane(positions)
-        if orientations is not None:
-            orientations = plane.orientation_to_plane(orientations)
-    return Demonstration(name, positions, t, orientations)
+        x = plane.to_plane(x)
+        if quats is not None:
+            quats = plane.orientation_to_plane(quats)
+    # times None: uniform over 1 s, which Demonstration sets (its field is typed as set).
+    return Demonstration(name, x, times, quats)  # type: ignore[arg-type]
 
 
-def read_mcap_path(path, topic=None, kinematics=None):
-    """
-    Read the base_link path of a PoseStamped, Path or JointState topic from a ``.mcap`` file.
-
-    ``topic`` may be None when the file holds exactly one such topic. ``kinematics``: the
-    :class:`etdmp_ros.robot.UR10Model` (with the controller's tool offset) that turns joint
-    states into tool poses; a JointState topic needs it. Raises DemonstrationError (missing
-    reader package, unreadable file, no or ambiguous topic, wrong frame, no samples).
-    """
-    path = Path(path)
-    try:
-        from mcap.reader import make_reader
-        from mcap_ros2.decoder import DecoderFactory
-    except ImportError:
-        raise DemonstrationError(f'{path}: reading .mcap files needs the Python package '
-                                 'mcap-ros2-support (pip install mcap-ros2-support)') from None
-    try:
-        check_file_size(path)
-        with open(path, 'rb') as stream:
-            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-            topics = _mcap_topics(reader)
-            chosen = _choose_topic(path, topics, topic)
-            kind = topics[chosen]
-            most = (limits.MAX_RECORDED_JOINT_STATES if kind == JOINT_STATE
-                    else limits.MAX_DEMO_SAMPLES) + 1
-            records = [(message.log_time, decoded) for _, _, message, decoded in
-                       itertools.islice(reader.iter_decoded_messages(topics=[chosen]), most)]
-    except DemonstrationError:
-        raise
-    except MemoryError:
-        raise DemonstrationError(f'{path}: too large to read (out of memory)') from None
-    except OSError as err:
-        raise DemonstrationError(f'{path}: cannot read: {err.strerror or err}') from None
-    except Exception as err:   # noqa: B902 - the mcap readers raise many types on corrupt files
-        raise DemonstrationError(f'{path}: not a readable rosbag2 .mcap file '
-                                 f'({type(err).__name__}: {err})') from None
-    if not records:
-        raise DemonstrationError(f'{path}: topic {chosen!r} holds no messages')
-    if kind == JOINT_STATE:
-        return joint_state_path(records, kinematics, f'{path}: topic {chosen!r}', chosen)
-    if len(records) > limits.MAX_DEMO_SAMPLES and kind == POSE_STAMPED:
-        raise DemonstrationError(f'{path}: topic {chosen!r} holds more than MAX_DEMO_SAMPLES = '
-                                 f'{limits.MAX_DEMO_SAMPLES} messages; not learned')
-    if kind == POSE_STAMPED:
-        frames = {msg.header.frame_id for _, msg in records}
-        positions = [_xyz(msg.pose.position) for _, msg in records]
-        quaternions = [_xyzw(msg.pose.orientation) for _, msg in records]
-        stamps = np.array([_stamp(msg.header.stamp) for _, msg in records])
-        if np.all(stamps == stamps[0]):   # unset header stamps: use the recording times
-            stamps = np.array([log_time * 1e-9 for log_time, _ in records])
-    else:
-        last = records[-1][1]   # the most recent plan/path recorded on the topic
-        if len(last.poses) > limits.MAX_DEMO_SAMPLES:
-            raise DemonstrationError(f'{path}: the last Path on {chosen!r} has '
-                                     f'{len(last.poses)} poses, more than MAX_DEMO_SAMPLES = '
-                                     f'{limits.MAX_DEMO_SAMPLES}; not learned')
-        frames = {last.header.frame_id} | {pose.header.frame_id for pose in last.poses}
-        positions = [_xyz(pose.pose.position) for pose in last.poses]
-        quaternions = [_xyzw(pose.pose.orientation) for pose in last.poses]
-        stamps = np.array([_stamp(pose.header.stamp) for pose in last.poses])
-    wrong = sorted(frames - set(BASE_FRAMES))
-    if wrong:
-        raise DemonstrationError(f'{path}: topic {chosen!r} is in frame {wrong[0]!r}; only '
-                                 'base_link recordings can be used (no TF here)')
-    orientations = recorded_orientations(quaternions, f'{path}: topic {chosen!r}')
-    return RecordedPath(np.array(positions, dtype=float).reshape(-1, 3), stamps, chosen,
-                        orientations)
-
-
-def _mcap_topics(reader):
-    """
-    Return {topic: schema name} of the recordable channels (RECORDED_TYPES) in an mcap file.
-
-    A channel that the summary's statistics count no message on is left out: a recorder that
-    subscribed a topic nobody published (``ros2 bag record -a`` of a partial system) has
-    nothing to learn from it, and it must not make the topic to learn from ambiguous.
-    """
-    summary = reader.get_summary()
-    if summary is not None:
-        counts = (None if summary.statistics is None
-                  else summary.statistics.channel_message_counts)   # unlisted: none
-        pairs = [(channel.topic, summary.schemas.get(channel.schema_id))
-                 for channel_id, channel in summary.channels.items()
-                 if counts is None or counts.get(channel_id, 0) > 0]
-    else:   # no summary section (e.g. an interrupted recording): scan the records once
-        pairs = {channel.topic: schema for schema, channel, _ in reader.iter_messages()}.items()
-    return {topic: schema.name for topic, schema in pairs
-            if schema is not None and schema.name in RECORDED_TYPES}
-
-
-def _choose_topic(path, topics, topic):
-    if topic:
-        if topic not in topics:
-            raise DemonstrationError(f'{path}: no {_TYPES_TEXT} topic named '
-                                     f'{topic!r} (found: {", ".join(sorted(topics)) or "none"})')
-        return topic
-    if len(topics) != 1:
-        found = ', '.join(sorted(topics)) or 'none'
-        raise DemonstrationError(f'{path}: cannot tell which topic to learn from: the file holds '
-                                 f'{len(topics)} {_TYPES_TEXT} topics ({found}); '
-                                 'name one (parameter mcap_topic)')
-    return next(iter(topics))
-
-
-def joint_state_path(records, kinematics, where, topic='joint_states'):
-    """
-    Turn recorded joint states into the tool tip's base_link path (kinesthetic teaching).
-
-    ``records``: [(log time ns, sensor_msgs/JointState)] in order of recording. Joints are
-    matched by name (any order, extra joints such as a gripper's ignored); every message must
-    give the six UR10 joints' positions, finite. Times: the header stamps, or the recording
-    times when the stamps are unset. The tool poses are ``kinematics``'s forward kinematics
-    (the controller's tool tip), trimmed to the motion (:data:`MOTION_THRESHOLD`) and, beyond
-    MAX_DEMO_SAMPLES samples, decimated evenly. Return a :class:`RecordedPath` with the
-    orientations. Raises DemonstrationError saying which message is wrong.
-    """
-    from etdmp_ros.robot import JOINT_NAMES
-    if kinematics is None:
-        raise DemonstrationError(f'{where}: joint states need the UR10 model (forward '
-                                 'kinematics) to become tool positions; none is available')
-    if len(records) > limits.MAX_RECORDED_JOINT_STATES:
-        raise DemonstrationError(f'{where}: more than MAX_RECORDED_JOINT_STATES = '
-                                 f'{limits.MAX_RECORDED_JOINT_STATES} joint states; not learned')
-    joints = np.empty((len(records), len(JOINT_NAMES)))
-    columns, names = None, None
-    for row, (_, msg) in enumerate(records):
-        if names != list(msg.name):
-            names = list(msg.name)
-            missing = [j for j in JOINT_NAMES if j not in names]
-            if missing:
-                raise DemonstrationError(f'{where}: message {row} has no position of '
-                                         f'{", ".join(missing)} (it names {names})')
-            columns = [names.index(j) for j in JOINT_NAMES]
-        if len(msg.position) != len(names):
-            raise DemonstrationError(f'{where}: message {row} names {len(names)} joints but '
-                                     f'gives {len(msg.position)} positions')
-        joints[row] = [msg.position[c] for c in columns]
-    bad = np.flatnonzero(~np.all(np.isfinite(joints), axis=1))
-    if bad.size:
-        raise DemonstrationError(f'{where}: message {bad[0]} has a NaN or inf joint position')
-    stamps = np.array([_stamp(msg.header.stamp) for _, msg in records])
-    if np.all(stamps == stamps[0]):   # unset header stamps: use the recording times
-        stamps = np.array([log_time * 1e-9 for log_time, _ in records])
-    positions = np.array([kinematics.tool_position(q) for q in joints])
-    first, last = _motion_span(positions)
-    if first is None:
-        raise DemonstrationError(f'{where}: the tool never moves more than MOTION_THRESHOLD = '
-                                 f'{MOTION_THRESHOLD * 1e3:g} mm from where it starts: nothing '
-                                 'to learn')
-    keep = np.arange(first, last + 1)
-    if len(keep) > limits.MAX_DEMO_SAMPLES:
-        keep = keep[np.linspace(0, len(keep) - 1, limits.MAX_DEMO_SAMPLES).round().astype(int)]
-    rotations = [kinematics.frame_pose(q)[1] for q in joints[keep]]
-    orientations = np.array([quat.from_matrix(r) for r in rotations])
-    return RecordedPath(positions[keep], stamps[keep], topic, orientations)
-
-
-def _motion_span(positions):
-    """Return (first, last) indices of the motion in ``positions``, or (None, None) if none."""
-    from_start = np.linalg.norm(positions - positions[0], axis=1)
-    from_end = np.linalg.norm(positions - positions[-1], axis=1)
-    if not np.any(from_start > MOTION_THRESHOLD):
-        return None, None
-    moves = int(np.argmax(from_start > MOTION_THRESHOLD))
-    stops = len(positions) - 1 - int(np.argmax(from_end[::-1] > MOTION_THRESHOLD))
-    settled = np.flatnonzero(from_start[:moves] <= SETTLED_THRESHOLD)
-    first = int(settled[-1]) if settled.size else 0
-    settled = np.flatnonzero(from_end[stops + 1:] <= SETTLED_THRESHOLD)
-    last = stops + 1 + int(settled[0]) if settled.size else len(positions) - 1
-    return first, last
-
-
-def _xyz(point):
-    return (point.x, point.y, point.z)
-
-
-def _xyzw(quaternion):
-    return (quaternion.x, quaternion.y, quaternion.z, quaternion.w)
-
-
-def _stamp(stamp):
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def load_demonstration(path, plane, name=None, mcap_topic=None, recorded_dim='auto',
-                       plane_tolerance=0.01, kinematics=None):
+def load_demonstration(path: str | os.PathLike[str], plane: TaskPlane, name: str | None = None,
+                       mcap_topic: str | None = None, recorded_dim: str = 'auto',
+                       plane_tolerance: float = 0.01,
+                       kinematics: UR10Model | None = None) -> Demonstration:
     """
     Read one demonstration file (``.csv``, ``.npy``, ``.npz`` or ``.mcap``).
 
@@ -398,7 +184,7 @@ def load_demonstration(path, plane, name=None, mcap_topic=None, recorded_dim='au
         raise DemonstrationError(f'{path} (topic {recorded.topic!r}): {err}') from None
 
 
-def save_skill_demo(skills_dir, demo):
+def save_skill_demo(skills_dir: str | os.PathLike[str], demo: Demonstration) -> Path:
     """
     Write ``demo`` to ``<skills_dir>/<demo.name>.csv`` (with a ``t`` column) and return the path.
 
@@ -421,10 +207,10 @@ class SkillEntry:
     name: str
     demo: Demonstration
     source: str
-    _learned: dict = field(default_factory=dict, repr=False)
+    _learned: dict[tuple[str, int], Skill] = field(default_factory=dict, repr=False)
 
     @property
-    def planar(self):
+    def planar(self) -> bool:
         """Return True for a 2D skill (task plane, demo units), False for 3D (base_link)."""
         return self.demo.dim == 2
 
@@ -438,37 +224,38 @@ class SkillLibrary:
     functions, learning and caching it on first use.
     """
 
-    def __init__(self, formulation='ijspeert', n_basis=100):
+    def __init__(self, formulation: str = 'ijspeert', n_basis: int = 100) -> None:
         """Create an empty library that learns with ``formulation`` and ``n_basis``."""
         if formulation not in FORMULATIONS:
             raise ValueError(f'formulation must be one of {FORMULATIONS}, got {formulation!r}')
         self.formulation = formulation
         self.n_basis = int(n_basis)
-        self._entries = {}
+        self._entries: dict[str, SkillEntry] = {}
         self._lock = threading.RLock()
 
-    def __len__(self):
+    def __len__(self) -> int:
         """Return the number of skills."""
         with self._lock:
             return len(self._entries)
 
-    def __contains__(self, name):
+    def __contains__(self, name: object) -> bool:
         """Return True if a skill of that name is known."""
         with self._lock:
             return name in self._entries
 
-    def names(self):
+    def names(self) -> list[str]:
         """Return the known skill names, sorted."""
         with self._lock:
             return sorted(self._entries)
 
-    def source(self, name):
+    def source(self, name: str) -> str | None:
         """Return where skill ``name`` came from (its SkillEntry.source), or None if unknown."""
         with self._lock:
             entry = self._entries.get(name)
             return None if entry is None else entry.source
 
-    def add(self, name, demo, source, protected=()):
+    def add(self, name: str, demo: Demonstration, source: object,
+            protected: Container[str] = ()) -> SkillEntry:
         """
         Learn ``demo`` (a Demonstration) as skill ``name`` and return its SkillEntry.
 
@@ -497,7 +284,7 @@ class SkillLibrary:
             self._entries[name] = entry
         return entry
 
-    def _check_new(self, name, protected):
+    def _check_new(self, name: str, protected: Container[str]) -> None:
         """Raise if skill ``name`` may not be added (a protected one, or a case clash)."""
         with self._lock:
             existing = self._entries.get(name)
@@ -512,13 +299,13 @@ class SkillLibrary:
                     'itself to replace that one (names are case-sensitive, and the two would '
                     'be one file on a case-insensitive file system)')
 
-    def _case_twin(self, name):
+    def _case_twin(self, name: str) -> SkillEntry | None:
         """Return the entry whose name equals ``name`` but for case (not ``name`` itself)."""
         folded = name.casefold()
         return next((e for n, e in self._entries.items()
                      if n != name and n.casefold() == folded), None)
 
-    def get(self, name):
+    def get(self, name: str) -> SkillEntry:
         """Return the SkillEntry of ``name`` or raise UnknownSkillError listing the known ones."""
         with self._lock:
             entry = self._entries.get(name)
@@ -529,7 +316,8 @@ class SkillLibrary:
                                         f'{", ".join(sorted(self._entries)) or "none"}')
             return entry
 
-    def skill(self, name, formulation=None, n_basis=None):
+    def skill(self, name: str, formulation: str | None = None, n_basis: int | None = None
+              ) -> Skill:
         """Return the learned Skill of ``name`` (learned on first use for these settings)."""
         entry = self.get(name)
         key = (formulation or self.formulation, int(n_basis or self.n_basis))
@@ -540,8 +328,10 @@ class SkillLibrary:
                 entry._learned[key] = learned
             return learned
 
-    def add_files(self, paths, plane, mcap_topic=None, recorded_dim='auto', plane_tolerance=0.01,
-                  kinematics=None):
+    def add_files(self, paths: Iterable[str | os.PathLike[str]], plane: TaskPlane,
+                  mcap_topic: str | None = None, recorded_dim: str = 'auto',
+                  plane_tolerance: float = 0.01, kinematics: UR10Model | None = None
+                  ) -> tuple[list[SkillEntry], list[str]]:
         """
         Learn every demonstration file in ``paths`` (files or folders), named by file stem.
 
@@ -550,7 +340,8 @@ class SkillLibrary:
         Returns (added SkillEntries, error messages); a bad file is reported and skipped, the
         others are still learned.
         """
-        added, errors = [], []
+        added: list[SkillEntry] = []
+        errors: list[str] = []
         for entry in paths:
             try:
                 files = demonstration_files([entry])

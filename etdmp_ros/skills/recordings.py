@@ -15,10 +15,14 @@ Times: a message's log time is when the recorder received it (ns since the epoch
 ``ros2 bag record`` stamps it); its publish time is the same.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
 import os
 from pathlib import Path
 import re
 import sys
+from typing import Any
 
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
@@ -39,12 +43,12 @@ class BagError(RuntimeError):
     """A message definition could not be found, or a file is not such a recording."""
 
 
-def _share_dirs():
+def _share_dirs() -> list[Path]:
     prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
     return [Path(p) / 'share' for p in prefixes + [sys.prefix]]
 
 
-def _msg_file(package, name):
+def _msg_file(package: str, name: str) -> Path:
     for share in _share_dirs():
         path = share / package / 'msg' / f'{name}.msg'
         if path.is_file():
@@ -53,7 +57,7 @@ def _msg_file(package, name):
                    f'{", ".join(str(s) for s in _share_dirs())}')
 
 
-def _split_type(type_name):
+def _split_type(type_name: str) -> tuple[str, str]:
     """Return (package, name) of ``pkg/msg/Name`` or ``pkg/Name``."""
     parts = type_name.split('/')
     if len(parts) not in (2, 3) or (len(parts) == 3 and parts[1] != 'msg'):
@@ -61,9 +65,9 @@ def _split_type(type_name):
     return parts[0], parts[-1]
 
 
-def _dependencies(package, text):
+def _dependencies(package: str, text: str) -> list[str]:
     """Return the sorted message types (``pkg/Name``) that the fields of a .msg text use."""
-    found = set()
+    found: set[str] = set()
     for line in text.splitlines():
         line = line.split('#', 1)[0].strip()
         if not line:
@@ -84,7 +88,7 @@ def _dependencies(package, text):
     return sorted(found)
 
 
-def message_definition(type_name):
+def message_definition(type_name: str) -> str:
     """
     Return the message definition of ``type_name`` (``pkg/msg/Name``) as rosbag2 embeds it.
 
@@ -93,23 +97,26 @@ def message_definition(type_name):
     pkg/Name``, its ``.msg`` text. Raises BagError when a file is missing.
     """
     package, name = _split_type(type_name)
-    parts, seen = [], set()
+    parts: list[str] = []
+    seen: set[str] = set()
 
-    def add(package, name, header):
+    def add(package: str, name: str, header: bool) -> None:
         text = _msg_file(package, name).read_text()
         parts.append((f'{SEPARATOR}\nMSG: {package}/{name}\n' if header else '')
                      + text.rstrip('\n'))
         for dependency in _dependencies(package, text):
             if dependency not in seen:
                 seen.add(dependency)
-                add(*dependency.split('/'), True)
+                used_package, used_name = dependency.split('/')
+                add(used_package, used_name, True)
 
     seen.add(f'{package}/{name}')
     add(package, name, False)
     return '\n'.join(parts) + '\n'
 
 
-def qos_profile(reliable=True, transient_local=False, depth=10):
+def qos_profile(reliable: bool = True, transient_local: bool = False, depth: int = 10
+                ) -> dict[str, Any]:
     """Return one offered QoS profile as rosbag2 (metadata version 9) writes it."""
     return {'history': 'keep_last', 'depth': int(depth),
             'reliability': 'reliable' if reliable else 'best_effort',
@@ -127,7 +134,7 @@ class BagWriter:
     sort by log time). Chunks are zstd-compressed.
     """
 
-    def __init__(self, path, metadata_yaml=True):
+    def __init__(self, path: str | os.PathLike[str], metadata_yaml: bool = True) -> None:
         """Open ``path`` for writing (its folder is created)."""
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -135,11 +142,14 @@ class BagWriter:
         self._writer = Writer(self._stream, compression=CompressionType.ZSTD)
         self._writer.start(profile='ros2', library='etdmp_ros')
         self._metadata_yaml = metadata_yaml
-        self._schemas = {}
-        self.topics = {}            # topic -> [channel id, type, qos profiles, count]
-        self._first = self._last = None
+        self._schemas: dict[str, int] = {}
+        # topic -> [channel id, type, qos profiles, count]
+        self.topics: dict[str, list[Any]] = {}
+        self._first: int | None = None
+        self._last: int | None = None
 
-    def add_topic(self, topic, type_name, qos_profiles=()):
+    def add_topic(self, topic: str, type_name: str,
+                  qos_profiles: Iterable[dict[str, Any]] = ()) -> None:
         """Register ``topic`` of ``type_name`` (``pkg/msg/Name``) with its offered QoS."""
         if type_name not in self._schemas:
             self._schemas[type_name] = self._writer.register_schema(
@@ -151,7 +161,7 @@ class BagWriter:
              else '', 'topic_type_hash': ''})
         self.topics[topic] = [channel, type_name, profiles, 0]
 
-    def write(self, topic, log_ns, data):
+    def write(self, topic: str, log_ns: int, data: bytes | bytearray | memoryview) -> None:
         """Write one serialized (CDR) message of ``topic`` received at ``log_ns``."""
         entry = self.topics[topic]
         self._writer.add_message(entry[0], log_time=int(log_ns), data=bytes(data),
@@ -160,7 +170,7 @@ class BagWriter:
         self._first = log_ns if self._first is None else min(self._first, log_ns)
         self._last = log_ns if self._last is None else max(self._last, log_ns)
 
-    def _metadata(self):
+    def _metadata(self) -> dict[str, Any]:
         start = int(self._first or 0)
         duration = int((self._last or 0) - start)
         count = sum(entry[3] for entry in self.topics.values())
@@ -186,7 +196,7 @@ class BagWriter:
             'custom_data': {},
             'ros_distro': ROS_DISTRO}}
 
-    def close(self):
+    def close(self) -> None:
         """Finish the file (summary, indexes, rosbag2's metadata); write metadata.yaml."""
         text = yaml.safe_dump(self._metadata(), sort_keys=False)
         self._writer.add_metadata('rosbag2', {'serialized_metadata': text})
@@ -195,16 +205,16 @@ class BagWriter:
         if self._metadata_yaml:
             (self.path.parent / 'metadata.yaml').write_text(text)
 
-    def __enter__(self):
+    def __enter__(self) -> BagWriter:
         """Return the writer."""
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
         """Close the file."""
         self.close()
 
 
-def topics(path):
+def topics(path: str | os.PathLike[str]) -> dict[str, tuple[str, int]]:
     """Return {topic: (type, message count)} of an MCAP file, from its summary."""
     with open(path, 'rb') as stream:
         summary = make_reader(stream).get_summary()
@@ -215,10 +225,13 @@ def topics(path):
             for c in summary.channels.values()}
 
 
-def read_messages(path, names=None):
+def read_messages(path: str | os.PathLike[str], names: Iterable[str] | None = None
+                  ) -> Iterator[tuple[str, str, int, bytes]]:
     """Yield (topic, type, log ns, CDR bytes) of ``path`` by log time (``names``: only those)."""
     with open(path, 'rb') as stream:
         reader = make_reader(stream)
         for schema, channel, message in reader.iter_messages(
                 topics=None if names is None else list(names), log_time_order=True):
+            if schema is None:
+                raise BagError(f'{path}: topic {channel.topic} has no message type (schema)')
             yield channel.topic, schema.name, message.log_time, message.data

@@ -37,17 +37,24 @@ ET-DMP and the plain DMP generalizations from a start in each quadrant of the go
 demonstration's start direction turned by 0, 90, 180 and 270 degrees), in canvas pixels.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable
 from dataclasses import dataclass
 import json
 import math
 import re
 import threading
+from typing import Any
 
 from etdmp_ros import limits
-from etdmp_ros.dmp import GeneralizationError, METHODS, nrmse
-from etdmp_ros.geometry.task_plane import quadrant
+from etdmp_ros.dmp import Demonstration, GeneralizationError, METHODS, nrmse, Skill
+from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
+from etdmp_ros.geometry.task_plane import quadrant, TaskPlane
 from etdmp_ros.skills.library import check_skill_name, recorded_path_demo, SkillLibrary
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: Logical size of the canvas in pixels (the camera image's 4:3).
 CANVAS_PIXELS = (640, 480)
@@ -80,7 +87,7 @@ _HOST = re.compile(r'(?:\[(?P<ip6>[0-9A-Fa-f:.]+)\]|(?P<name>[A-Za-z0-9._~%!$&\'
                    r'(?::(?P<port>[0-9]{0,5}))?')
 
 
-def request_host(header):
+def request_host(header: str) -> str:
     """
     Return the host name of an HTTP ``Host`` header, lower case (an IPv6 address unbracketed).
 
@@ -96,7 +103,7 @@ def request_host(header):
     return (match['ip6'] or match['name']).lower()
 
 
-def is_local(header):
+def is_local(header: str | None) -> bool:
     """
     Return whether a request's ``Host`` header (None: none sent) names this machine.
 
@@ -107,11 +114,11 @@ def is_local(header):
     return header is None or request_host(header) in LOCAL_NAMES
 
 
-def _no_constant(name):
+def _no_constant(name: str) -> float:
     raise ValueError(f'{name} is not a number JSON allows')
 
 
-def decode_json(body):
+def decode_json(body: bytes | str) -> Any:
     """
     Return the JSON value of a request body (bytes); :class:`MalformedRequest` saying why not.
 
@@ -128,7 +135,7 @@ def decode_json(body):
         raise MalformedRequest(f'the request is not valid JSON: {_cut(err)}') from None
 
 
-def _cut(err, limit=2 * limits.MAX_REASON_CHARS):
+def _cut(err: Exception, limit: int = 2 * limits.MAX_REASON_CHARS) -> str:
     text = str(err)
     return text if len(text) <= limit else text[:limit - 3] + '...'
 
@@ -138,12 +145,12 @@ class Drawing:
     """A checked drawing: canvas pixels ``points`` (n, 2) at times ``t`` (n,) rising from 0 s."""
 
     name: str
-    points: np.ndarray
-    t: np.ndarray
+    points: FloatArray
+    t: FloatArray
     strokes: int
 
     @property
-    def duration(self):
+    def duration(self) -> float:
         """Return the time from the first to the last point (s)."""
         return float(self.t[-1] - self.t[0])
 
@@ -156,7 +163,7 @@ class Canvas:
     width_px: int = CANVAS_PIXELS[0]
     height_px: int = CANVAS_PIXELS[1]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         """Check the sizes."""
         if not (math.isfinite(self.width_m) and self.width_m > 0.0):
             raise ValueError(f'canvas width must be > 0 m, got {self.width_m!r}')
@@ -165,28 +172,28 @@ class Canvas:
                              f'{self.height_px}')
 
     @property
-    def metres_per_pixel(self):
+    def metres_per_pixel(self) -> float:
         """Return the size of a canvas pixel on the task plane (m)."""
         return self.width_m / self.width_px
 
     @property
-    def centre(self):
+    def centre(self) -> FloatArray:
         """Return the canvas centre in pixels (2,), where the task plane's origin is."""
         return np.array([self.width_px, self.height_px], dtype=float) / 2.0
 
-    def to_base_link(self, points, plane):
+    def to_base_link(self, points: ArrayLike, plane: TaskPlane) -> FloatArray:
         """Return base_link points (n, 3) on ``plane`` of canvas pixels ``points`` (n, 2)."""
         offset = (np.asarray(points, dtype=float).reshape(-1, 2) - self.centre) * \
             self.metres_per_pixel
         return plane.origin + offset[:, 1:2] * plane.x_axis + offset[:, 0:1] * plane.y_axis
 
-    def from_plane(self, uv, plane):
+    def from_plane(self, uv: ArrayLike, plane: TaskPlane) -> FloatArray:
         """Return canvas pixels (..., 2) of task-plane coordinates ``uv`` (..., 2, demo units)."""
-        uv = np.asarray(uv, dtype=float)
-        return uv[..., ::-1] * (plane.scale / self.metres_per_pixel) + self.centre
+        values = np.asarray(uv, dtype=float)
+        return values[..., ::-1] * (plane.scale / self.metres_per_pixel) + self.centre
 
 
-def _stroke(value, j, canvas):
+def _stroke(value: object, j: int, canvas: Canvas) -> FloatArray:
     """Return stroke ``j`` as a float (m, 3) array of x, y (px) and t (s); TeachInputError."""
     where = f'stroke {j + 1}'
     if not isinstance(value, list) or not all(isinstance(p, list) for p in value):
@@ -199,10 +206,10 @@ def _stroke(value, j, canvas):
         raise TeachInputError(f'{where}, point {bad + 1}: {_shown(value[bad])} is not three '
                               'numbers [x, y, t] (NaN and infinity arrive as null)')
     array = np.array(value, dtype=float)
-    bad = np.flatnonzero(~np.all(np.isfinite(array), axis=1))
-    if bad.size:
-        raise TeachInputError(f'{where}, point {bad[0] + 1}: {_shown(value[bad[0]])} is not '
-                              'finite')
+    nonfinite = np.flatnonzero(~np.all(np.isfinite(array), axis=1))
+    if nonfinite.size:
+        raise TeachInputError(f'{where}, point {nonfinite[0] + 1}: '
+                              f'{_shown(value[nonfinite[0]])} is not finite')
     size = np.array([canvas.width_px, canvas.height_px], dtype=float)
     outside = np.flatnonzero(np.any((array[:, :2] < -CANVAS_MARGIN * size) |
                                     (array[:, :2] > (1.0 + CANVAS_MARGIN) * size), axis=1))
@@ -222,16 +229,16 @@ def _stroke(value, j, canvas):
     return array[keep]
 
 
-def _shown(value):
+def _shown(value: object) -> str:
     text = repr(value).replace('None', 'null')
     return text if len(text) <= 60 else text[:57] + '...'
 
 
-def _length(stroke):
+def _length(stroke: FloatArray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(stroke[:, :2], axis=0), axis=1)))
 
 
-def _join(strokes):
+def _join(strokes: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
     """Join strokes (m_j, 3) into one timeline (see the module docstring); return (n, 3)."""
     drawn_time = sum(s[-1, 2] - s[0, 2] for s in strokes)
     drawn_length = sum(_length(s) for s in strokes)
@@ -262,7 +269,7 @@ def _join(strokes):
     return np.concatenate(pieces), np.concatenate(times)
 
 
-def parse_drawing(data, canvas=Canvas()):
+def parse_drawing(data: object, canvas: Canvas = Canvas()) -> Drawing:
     """
     Check what the page sent (decoded JSON) and return the :class:`Drawing`.
 
@@ -295,7 +302,7 @@ def parse_drawing(data, canvas=Canvas()):
     return Drawing(name, points, t, len(checked))
 
 
-def resampled(drawing):
+def resampled(drawing: Drawing) -> tuple[FloatArray, FloatArray]:
     """
     Return (points (m, 2), t (m,)) of a drawing at evenly spaced times (about SAMPLE_PERIOD).
 
@@ -315,7 +322,8 @@ def resampled(drawing):
     return points, t
 
 
-def taught_path(drawing, canvas, plane):
+def taught_path(drawing: Drawing, canvas: Canvas, plane: TaskPlane
+                ) -> tuple[FloatArray, FloatArray]:
     """
     Return (positions (n, 3) in base_link on ``plane``, times (n,) s) of a drawing: the Path sent.
 
@@ -325,7 +333,9 @@ def taught_path(drawing, canvas, plane):
     return canvas.to_base_link(points, plane), t
 
 
-def learn_drawing(drawing, canvas, plane, formulation='ijspeert', n_basis=100):
+def learn_drawing(drawing: Drawing, canvas: Canvas, plane: TaskPlane,
+                  formulation: str = 'ijspeert', n_basis: int = 100
+                  ) -> tuple[Demonstration, Skill]:
     """
     Learn a drawing as dmp_server learns the Path of it; return (Demonstration, Skill).
 
@@ -347,17 +357,17 @@ def learn_drawing(drawing, canvas, plane, formulation='ijspeert', n_basis=100):
     return entry.demo, library.skill(drawing.name)
 
 
-def _rotation(angle):
+def _rotation(angle: float) -> FloatArray:
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s], [s, c]])
 
 
-def _decimated(x, n=GENERALIZATION_POINTS):
+def _decimated(x: FloatArray, n: int = GENERALIZATION_POINTS) -> FloatArray:
     index = np.unique(np.linspace(0, len(x) - 1, min(n, len(x))).round().astype(int))
     return x[index]
 
 
-def uniform(t, x, n=None):
+def uniform(t: ArrayLike, x: ArrayLike, n: int | None = None) -> FloatArray:
     """
     Return samples (n, d) of a movement ``x`` (m, d) at times ``t`` (m,), evenly spaced in time.
 
@@ -365,13 +375,14 @@ def uniform(t, x, n=None):
     their index, and pointer events come at uneven intervals, a rollout at even ones. ``n``
     defaults to ``m``.
     """
-    t = np.asarray(t, dtype=float)
-    x = np.asarray(x, dtype=float)
-    times = np.linspace(t[0], t[-1], len(t) if n is None else int(n))
-    return np.stack([np.interp(times, t, x[:, i]) for i in range(x.shape[1])], axis=1)
+    given = np.asarray(t, dtype=float)
+    values = np.asarray(x, dtype=float)
+    times = np.linspace(given[0], given[-1], len(given) if n is None else int(n))
+    return np.stack([np.interp(times, given, values[:, i]) for i in range(values.shape[1])],
+                    axis=1)
 
 
-def generalizations(skill, canvas, plane):
+def generalizations(skill: Skill, canvas: Canvas, plane: TaskPlane) -> dict[str, Any]:
     """
     Return the paper's Fig. 5 for ``skill`` (a 2D skill in demo units), JSON-ready, in pixels.
 
@@ -385,17 +396,17 @@ def generalizations(skill, canvas, plane):
     own = quadrant(relative)
     starts = np.stack([goal + _rotation(k * math.pi / 2.0) @ relative for k in range(4)])
     demo = uniform(skill.demo_t, skill.demo)
-    runs = {}
+    runs: dict[str, Any] = {}
     for method in METHODS:
         try:
             with np.errstate(over='raise', invalid='raise', divide='raise'):
                 runs[method] = skill.generalize(starts, goal, method=method).x
         except (GeneralizationError, ArithmeticError, ValueError) as err:
             runs[method] = str(err)
-    panels = []
+    panels: list[dict[str, Any]] = []
     for k, start in enumerate(starts):
-        panel = {'quadrant': quadrant(start - goal), 'start': canvas.from_plane(start, plane)
-                 .tolist()}
+        panel: dict[str, Any] = {'quadrant': quadrant(start - goal),
+                                 'start': canvas.from_plane(start, plane).tolist()}
         panel['own'] = k == 0   # the demonstration's own start
         for method, x in runs.items():
             if isinstance(x, str):
@@ -411,7 +422,8 @@ def generalizations(skill, canvas, plane):
             'panels': panels}
 
 
-def project(points, intrinsics, camera):
+def project(points: ArrayLike, intrinsics: CameraIntrinsics, camera: CameraPose
+            ) -> list[list[float]]:
     """
     Return the pixels (m, 2) of base_link ``points`` (n, 3) in the camera image, as a list.
 
@@ -420,9 +432,9 @@ def project(points, intrinsics, camera):
     place of the workcell (NaN, inf or beyond MAX_REQUEST_COORDINATE: a received plan at 1e308 m
     overflowed into infinite pixels, which JSON cannot carry to the page).
     """
-    points = np.asarray(points, dtype=float).reshape(-1, 3)
-    points = points[np.all(np.abs(points) <= limits.MAX_REQUEST_COORDINATE, axis=1)]
-    optical = (points - np.asarray(camera.position)) @ camera.rotation
+    given = np.asarray(points, dtype=float).reshape(-1, 3)
+    given = given[np.all(np.abs(given) <= limits.MAX_REQUEST_COORDINATE, axis=1)]
+    optical = (given - np.asarray(camera.position)) @ camera.rotation
     optical = optical[optical[:, 2] > 0.01]
     if not len(optical):
         return []
@@ -436,28 +448,28 @@ class Trace:
     Points at least ``spacing`` metres apart, at most ``max_points`` (the oldest dropped).
     """
 
-    def __init__(self, spacing=0.0005, max_points=5000):
+    def __init__(self, spacing: float = 0.0005, max_points: int = 5000) -> None:
         """Create an empty trace."""
         self.spacing, self.max_points = float(spacing), int(max_points)
-        self._points = []
+        self._points: list[tuple[float, ...]] = []
         self._lock = threading.Lock()
 
-    def add(self, point):
+    def add(self, point: Iterable[float]) -> None:
         """Add a point (3,) if it is ``spacing`` from the last one kept."""
-        point = tuple(float(c) for c in point)
+        kept = tuple(float(c) for c in point)
         with self._lock:
-            if self._points and math.dist(self._points[-1], point) < self.spacing:
+            if self._points and math.dist(self._points[-1], kept) < self.spacing:
                 return
-            self._points.append(point)
+            self._points.append(kept)
             if len(self._points) > self.max_points:
                 del self._points[:len(self._points) - self.max_points]
 
-    def clear(self):
+    def clear(self) -> None:
         """Forget every point."""
         with self._lock:
             self._points = []
 
-    def points(self):
+    def points(self) -> FloatArray:
         """Return the points kept, (n, 3)."""
         with self._lock:
             return np.array(self._points, dtype=float).reshape(-1, 3)

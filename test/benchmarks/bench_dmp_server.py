@@ -19,7 +19,7 @@ plan. Finally the request's pieces are timed in-process to say where the time go
 (planning), building the response Path, serializing it for /etdmp/path, and what rclpy and DDS
 cost (serializing the response, deserializing it in the client: measured the same way).
 
-Targets (issue 4): p50 <= 1.5x the floor and <= 25 ms; sustained 20 req/s from 4 clients with
+Targets: p50 <= 1.5x the floor and <= 25 ms; sustained 20 req/s from 4 clients with
 no failure.
 """
 

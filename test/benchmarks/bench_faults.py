@@ -1,5 +1,5 @@
 """
-Faults benchmark (issue 23): restarts in one domain, with a crash's leftovers; nodes killed.
+Faults benchmark: restarts in one domain, with a crash's leftovers; nodes killed.
 
 A script, not a pytest test. Run from the repository root after ``make ros-tools`` (the ros2
 CLI and launch in .venv/; ``make bench-faults``)::

@@ -1,5 +1,5 @@
 """
-Kinesthetic teaching benchmark (issue 16): record a stir by hand, learn it, repeat it.
+Kinesthetic teaching benchmark: record a stir by hand, learn it, repeat it.
 
 A script, not a pytest test; it needs no peer library. Run from the repository root::
 
@@ -33,7 +33,8 @@ from etdmp_ros.demo.scenario import Scenario
 from etdmp_ros.dmp import load_demo
 from etdmp_ros.robot import UR10Model
 from etdmp_ros.ros.processes import DISCOVERY_VARIABLES, isolated_environment
-from etdmp_ros.skills.library import _motion_span, load_demonstration
+from etdmp_ros.skills.library import load_demonstration
+from etdmp_ros.skills.recorded import _motion_span
 from etdmp_ros.skills.recordings import read_messages
 from geometry_msgs.msg import PointStamped
 import numpy as np

@@ -1,5 +1,5 @@
 """
-Obstacles with a size, ROS side (issue 25): radii measured, contacts seen, the arm checked.
+Obstacles with a size, ROS side: radii measured, contacts seen, the arm checked.
 
 A script, not a pytest test. From the repository root::
 

@@ -499,7 +499,7 @@ NOTES = """\
   plan's; ms/plan: the core's generalize (paper, detour) or this script's numpy loop per start
   of a batch (the others: not comparable).
 - obstacle-free plan: goal err. at tau, and in the far column at 1.5 tau: the obstacle-free
-  plans of some shapes (LASA) leave their goal past tau (issue 24), which is what the goal
+  plans of some shapes (LASA) leave their goal past tau, which is what the goal
   errors of the methods that need 1.5 tau show; collisions: the cases whose obstacle-free plan
   enters an obstacle (all of them, by construction)."""
 

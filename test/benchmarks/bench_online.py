@@ -1,5 +1,5 @@
 """
-Online ET-DMP benchmark (issue 14): the cost of one online update, core and end to end.
+Online ET-DMP benchmark: the cost of one online update, core and end to end.
 
 A script, not a pytest test; it needs no peer library. Run from the repository root::
 

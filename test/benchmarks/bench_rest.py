@@ -1,5 +1,5 @@
 """
-Rest benchmark (issue 24): every plan comes to rest at its goal, position and orientation.
+Rest benchmark: every plan comes to rest at its goal, position and orientation.
 
 A script, not a pytest test; it needs no peer library. Run from the repository root::
 

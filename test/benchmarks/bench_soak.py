@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """
-Soak of the whole system (issue 13): /generalize hammered while the arm tracks, junk on its input.
+Soak of the whole system: /generalize hammered while the arm tracks, junk on its input.
 
 The four nodes start as ``make demo`` starts them (letter G, its scene; dmp_server with
 ``execute`` false, so the requests plan without moving the arm). The arm tracks one long path

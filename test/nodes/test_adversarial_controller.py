@@ -1,5 +1,5 @@
 """
-Attacks on the controller through its topics (issue 13), against the installed nodes.
+Attacks on the controller through its topics, against the installed nodes.
 
 ``ur10_sim`` (camera off) and ``controller`` run from the colcon install as in
 test_controller_node (its :class:`Rig`). While the arm writes the letter G, each row of
@@ -33,7 +33,7 @@ from test_controller_node import Rig
 #: uses once started (360 MB with numba's cache, 450 MB when numba compiled in the process:
 #: a fresh clone). Measured: +3 to +33 MB; a 10^5-pose path is 8 MB of bytes.
 RSS_GROWTH_LIMIT = 64e6
-#: Joint states per second of the flood: the rate that stopped every letter before (issue 13).
+#: Joint states per second of the flood: the rate that stopped every letter before.
 FLOOD_RATE = 13000
 #: The shipped max_path_poses (config/controller.yaml).
 MAX_PATH_POSES = 20000
@@ -53,6 +53,8 @@ FLOOD = textwrap.dedent("""
     msg = serialize_message(JointState(name=['a', 'b', 'c'], position=[0.0, 1.0, 2.0]))
     while pub.get_subscription_count() < 2:            # the controller and the test client
         time.sleep(0.05)
+    # Matched here; the readers' side may match a moment later, which this process cannot see
+    # (the test starts the letter only after 'flooding', so nothing depends on this wait).
     time.sleep(0.5)
     print('flooding', flush=True)
     burst = round(float(sys.argv[2]) / 1000)
@@ -62,7 +64,7 @@ FLOOD = textwrap.dedent("""
         for _ in range(burst):
             pub.publish(msg)
         n += burst
-        time.sleep(max(0.0, start + n / float(sys.argv[2]) - time.monotonic()))
+        time.sleep(max(0.0, start + n / float(sys.argv[2]) - time.monotonic()))   # the rate
     print(n / (time.monotonic() - start), flush=True)
 """)
 
@@ -94,7 +96,7 @@ def _forged_joint_states(rig, offset_ns):
     for k in range(3):
         rig.client.joint_pub.publish(joint_state_msg(q, np.zeros(6), names=JOINT_NAMES,
                                                      stamp=ns_to_stamp(stamp + k * 8_000_000)))
-        time.sleep(0.01)
+        time.sleep(0.01)        # the subject: one a control period or so, as a robot's would
     return 'joint state ignored: its stamp is'
 
 
@@ -134,9 +136,12 @@ def joint_state_flood(rig):
 def oversized_path(rig):
     """Send a Path of 10^5 poses (8 MB) while the letter is written: refused unread."""
     yield
+    seen = len(rig.controller.log())
     rig.client.path_pub.publish(rig.oversized)
-    time.sleep(1.0)
-    return f'path ignored: the path has 100000 poses, more than max_path_poses ({MAX_PATH_POSES})'
+    said = f'path ignored: the path has 100000 poses, more than max_path_poses ({MAX_PATH_POSES})'
+    rig.client.wait_for(lambda: said in rig.controller.log()[seen:], 10.0,
+                        'the refusal of the oversized path', rig.processes)
+    return said
 
 
 def path_at_the_limit(rig):
@@ -183,7 +188,7 @@ def test_an_attack_while_writing_leaves_the_letter_whole(rig, letter, attack):
     next(steps)
     c.publish_path(letter)
     c.wait_for(lambda: c.state() == 'tracking', 30.0, 'tracking', rig.processes)
-    time.sleep(0.5)
+    time.sleep(0.5)             # the subject: the attack while the letter is being written
     try:
         next(steps)
     except StopIteration as end:

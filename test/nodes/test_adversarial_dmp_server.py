@@ -1,5 +1,5 @@
 """
-dmp_server under attack (issue 13): the installed node, attacked as a user on the machine can.
+dmp_server under attack: the installed node, attacked as a user on the machine can.
 
 Each row of ATTACKS does what ``ros2 service call``, ``ros2 param set`` or ``ros2 topic pub`` (or
 a file put in ``demo_files`` / ``skills_dir``) would, and then checks, for every row: the node
@@ -383,14 +383,12 @@ def test_teaching_a_builtin_name_needs_teach_overwrite(attacked):
 def page(attacked, colcon_install, module_ros_env, tmp_path_factory):
     """Return the page of the installed teach node beside the module's dmp_server."""
     from support.drawings import request
+    from support.waiting import wait_for
     from etdmp_ros.demo.teach_session import READY
     tmp = tmp_path_factory.mktemp('page')
     node = NodeProcess(colcon_install, module_ros_env, tmp, 'teach', {'port': 0})
     deadline = time.monotonic() + 60.0
-    while not READY.search(node.log()):
-        assert node.process.poll() is None and time.monotonic() < deadline, node.log()
-        time.sleep(0.1)
-    url = READY.search(node.log()).group(1)
+    url = wait_for(lambda: READY.search(node.log()), 60.0, 'the teach page', [node]).group(1)
     # Once it has found dmp_server (DDS discovery: seconds on a loaded machine), as a page
     # opened beside a running system (make teach waits for every node likewise).
     while _post(url + 'api/teach', request('warm_up'))[0] == 503:
@@ -429,7 +427,7 @@ class Meddler:
         while not self._stop.is_set():
             assert all(r.successful for r in self.client.set_parameters(**next(self._values)))
             self.sets += 1
-            time.sleep(0.01)
+            time.sleep(0.01)    # the subject: a client setting them over and over
 
     def __enter__(self):
         assert self.client.parameters.wait_for_service(timeout_sec=TIMEOUT)

@@ -1,5 +1,5 @@
 """
-Attacks on perception through its camera topics (issue 13), against the installed node.
+Attacks on perception through its camera topics, against the installed node.
 
 One ``perception`` from the colcon install (warnings throttled to 0.1 s), fed by this test as a
 RealSense driver would (:class:`test_perception_node.CameraFeed`) with frames the simulation

@@ -9,7 +9,6 @@ The launch file runs for real, with `ros2 launch`, in test_ros2_cli.py.
 
 import signal
 import subprocess
-import time
 
 from conftest import sourced
 from etdmp_ros.ros import system
@@ -17,8 +16,8 @@ from etdmp_ros.ros.background import BackgroundNode
 from geometry_msgs.msg import PointStamped
 from nav_msgs.srv import GetPlan
 import numpy as np
-import pytest
 from std_msgs.msg import Float64MultiArray, String
+from support.waiting import wait_for
 
 NODES = system.NODE_NAMES
 
@@ -38,13 +37,8 @@ class Listener(BackgroundNode):
         self.start()
 
     def wait(self, predicate, timeout, what, process):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return
-            assert process.poll() is None, f'bringup exited while waiting for {what}'
-            time.sleep(0.05)
-        pytest.fail(f'timed out after {timeout} s waiting for {what}')
+        """Wait until ``predicate()``; fail naming ``what`` (or bringup's exit)."""
+        return wait_for(predicate, timeout, what, [process], period=0.05)
 
 
 def test_bringup_runs_the_system_in_one_process(colcon_install, ros_env, tmp_path):
@@ -78,8 +72,11 @@ def test_bringup_runs_the_system_in_one_process(colcon_install, ros_env, tmp_pat
         except subprocess.TimeoutExpired:
             process.kill()
             code = process.wait()
-        time.sleep(0.3)
-        listener.close()
+        try:
+            wait_for(lambda: listener.commands and not np.any(listener.commands[-1]), 10.0,
+                     'a zero velocity command after Ctrl-C')
+        finally:
+            listener.close()
     text = log_path.read_text()
     assert code == 0, text
     assert 'Traceback' not in text, text

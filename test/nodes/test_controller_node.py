@@ -34,6 +34,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool
 from support.controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
+from support.waiting import wait_for
 
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -100,13 +101,9 @@ class Client(BackgroundNode):
             return self.status[-1][1].split(':')[0] if self.status else None
 
     def wait_for(self, predicate, timeout, what, processes=()):
-        """Wait until ``predicate()``; fail saying ``what`` (with the nodes' logs)."""
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            if time.monotonic() > deadline:
-                logs = '\n'.join(p.log() for p in processes)
-                pytest.fail(f'timed out waiting for {what}; status {self.status[-5:]}\n{logs}')
-            time.sleep(0.01)
+        """Wait until ``predicate()``; fail saying ``what`` (the last statuses, the logs)."""
+        return wait_for(predicate, timeout, what, processes, period=0.01,
+                        details=lambda: f'status {self.status[-5:]}')
 
     def latest_q(self):
         """Return the newest joint positions."""
@@ -141,18 +138,14 @@ class Client(BackgroundNode):
             v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(value))
         future = self.parameters.call_async(
             SetParameters.Request(parameters=[ParameterMsg(name=name, value=v)]))
-        deadline = time.monotonic() + 10
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_for(future.done, 10.0, f'the answer to setting {name}')
         return future.result().results[0]
 
     def call_pause(self, paused):
         """Call /controller/pause; return the response."""
         assert self.pause.wait_for_service(timeout_sec=10)
         future = self.pause.call_async(SetBool.Request(data=paused))
-        deadline = time.monotonic() + 10
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.005)
+        wait_for(future.done, 10.0, 'the answer of /controller/pause', period=0.005)
         return future.result()
 
 
@@ -191,13 +184,13 @@ class Rig:
             self.client.wait_for(lambda: self.client.state() == 'idle', STARTUP,
                                  'the controller to see joint states', self.processes)
             # The latched status can arrive before the other topics are matched: wait for their
-            # publishers and let discovery settle, or the first path's references are missed.
+            # publishers, and for commands to arrive (the controller has matched this client's
+            # readers, announced together), or the first path's references are missed.
             node = self.client.node
             self.client.wait_for(
                 lambda: all(node.count_publishers(t) > 0 for t in (
-                    '/etdmp/controller/reference', '/forward_velocity_controller/commands')),
-                STARTUP, 'the controller topics', self.processes)
-            time.sleep(1.0)
+                    '/etdmp/controller/reference', '/forward_velocity_controller/commands'))
+                and self.client.commands, STARTUP, 'the controller topics', self.processes)
 
     def close(self):
         """Stop everything (whatever fails on the way); return the controller's exit code."""
@@ -330,6 +323,28 @@ def test_input_counts_as_lost_on_the_robots_time():
     assert watch.lost(20 * ms, 110 * ms, True) == ''
 
 
+class Probe:
+    """
+    A subscription of joint_states beside the controller's, spun on its own.
+
+    The controller node is not spun in the in-process tests: what is published waits in its
+    subscription. The probe's subscription, in the same process, gets every message in the same
+    delivery: once the probe has them, so has the controller's subscription.
+    """
+
+    def __init__(self, node, context):
+        from rclpy.executors import SingleThreadedExecutor
+        self.received = []
+        node.create_subscription(JointState, 'joint_states', self.received.append, 100)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(node)
+
+    def wait_for(self, count):
+        """Spin the probe until it has received ``count`` joint states."""
+        wait_for(lambda: self.executor.spin_once(timeout_sec=0.01) or
+                 len(self.received) >= count, 10.0, f'{count} joint states delivered')
+
+
 def test_joint_states_queued_behind_the_clock_are_late_not_lost(ros_env):
     # After the controller's process was not scheduled for a while, its executor may run the
     # watchdog (and the /clock callbacks) before the joint states that queued meanwhile. Those
@@ -346,18 +361,18 @@ def test_joint_states_queued_behind_the_clock_are_late_not_lost(ros_env):
             Parameter('use_sim_time', value=True), Parameter('tool_offset', value=TOOL_OFFSET)])
         source = rclpy.create_node('joint_state_source', context=context)
         pub = source.create_publisher(JointState, 'joint_states', 10)
+        probe = Probe(source, context)
         clock = node.get_clock()
         clock._set_ros_time_is_active(True)      # as rclpy's TimeSource does on /clock
         ms = 1_000_000
         clock.set_ros_time_override(Time(nanoseconds=5000 * ms))
         node.watch.received(5000 * ms, time.monotonic_ns(), True, stamp_ns=5000 * ms)
-        deadline = time.monotonic() + 10.0
-        while not pub.get_subscription_count():
-            assert time.monotonic() < deadline, 'the controller did not match the publisher'
-            time.sleep(0.05)
-        for stamp in range(5008, 5151, 8):       # every period's, queued in the subscription
+        wait_for(lambda: pub.get_subscription_count() >= 2, 10.0,
+                 'the controller (and the probe) to match the publisher')
+        stamps = range(5008, 5151, 8)
+        for stamp in stamps:                     # every period's, queued in the subscription
             pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp(stamp * ms)))
-        time.sleep(0.5)                          # delivered to the subscription, not yet taken
+        probe.wait_for(len(stamps))              # delivered to the subscription, not yet taken
         clock.set_ros_time_override(Time(nanoseconds=5160 * ms))   # the clock went on
         node._watchdog()
         assert not node._stale, 'joint states waiting in the subscription were called lost'
@@ -366,6 +381,7 @@ def test_joint_states_queued_behind_the_clock_are_late_not_lost(ros_env):
         clock.set_ros_time_override(Time(nanoseconds=5300 * ms))
         node._watchdog()
         assert node._stale
+        probe.executor.shutdown()
         source.destroy_node()
         node.destroy_node()
     finally:
@@ -404,25 +420,25 @@ def test_a_link_loss_noticed_late_is_stale_input_not_a_tracking_error(ros_env):
             Parameter('use_sim_time', value=True), Parameter('tool_offset', value=TOOL_OFFSET)])
         source = rclpy.create_node('joint_state_source', context=context)
         pub = source.create_publisher(JointState, 'joint_states', 10)
+        probe = Probe(source, context)
         clock = node.get_clock()
         clock._set_ros_time_is_active(True)      # as rclpy's TimeSource does on /clock
         ms = 1_000_000
         clock.set_ros_time_override(Time(nanoseconds=5000 * ms))
         node.watch.received(5000 * ms, time.monotonic_ns(), True, stamp_ns=5000 * ms)
         node.watch.gap(5000 * ms, True)
-        deadline = time.monotonic() + 10.0
-        while not pub.get_subscription_count():
-            assert time.monotonic() < deadline, 'the controller did not match the publisher'
-            time.sleep(0.05)
+        wait_for(lambda: pub.get_subscription_count() >= 2, 10.0,
+                 'the controller (and the probe) to match the publisher')
         clock.set_ros_time_override(Time(nanoseconds=5500 * ms))   # the link is back
         pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp(5504 * ms)))
-        time.sleep(0.5)                          # delivered to the subscription, not yet taken
+        probe.wait_for(1)                        # delivered to the subscription, not yet taken
         node._watchdog()
         assert node._stale
         assert node.controller.status == 'stale-input'
         reason = node.controller.reason
         assert reason.startswith('joint states on joint_states are stale'), reason
         assert 'none for 0.504 s of simulated time' in reason, reason
+        probe.executor.shutdown()
         source.destroy_node()
         node.destroy_node()
     finally:
@@ -474,9 +490,9 @@ def test_a_stalled_simulation_is_late_input_not_lost_input(rig):
         start, n_status = time.monotonic(), len(c.status)
     c.publish_path(path)
     c.wait_for(lambda: c.state() == 'tracking', 30.0, 'tracking', rig.processes)
-    time.sleep(1.0)
+    time.sleep(1.0)             # the subject: a freeze 1 s into the letter (mid-letter) ...
     os.kill(sim.pid, signal.SIGSTOP)
-    time.sleep(0.3)
+    time.sleep(0.3)             # ... for 0.3 s
     os.kill(sim.pid, signal.SIGCONT)
     c.wait_for(lambda: c.state() == 'idle', 30.0, 'the end of the letter', rig.processes)
     joints, refs, commands, _ = rig.records(start)
@@ -532,7 +548,7 @@ def test_stale_joint_states_and_shutdown_send_zeros(colcon_install, tmp_path):
             c.joint_pub.publish(joint_state_msg(Q_INITIAL, np.zeros(6), stamp=stamp))
             last[0] = time.monotonic()
             next_time += 1.0 / 125.0
-            time.sleep(max(0.0, next_time - time.monotonic()))
+            time.sleep(max(0.0, next_time - time.monotonic()))     # the robot's pace: 125 Hz
 
     robot = threading.Thread(target=publish, daemon=True)
     robot.start()
@@ -542,13 +558,14 @@ def test_stale_joint_states_and_shutdown_send_zeros(colcon_install, tmp_path):
         target = PoseTrajectory([0.0, 2.0], [p0 + [0.05, 0, 0], p0 + [0.1, 0, 0]], [r0, r0])
         c.publish_path(target)
         c.wait_for(lambda: c.state() == 'approaching', 10.0, 'the approach', rig.processes)
-        time.sleep(0.3)
+        c.wait_for(lambda: np.any(c.commands[-1][1]), 5.0, 'a motion command', rig.processes)
         with c.lock:
             assert np.any(c.commands[-1][1])          # commanding motion
         stop.set()
         robot.join()
         c.wait_for(lambda: c.state() == 'stale-input', 2.0, 'stale input', rig.processes)
-        time.sleep(0.2)
+        c.wait_for(lambda: sum(w > last[0] and not np.any(v) for w, v in c.commands[-20:])
+                   >= 0.1 * 125 / 2, 5.0, 'zero commands after the stale input', rig.processes)
         with c.lock:
             moving = [w for w, v in c.commands if np.any(v)]
             zeros = [w for w, v in c.commands if not np.any(v) and w > last[0]]
@@ -565,10 +582,11 @@ def test_stale_joint_states_and_shutdown_send_zeros(colcon_install, tmp_path):
         c.wait_for(lambda: c.state() == 'idle', 5.0, 'idle after stale input', rig.processes)
         c.publish_path(target)
         c.wait_for(lambda: c.state() == 'approaching', 10.0, 'the approach', rig.processes)
-        time.sleep(0.3)
+        c.wait_for(lambda: np.any(c.commands[-1][1]), 5.0, 'a motion command', rig.processes)
         rig.controller.process.send_signal(signal.SIGINT)
         assert rig.controller.process.wait(timeout=10) == 0
-        time.sleep(0.2)
+        c.wait_for(lambda: c.status[-1][1].startswith('idle') and trailing_zeros(c) >= EXIT_ZEROS,
+                   5.0, "the controller's last commands and status")
         with c.lock:
             assert np.any(c.commands[-EXIT_ZEROS - 1][1])
             assert not np.any(c.commands[-1][1])       # the last word is zero velocity
@@ -577,6 +595,13 @@ def test_stale_joint_states_and_shutdown_send_zeros(colcon_install, tmp_path):
         stop.set()
         robot.join()
         rig.close()
+
+
+def trailing_zeros(client):
+    """Return how many zero commands the client received after its last motion command."""
+    with client.lock:
+        return next((k for k, (_, v) in enumerate(reversed(client.commands)) if np.any(v)),
+                    len(client.commands))
 
 
 def test_letter_g_through_ros(rig):
@@ -607,10 +632,10 @@ def test_pause_sends_zeros_and_resume_finishes(rig):
     c = rig.client
     c.publish_path(path)
     c.wait_for(lambda: c.state() == 'tracking', 30.0, 'tracking', rig.processes)
-    time.sleep(0.5)
+    time.sleep(0.5)             # the subject: a pause mid-letter ...
     asked = time.monotonic()
     assert c.call_pause(True).success
-    time.sleep(0.5)
+    time.sleep(0.5)             # ... and 0.5 s paused, in which zeros must keep coming
     assert c.state() == 'paused'
     with c.lock:
         paused_at = next(w for w, s in c.status if w >= asked and s == 'paused')
@@ -644,11 +669,15 @@ def test_unreachable_and_malformed_paths_are_refused(rig):
     bad.poses = [PoseStamped()]
     huge = path.positions[:3].copy()
     huge[1, 0] = 1e308   # a traceback in the checking thread before, the path dropped unsaid
-    for message in (bad, serialize_path(np.full((3, 3), np.nan), [0.0, 0.1, 0.2]),
-                    serialize_path(path.positions[:3], [0.0, 0.2, 0.1]),
-                    serialize_path(huge, [0.0, 0.1, 0.2])):
+    for message, said in ((bad, "frame 'map' is not base_link"),
+                          (serialize_path(np.full((3, 3), np.nan), [0.0, 0.1, 0.2]), 'NaN'),
+                          (serialize_path(path.positions[:3], [0.0, 0.2, 0.1]), 'increase'),
+                          (serialize_path(huge, [0.0, 0.1, 0.2]), 'beyond 100 m')):
+        seen = len(rig.controller.log())
         c.path_pub.publish(message)
-        time.sleep(0.3)     # the path topic keeps only the latest message: one at a time
+        # The path topic keeps only the latest message: one at a time, each once refused.
+        c.wait_for(lambda: said in rig.controller.log()[seen:], 10.0, f'the refusal: {said}',
+                   rig.processes)
     _, _, commands, status = rig.records(since)
     assert status == ['unreachable: ' + reason.split(': ', 1)[1]]
     assert commands and not any(np.any(v) for _, v in commands)      # the arm never moved

@@ -52,6 +52,8 @@ from sensor_msgs.msg import JointState
 
 from std_msgs.msg import Header
 
+from support.waiting import wait_for
+
 from visualization_msgs.msg import MarkerArray
 
 import yaml
@@ -199,14 +201,10 @@ def core_plan(name, start, goal, obstacles=(), method='etdmp', **kwargs):
 
 def wait_for_log(server, *fragments, timeout=10.0):
     """Return the first ERROR line of the node's log holding all fragments (or fail)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        lines = [line for line in server.log().splitlines() if '[ERROR]' in line and
-                 all(f in line for f in fragments)]
-        if lines:
-            return lines[0]
-        assert time.monotonic() < deadline, f'no ERROR log with {fragments}:\n{server.log()}'
-        time.sleep(0.05)
+    def found():
+        return next((line for line in server.log().splitlines()
+                     if '[ERROR]' in line and all(f in line for f in fragments)), None)
+    return wait_for(found, timeout, f'an ERROR log with {fragments}', [server])
 
 
 def clearance_2d(positions, obstacles):
@@ -488,7 +486,7 @@ def test_static_obstacles_and_the_maximum_age(client):
     client.publish('obstacles', obstacles_msg(point))
     assert client.set_parameters(obstacle_max_age=0.3)[0].successful
     try:
-        time.sleep(0.5)
+        time.sleep(0.5)     # the subject: the obstacle grows older than its maximum age
         _, stale, _, _ = client.call(START, GOAL)
     finally:
         assert client.set_parameters(obstacle_max_age=60.0)[0].successful
@@ -523,7 +521,7 @@ def test_empty_frames_use_the_tool_position_and_the_perceived_goal(client):
 def test_stale_tool_state_is_not_used(server, client):
     assert client.set_parameters(tool_state_max_age=0.2)[0].successful
     try:
-        time.sleep(0.4)
+        time.sleep(0.4)     # the subject: the tool state grows older than its maximum age
         assert len(client.call(None, GOAL, start_frame='')[1]) == 0
     finally:
         assert client.set_parameters(tool_state_max_age=60.0)[0].successful

@@ -22,6 +22,7 @@ import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from support.waiting import wait_for
 import yaml
 
 ROBOTS = ('/robot1', '/robot2')
@@ -92,15 +93,6 @@ class Client(BackgroundNode):
             return self.joints[ns][-1], self.tips[ns][-1], self.status[ns][-1]
 
 
-def wait_for(predicate, timeout, what, processes):
-    """Wait until ``predicate()``; fail with the nodes' logs."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f'timed out waiting for {what}\n' + '\n'.join(p.log() for p in processes))
-        time.sleep(0.02)
-
-
 @pytest.fixture(scope='module')
 def robots(colcon_install, module_ros_env, tmp_path_factory):
     """Start three nodes per robot and the client; yield the client and the processes."""
@@ -120,6 +112,9 @@ def robots(colcon_install, module_ros_env, tmp_path_factory):
                      and client.tips[ns], STARTUP, f'{ns} to be idle', processes)
             wait_for(lambda: client.generalize[ns].service_is_ready(), STARTUP,
                      f'{ns}/generalize', processes)
+        # dmp_server says nothing when its first joint state arrives (it plans from the tool
+        # position they give): no condition to wait on, a moment for its subscription to match
+        # and receive (without it: "the tool position is unknown (none received yet)").
         time.sleep(1.0)
         yield client, processes
     finally:

@@ -220,7 +220,7 @@ def test_first_readme_example_writes_the_letter(launched):
         wait_for(lambda: subscriptions(ros2, COMMANDS) >= 3, 60, 'ros2 topic hz subscribed',
                  [hz])
         wait_for(lambda: 'idle' in echoes['status'].log(), 30, 'the idle controller')
-        # In the W's own 2 s (duration 0, the default), as a user runs it: issue 25's "tracking
+        # In the W's own 2 s (duration 0, the default), as a user runs it: the "tracking
         # error 51 mm" stop was the controller missing steps on a loaded machine, not the W.
         result = ros2.run(examples[0], timeout=60)
         plan = ros2_cli.plan_positions(result.stdout)
@@ -375,7 +375,7 @@ def test_param_set_changes_the_plan_and_the_goal(launched):
 
 def test_param_set_of_an_empty_list_clears_static_obstacles(launched):
     """
-    ``ros2 param set /dmp_server static_obstacles "[]"`` clears them (issue 13).
+    ``ros2 param set /dmp_server static_obstacles "[]"`` clears them.
 
     The CLI types ``[]`` as bool[]; it was refused (expected 'Type.DOUBLE_ARRAY'), and after an
     obstacle on the goal every request failed. A wrong type is still refused with the reason.

@@ -28,6 +28,7 @@ from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, Paramet
 from rcl_interfaces.srv import SetParameters
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
+from support.waiting import wait_for
 from visualization_msgs.msg import Marker, MarkerArray
 
 STARTUP = 40.0
@@ -71,11 +72,7 @@ class Client(BackgroundNode):
 
     def wait_for(self, predicate, timeout, what, sim):
         """Wait until ``predicate()``; fail saying ``what`` (with the node's log)."""
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            if time.monotonic() > deadline:
-                pytest.fail(f'timed out waiting for {what}\n{sim.log()}')
-            time.sleep(0.01)
+        return wait_for(predicate, timeout, what, [sim], period=0.01)
 
     def joint_state(self):
         """Return (stamp s, q, qd) of the newest joint state."""
@@ -90,7 +87,7 @@ class Client(BackgroundNode):
             self.command_pub.publish(Float64MultiArray(data=[float(v) for v in qd]))
             if time.monotonic() >= end:
                 return
-            time.sleep(1.0 / rate)
+            time.sleep(1.0 / rate)      # the subject: commands at ``rate`` for ``duration``
 
     def set_parameter(self, name, value):
         """Set one parameter of /ur10_sim as `ros2 param set` would; return the result."""
@@ -109,9 +106,7 @@ class Client(BackgroundNode):
                                double_array_value=[float(x) for x in value])
         future = self.parameters.call_async(
             SetParameters.Request(parameters=[ParameterMsg(name=name, value=v)]))
-        deadline = time.monotonic() + 10
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_for(future.done, 10.0, f'the answer to setting {name}', period=0.01)
         return future.result().results[0]
 
 
@@ -192,10 +187,10 @@ def test_a_stalled_simulation_slips_instead_of_bursting(launch):
     """
     sim, client = launch({'camera_rate': 0.0})
     os.kill(sim.pid, signal.SIGSTOP)
-    time.sleep(0.15)
+    time.sleep(0.15)            # the subject: a freeze of 0.15 s ...
     os.kill(sim.pid, signal.SIGCONT)
     resumed = time.monotonic()
-    time.sleep(0.5)
+    time.sleep(0.5)             # ... and the 0.5 s after it, which must run in real time
     with client.lock:
         after = [(w, stamp_to_ns(m.header.stamp) * 1e-9)
                  for w, m in client.messages['/joint_states'] if w >= resumed]
@@ -248,6 +243,8 @@ def test_a_late_controller_is_waited_for_not_missed(launch):
     sim, client = launch({'camera_rate': 0.0})
     responder = Responder()
     try:
+        # The subject: a late controller for 3 s, 1 s with command_wait 0, 1 s with it back,
+        # then 1 s unanswered (windows of the responder's stalls, counted in the stop line).
         time.sleep(3.0)
         assert client.set_parameter('command_wait', 0.0).successful
         stalls = responder.stalls
@@ -282,7 +279,7 @@ def test_commands_watchdog_and_runtime_parameters(launch):
     assert qd1[0] == pytest.approx(0.2, rel=0.02)
     assert np.allclose(qd1[1:], 0.0, atol=1e-3)
     # The watchdog (0.1 s) brakes once commands stop.
-    time.sleep(0.5)
+    time.sleep(0.5)             # the subject: a silence that must trigger the watchdog
     _, q2, qd2 = client.joint_state()
     assert np.abs(qd2).max() < 1e-3
     assert q2[0] - q1[0] < 0.2 * 0.5                 # stopped well before 0.5 s of motion
@@ -290,7 +287,7 @@ def test_commands_watchdog_and_runtime_parameters(launch):
     # Bad commands are rejected (with a warning), never applied.
     for bad in ([0.3] * 5, [0.3] * 7, [0.3, float('nan'), 0, 0, 0, 0], [float('inf')] * 6):
         client.command(bad, duration=0.2)
-    time.sleep(0.1)
+    time.sleep(0.1)             # the subject: a bad command, were it applied, would show by now
     _, q3, qd3 = client.joint_state()
     assert np.abs(qd3).max() < 1e-6 and np.abs(q3 - q2).max() < 1e-6
     assert 'velocity command rejected' in sim.log()
@@ -375,7 +372,7 @@ def test_contacts_are_published_while_the_arm_touches_an_obstacle(launch):
                                 [tip.x + 0.05, tip.y, tip.z + 0.03]).successful
     client.wait_for(lambda: any(not contacts_from_markers(m)
                                 for m in client.received(topic, moved)), 5.0, 'no contact', sim)
-    time.sleep(0.3)
+    time.sleep(0.3)             # the subject: one empty message, then none for a while
     after = client.received(topic, moved)
     assert len(after) - len([m for m in after if contacts_from_markers(m)]) == 1
     for bad in ([-0.01], [0.02] * 9, [float('nan')]):
@@ -407,7 +404,9 @@ def test_teaching_mode_leads_the_tool_and_ignores_commands(launch, tmp_path):
     assert result.successful, result.reason
     client.command([0.5, 0.0, 0.0, 0.0, 0.0, 0.0], duration=1.0)    # ignored while it plays
     client.wait_for(lambda: 'line.csv played' in sim.log(), 10.0, 'the script to end', sim)
-    time.sleep(0.3)
+    played = time.monotonic()
+    client.wait_for(lambda: len(client.received('/ur10_sim/ground_truth/tool_tip', played)) >= 10,
+                    5.0, 'the tool tip after the script', sim)
     tip = client.received('/ur10_sim/ground_truth/tool_tip')[-1].point
     end = np.array([tip.x, tip.y, tip.z])
     assert np.linalg.norm(end - (start + [0.05, -0.03, 0.0])) < 1e-3

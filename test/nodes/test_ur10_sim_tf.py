@@ -35,6 +35,8 @@ from sensor_msgs.msg import JointState
 
 from std_msgs.msg import Float64MultiArray, String
 
+from support.waiting import wait_for
+
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 STARTUP = 60.0
@@ -93,15 +95,6 @@ def _transform(msg):
                      (r.x, r.y, r.z, r.w))
 
 
-def wait_for(predicate, timeout, what, process):
-    """Wait until ``predicate()``; fail with the node's log."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            pytest.fail(f'timed out waiting for {what}\n{process.log()}')
-        time.sleep(0.02)
-
-
 @pytest.fixture(scope='module')
 def moving_sim(colcon_install, module_ros_env, tmp_path_factory):
     """Run ur10_sim while the joints turn at up to 0.5 rad/s; return (client, scene values)."""
@@ -113,7 +106,7 @@ def moving_sim(colcon_install, module_ros_env, tmp_path_factory):
     client = Client(tf=True)
     try:
         wait_for(lambda: client.joints and client.static and client.description, STARTUP,
-                 'joint states, /tf_static and /robot_description', sim)
+                 'joint states, /tf_static and /robot_description', [sim])
         with client.lock:
             client.tf.clear()
         start = time.monotonic()
@@ -121,9 +114,10 @@ def moving_sim(colcon_install, module_ros_env, tmp_path_factory):
             t = time.monotonic() - start
             qd = 0.5 * np.sin(2 * np.pi * 0.5 * t + np.arange(6))
             client.command.publish(Float64MultiArray(data=qd.tolist()))
-            time.sleep(0.02)
+            time.sleep(0.02)        # the subject: 3 s of motion, commanded at 50 Hz
         client.command.publish(Float64MultiArray(data=[0.0] * 6))
-        time.sleep(0.5)
+        wait_for(lambda: np.abs(client.joints[-1].velocity).max() < 1e-6, 10.0,
+                 'the joints to stop', [sim])
         yield client
     finally:
         client.close()
@@ -190,8 +184,8 @@ def test_without_tf2_msgs_one_warning_and_no_tf(colcon_install, ros_env, tmp_pat
     client = Client(tf=False)
     try:
         wait_for(lambda: len(client.joints) > 20 and client.description, STARTUP,
-                 'joint states and /robot_description', sim)
-        time.sleep(1.0)
+                 'joint states and /robot_description', [sim])
+        time.sleep(1.0)     # the subject: no /tf publisher appears in the graph meanwhile
         assert client.node.count_publishers('/tf') == 0
         assert client.node.count_publishers('/tf_static') == 0
         assert client.node.count_publishers('/joint_states') == 1

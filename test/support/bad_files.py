@@ -1,4 +1,4 @@
-"""Forged and oversized demonstration files (issue 13) for the skill library and dmp_server."""
+"""Forged and oversized demonstration files for the skill library and dmp_server."""
 
 import io
 import zipfile

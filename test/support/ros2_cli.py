@@ -18,12 +18,12 @@ import shlex
 import signal
 import subprocess
 import sys
-import time
 
 from etdmp_ros.ros import fastdds_files
 from etdmp_ros.ros.processes import isolated_environment, NodeProcess, sourced
 from etdmp_ros.ros.spin import DDS_PROFILE_VARIABLES
 import numpy as np
+from support import waiting
 
 REPO = Path(__file__).resolve().parents[2]
 README = REPO / 'README.md'
@@ -155,17 +155,8 @@ class Background(NodeProcess):
 
 
 def wait_for(predicate, timeout, what, processes=()):
-    """Poll ``predicate`` until true; fail naming ``what`` (and a process that died) if not."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        for process in processes:
-            assert process.returncode is None, (
-                f'{what}: a process exited with {process.returncode}:\n{process.log()[-3000:]}')
-        time.sleep(0.2)
-    raise AssertionError(f'timed out after {timeout} s waiting for {what}')
+    """Wait as :func:`support.waiting.wait_for` does, polling every 0.2 s (ros2 commands)."""
+    return waiting.wait_for(predicate, timeout, what, processes, period=0.2)
 
 
 # ----------------------------------------------------------------------- what the CLI prints

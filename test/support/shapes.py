@@ -258,7 +258,7 @@ def shape_deviation(x, reference, size, n=500):
     Return the shape deviation of the plan ``x`` from ``reference`` (both (m, d)).
 
     The RMS distance between the two, both resampled to ``n`` points by arc length, over
-    ``size`` (issue 25's measure: how much an obstacle bends the shape).
+    ``size`` (a measure of how much an obstacle bends the shape).
     """
     a, b = _by_arc_length(np.asarray(x, float), n), _by_arc_length(np.asarray(reference, float), n)
     return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))) / size)

@@ -1,5 +1,5 @@
 """
-End to end (issue 7): see the goal, plan with ET-DMP, write with the simulated UR10, measure.
+End to end: see the goal, plan with ET-DMP, write with the simulated UR10, measure.
 
 The four INSTALLED nodes (``<install>/lib/etdmp_ros/<node>`` after sourcing the colcon install,
 what ``ros2 run`` runs; parameters from the install's share folder) run as separate processes
@@ -14,14 +14,14 @@ acceleration limits; the true pen trace reaches the goal within 5 mm, clears eve
 keeps the demonstration's shape (nRMSE at most twice the plan's), and the DMP baseline from the
 same start is clearly worse. One run per skill and load (~15 s each) serves all the checks.
 
-Orientation (issue 15), case ``wipe-idle`` besides ``stir``: the stirrer tilts and circles, the
+Orientation, case ``wipe-idle`` besides ``stir``: the stirrer tilts and circles, the
 sponge turns along the stroke. The true tool orientation (forward kinematics of the
 simulation's /joint_states; the model's tip is the simulation's ground-truth tip) is within
 0.5 degree RMS and 2 degrees max of the plan's at the same path time and of the controller's
 reference, and the plan's orientations are the demonstration's turned by the Euclidean
 transform (computed independently in ``etdmp_ros.demo.metrics``) within 0.5 degree.
 
-Online ET-DMP (issue 14), case ``G-move`` (idle only): while the pen writes G, the goal marker
+Online ET-DMP, case ``G-move`` (idle only): while the pen writes G, the goal marker
 is moved by 4 cm (ur10_sim's ``goal_position``, as ``ros2 param set`` would; the demo's
 ``--move-goal``). The pen ends within 2 mm of the new marker, every command within the
 velocity and acceleration limits, no stop-and-go at the switch of plans (the tool's speed at
@@ -29,7 +29,7 @@ least 20 % of the plan's there, unless the plan itself slows) and no second appr
 trace keeps the demonstration's shape placed at the new goal (nRMSE within twice the no-move
 run's + 0.05; the G-idle run's metrics are reused).
 
-Contacts (issue 25): in every run the simulation's ground truth (/ur10_sim/ground_truth/contacts,
+Contacts: in every run the simulation's ground truth (/ur10_sim/ground_truth/contacts,
 recorded in demo.mcap) shows no link and not the tool touching an obstacle, the bottle or the
 table: metrics.json's ``contacts`` is 0. The letters P and R (idle, written in the demo's 4 s)
 and W in its own 2 s (the "unexplained stop" of issue 25) are run for that too, each written to
@@ -66,7 +66,7 @@ SKILLS = ('G', 'stir')
 #: on the machine): the closed loop must keep its rate either way. Wipe (the sponge turning
 #: along the stroke, issue 15) idle only.
 CASES = [(skill, load) for load in ('idle', 'busy') for skill in SKILLS] + [('wipe', 'idle')]
-#: Skills whose demonstrations carry orientations: the tool turns as planned (issue 15).
+#: Skills whose demonstrations carry orientations: the tool turns as planned.
 TURNING = ('stir', 'wipe')
 #: nRMSE below which a ratio means nothing: the DMP's own fit of the demonstration and a
 #: tracking error of ~0.1 mm on a 0.2 m movement are of this order. ET-DMP's stirring plan
@@ -337,7 +337,7 @@ def test_the_recording_holds_the_run_as_the_readme_lists_it(run):
     assert depth.dtype == np.uint16 and depth.shape == (480, 640) and depth.max() > 500
 
 
-# ------------------------------------------------------------------ a goal that moves (issue 14)
+# ------------------------------------------------------------------ a goal that moves
 
 
 def test_moved_goal_the_pen_ends_at_the_new_marker(moved):

@@ -1,5 +1,5 @@
 """
-Faults (issue 23): a tool joining, each node killed mid-motion, then restarted alone.
+Faults: a tool joining, each node killed mid-motion, then restarted alone.
 
 The four INSTALLED nodes run as ``ros2 run`` runs them, on a DDS domain of their own, the
 letter G (4 s) planned by ``/generalize`` and written by the simulated UR10; this process

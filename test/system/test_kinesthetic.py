@@ -1,5 +1,5 @@
 """
-Kinesthetic teaching (issue 16), through the installed ur10_sim and then the whole system.
+Kinesthetic teaching, through the installed ur10_sim and then the whole system.
 
 1. :func:`etdmp_ros.demo.kinesthetic.record` (``make kinesthetic``) starts the installed ur10_sim,
    sets its ``teach_script`` as ``ros2 param set`` would (the teaching mode leads the arm
@@ -21,7 +21,8 @@ from etdmp_ros.dmp import learn, load_demo
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.robot import UR10Model
 from etdmp_ros.ros.processes import installed_command
-from etdmp_ros.skills.library import _motion_span, load_demonstration
+from etdmp_ros.skills.library import load_demonstration
+from etdmp_ros.skills.recorded import _motion_span
 from etdmp_ros.skills.recordings import read_messages
 from geometry_msgs.msg import PointStamped
 import numpy as np

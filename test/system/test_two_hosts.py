@@ -1,5 +1,5 @@
 """
-Two computers (issue 23): the robot's PC and the workstation, joined by a UDP link.
+Two computers: the robot's PC and the workstation, joined by a UDP link.
 
 :mod:`two_hosts` makes two network namespaces joined by a veth pair (as root; where that is not
 permitted every test here skips and says why), limits the middleware to UDP as between two

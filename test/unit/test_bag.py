@@ -1,5 +1,5 @@
 """
-The demo's recording (issue 12): rosbag2 MCAP files, read back by mcap-ros2-support.
+The demo's recording: rosbag2 MCAP files, read back by mcap-ros2-support.
 
 Files written by etdmp_ros.skills.recordings decode with mcap-ros2-support's own decoder for
 every type the system publishes; CompressedImage bytes are what rclpy would serialize; the measured

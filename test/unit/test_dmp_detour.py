@@ -87,7 +87,7 @@ def test_held_out_shapes_never_enter_an_obstacle_and_keep_their_shape(cases):
         dims.add(skill.dim)
     assert methods == {'etdmp', 'dmp'} and dims == {2, 3}
     assert len(deviations) >= 60
-    # Issue 25's targets (median <= 0.04, p90 <= 0.15; the paper's coupling: 0.21 / 0.48).
+    # targets (median <= 0.04, p90 <= 0.15; the paper's coupling: 0.21 / 0.48).
     assert np.median(deviations) <= 0.04
     assert np.percentile(deviations, 90) <= 0.15
     assert max(deviations) < 0.5

@@ -1,5 +1,5 @@
 """
-Every plan comes to rest at its goal, position and orientation, also past tau (issue 24).
+Every plan comes to rest at its goal, position and orientation, also past tau.
 
 On recordings that are not the built-in ones (test/support/shapes.py: the LASA handwriting data set
 and the ways a recording goes wrong; 3D shapes with a tool that turns with the stroke), with both
@@ -121,7 +121,7 @@ def test_a_hand_led_stir_as_recorded_comes_to_rest_from_every_octant():
     # as dmp_server trims a bag) with 20 um of sensor noise; through the simulation and a bag:
     # test_kinesthetic.py.
     from etdmp_ros.demo.kinesthetic import hand_stir
-    from etdmp_ros.skills.library import _motion_span
+    from etdmp_ros.skills.recorded import _motion_span
     t, positions = hand_stir([0.75, -0.2, 0.3], [0.7, -0.3, 0.2])
     positions = positions + np.random.default_rng(0).normal(0.0, 2e-5, positions.shape)
     first, last = _motion_span(positions)

@@ -1,5 +1,5 @@
 """
-Kinesthetic teaching in the simulation (issue 16): the scripted hand and the stir it makes.
+Kinesthetic teaching in the simulation: the scripted hand and the stir it makes.
 
 :class:`etdmp_ros.robot.GuidedMotion` leads the MuJoCo UR10's tool along a script as a hand in
 freedrive would; :func:`etdmp_ros.demo.kinesthetic.hand_stir` is the default script. Checked

@@ -302,7 +302,7 @@ def test_a_followed_plan_moves_its_goal_without_a_jump():
     np.testing.assert_array_equal(followed.positions, before)
 
 
-# -- orientation ---------------------------------------------------------------------------------
+# -- orientation ----------------------------------------------------------------------
 
 @pytest.fixture(scope='module')
 def stir_skill():

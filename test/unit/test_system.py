@@ -313,7 +313,7 @@ def test_a_signal_during_start_up_is_not_lost(ros_env):
     assert done.returncode == 0, done.stderr
 
 
-# ------------------------------------------------------------- a part of the system (issue 23)
+# ------------------------------------------------------------- a part of the system
 
 
 def test_hosts_place_every_node_once_the_controller_beside_the_robot():

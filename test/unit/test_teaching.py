@@ -203,7 +203,7 @@ def test_the_generalizations_are_the_paper_s_fig5_for_the_drawing():
     assert min(by_quadrant[q]['dmp']['nrmse'] for q in ('II', 'IV')) > 0.3
 
 
-#: Strokes drawn with the pen lifted while it still moves (issue 24), in canvas pixels: the Z
+#: Strokes drawn with the pen lifted while it still moves, in canvas pixels: the Z
 #: lifted half way along its last part, a circle and a spiral drawn at speed to the end.
 _CIRCLE = np.linspace(0.0, 1.8 * math.pi, 90)
 _SPIRAL = np.linspace(0.0, 4.0 * math.pi, 150) ** 1.3

@@ -20,7 +20,8 @@ from etdmp_ros.geometry.camera import CameraIntrinsics
 from etdmp_ros.perception import (check_frame, Detections, Detector, detector_from_parameters,
                                   DetectorSettings, FrameSynchronizer, HsvRange, ObjectModel,
                                   Rejection)
-from etdmp_ros.perception._vision import check_intrinsics, fit_circle
+from etdmp_ros.perception._circle import fit_circle
+from etdmp_ros.perception._frames import check_intrinsics
 from etdmp_ros.ros.config_files import read_node_parameters
 from etdmp_ros.ros.system import scene_config
 from etdmp_ros.sim import UR10Sim
@@ -680,7 +681,7 @@ def test_frame_synchronizer():
         FrameSynchronizer((), 0)
 
 
-# ----------------------------------------------------------------- the bottle (issue 14, stir)
+# ----------------------------------------------------------------- the bottle (stir)
 
 
 def test_the_bottle_is_located_within_2_mm_moved_and_with_the_stirrer_in_it(sim, detector):

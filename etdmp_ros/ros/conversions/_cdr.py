@@ -13,13 +13,20 @@ writes it: each primitive aligned to its size relative to the start of the paylo
 encapsulation header); the image reader (:func:`image_from_cdr`) is built on it.
 """
 
+from __future__ import annotations
+
 import importlib
 import struct
+from typing import Any
 
+from etdmp_ros.geometry.arrays import Array as FloatArray
 import numpy as np
 
+#: Serialized message bytes (rclpy gives bytes; views of them are read too).
+Bytes = bytes | bytearray | memoryview
 
-def message_class(type_name):
+
+def message_class(type_name: str) -> type:
     """
     Return the Python class of a ROS message type name (``pkg/msg/Name`` or ``pkg/Name``).
 
@@ -35,12 +42,12 @@ def message_class(type_name):
         raise ValueError(f'{type_name} is not installed here') from None
 
 
-def header_stamp_ns(data):
+def header_stamp_ns(data: Bytes) -> int:
     """Return the header stamp (integer ns) of a serialized message that starts with a Header."""
     if len(data) < 12 or data[0] != 0 or data[1] not in (0, 1):
         raise ValueError('not a CDR-encoded message with a header')
     sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
-    return sec * 1_000_000_000 + nanosec
+    return int(sec * 1_000_000_000 + nanosec)
 
 
 class CdrReader:
@@ -51,7 +58,7 @@ class CdrReader:
     bytes that are not CDR or end too early.
     """
 
-    def __init__(self, data):
+    def __init__(self, data: Bytes) -> None:
         """Check the encapsulation header; position the reader at the payload's first byte."""
         if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
             raise ValueError('not a CDR-encoded message (bad encapsulation header)')
@@ -59,7 +66,7 @@ class CdrReader:
         self.order = '<' if data[1] == 1 else '>'
         self.offset = 0
 
-    def _unpack(self, fmt, size):
+    def _unpack(self, fmt: str, size: int) -> Any:
         self.offset += -self.offset % size
         try:
             (value,) = struct.unpack_from(self.order + fmt, self.data, 4 + self.offset)
@@ -68,19 +75,19 @@ class CdrReader:
         self.offset += size
         return value
 
-    def int32(self):
+    def int32(self) -> int:
         """Return the next int32."""
         return self._unpack('i', 4)
 
-    def uint32(self):
+    def uint32(self) -> int:
         """Return the next uint32."""
         return self._unpack('I', 4)
 
-    def uint8(self):
+    def uint8(self) -> int:
         """Return the next uint8."""
         return self._unpack('B', 1)
 
-    def string(self):
+    def string(self) -> str:
         """Return the next string: uint32 length (with the NUL), the bytes, the NUL."""
         length = self.uint32()
         start = 4 + self.offset
@@ -89,7 +96,7 @@ class CdrReader:
         self.offset += length
         return bytes(self.data[start:start + length - 1]).decode('utf-8', errors='replace')
 
-    def byte_sequence(self):
+    def byte_sequence(self) -> memoryview:
         """Return the next sequence<uint8> as a memoryview of the data (no copy)."""
         length = self.uint32()
         start = 4 + self.offset
@@ -98,7 +105,7 @@ class CdrReader:
         self.offset += length
         return memoryview(self.data)[start:start + length]
 
-    def float64_sequence(self, limit=None):
+    def float64_sequence(self, limit: int | None = None) -> FloatArray:
         """
         Return the next sequence<float64> as a numpy array (a copy, native byte order).
 

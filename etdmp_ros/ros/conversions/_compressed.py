@@ -8,12 +8,16 @@ subscription kept into the bytes of that message (header copied), without rclpy 
 :func:`compressed_image_from_cdr` decodes one back to numpy.
 """
 
+from __future__ import annotations
+
 import struct
+from typing import Any
 
 import cv2
 import numpy as np
+from numpy.typing import NDArray
 
-from ._cdr import CdrReader
+from ._cdr import Bytes, CdrReader
 from ._image import image_from_cdr
 
 #: The topic image_transport's compressed plugin publishes beside ``topic``.
@@ -21,7 +25,7 @@ COMPRESSED_SUFFIX = '/compressed'
 COMPRESSED_IMAGE_TYPE = 'sensor_msgs/msg/CompressedImage'
 
 
-def _header(data):
+def _header(data: Bytes) -> tuple[int, int, str, str]:
     """Return (sec, nanosec, frame_id, encoding) of a serialized Image."""
     reader = CdrReader(data)
     sec, nanosec, frame_id = reader.int32(), reader.uint32(), reader.string()
@@ -29,13 +33,14 @@ def _header(data):
     return sec, nanosec, frame_id, reader.string()
 
 
-def _string(out, text):
+def _string(out: bytearray, text: str) -> None:
     out += b'\x00' * (-(len(out) - 4) % 4)
     raw = text.encode() + b'\x00'
     out += struct.pack('<I', len(raw)) + raw
 
 
-def compressed_image_cdr(sec, nanosec, frame_id, image_format, payload):
+def compressed_image_cdr(sec: int, nanosec: int, frame_id: str, image_format: str,
+                         payload: Bytes) -> bytes:
     """Return the CDR bytes (little endian) of a sensor_msgs/CompressedImage."""
     out = bytearray(b'\x00\x01\x00\x00') + struct.pack('<iI', sec, nanosec)
     _string(out, frame_id)
@@ -45,7 +50,7 @@ def compressed_image_cdr(sec, nanosec, frame_id, image_format, payload):
     return bytes(out)
 
 
-def compress_image_cdr(data, jpeg_quality=90, png_level=1):
+def compress_image_cdr(data: Bytes, jpeg_quality: int = 90, png_level: int = 1) -> bytes:
     """
     Return the serialized CompressedImage of a serialized Image (``data``: its CDR bytes).
 
@@ -55,7 +60,7 @@ def compress_image_cdr(data, jpeg_quality=90, png_level=1):
     other encodings.
     """
     sec, nanosec, frame_id, encoding = _header(data)
-    pixels = image_from_cdr(data)
+    pixels: Any = image_from_cdr(data)
     if encoding in ('rgb8', 'bgr8', 'mono8'):
         if encoding == 'rgb8':
             pixels = cv2.cvtColor(np.ascontiguousarray(pixels), cv2.COLOR_RGB2BGR)
@@ -75,7 +80,7 @@ def compress_image_cdr(data, jpeg_quality=90, png_level=1):
     return compressed_image_cdr(sec, nanosec, frame_id, image_format, encoded.tobytes())
 
 
-def compressed_image_from_cdr(data):
+def compressed_image_from_cdr(data: Bytes) -> tuple[int, str, NDArray[Any]]:
     """
     Return (stamp ns, format, pixels) of a serialized CompressedImage.
 
@@ -87,7 +92,7 @@ def compressed_image_from_cdr(data):
     reader.string()                                          # frame_id
     image_format = reader.string()
     payload = np.frombuffer(reader.byte_sequence(), dtype=np.uint8)
-    pixels = cv2.imdecode(payload, cv2.IMREAD_UNCHANGED)
+    pixels: Any = cv2.imdecode(payload, cv2.IMREAD_UNCHANGED)
     if pixels is None:
         raise ValueError(f'could not decode a {image_format!r} compressed image')
     if image_format.split(';')[0].strip() == 'rgb8' and pixels.ndim == 3:

@@ -10,17 +10,23 @@ same from the serialized bytes a ``raw=True`` subscription hands over, without t
 (rclpy's deserialization of a 640x480 frame costs a millisecond and a copy).
 """
 
-import array
-import sys
+from __future__ import annotations
 
+import array
+from collections.abc import Collection
+import sys
+from typing import Any, cast
+
+from builtin_interfaces.msg import Time
 from etdmp_ros.geometry.camera import CameraIntrinsics
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from sensor_msgs.msg import CameraInfo, Image
 
-from ._cdr import CdrReader
+from ._cdr import Bytes, CdrReader
 
 # encoding -> (dtype, channels); the encodings a RealSense driver and OpenCV users exchange.
-ENCODINGS = {
+ENCODINGS: dict[str, tuple[type[np.generic], int]] = {
     'rgb8': (np.uint8, 3),
     'bgr8': (np.uint8, 3),
     'mono8': (np.uint8, 1),
@@ -31,7 +37,7 @@ ENCODINGS = {
 _BIG_ENDIAN_HOST = sys.byteorder == 'big'
 
 
-def _encoding(encoding):
+def _encoding(encoding: str) -> tuple[type[np.generic], int]:
     try:
         return ENCODINGS[encoding]
     except KeyError:
@@ -39,7 +45,8 @@ def _encoding(encoding):
                          f'{", ".join(ENCODINGS)}') from None
 
 
-def image_msg(image, encoding, stamp=None, frame_id=''):
+def image_msg(image: ArrayLike, encoding: str, stamp: Time | None = None, frame_id: str = ''
+              ) -> Image:
     """
     Return a sensor_msgs/Image holding ``image`` (H, W) or (H, W, C) in ``encoding``.
 
@@ -48,30 +55,31 @@ def image_msg(image, encoding, stamp=None, frame_id=''):
     converted silently. ``stamp``: a builtin_interfaces/Time. Raises ValueError.
     """
     dtype, channels = _encoding(encoding)
-    image = np.asarray(image)
-    if image.dtype != dtype:
-        raise ValueError(f'{encoding} needs dtype {np.dtype(dtype).name}, got {image.dtype}')
-    shape_ok = (image.ndim == 3 and image.shape[2] == channels) if channels > 1 else \
-        (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 1))
-    if not shape_ok or image.shape[0] < 1 or image.shape[1] < 1:
+    pixels = np.asarray(image)
+    if pixels.dtype != dtype:
+        raise ValueError(f'{encoding} needs dtype {np.dtype(dtype).name}, got {pixels.dtype}')
+    shape_ok = (pixels.ndim == 3 and pixels.shape[2] == channels) if channels > 1 else \
+        (pixels.ndim == 2 or (pixels.ndim == 3 and pixels.shape[2] == 1))
+    if not shape_ok or pixels.shape[0] < 1 or pixels.shape[1] < 1:
         expected = f'(H, W, {channels})' if channels > 1 else '(H, W)'
-        raise ValueError(f'{encoding} needs an image of shape {expected}, got {image.shape}')
-    image = np.ascontiguousarray(image)
+        raise ValueError(f'{encoding} needs an image of shape {expected}, got {pixels.shape}')
+    pixels = np.ascontiguousarray(pixels)
     msg = Image()
     if stamp is not None:
         msg.header.stamp = stamp
     msg.header.frame_id = frame_id
-    msg.height, msg.width = int(image.shape[0]), int(image.shape[1])
+    msg.height, msg.width = int(pixels.shape[0]), int(pixels.shape[1])
     msg.encoding = encoding
-    msg.is_bigendian = int(_BIG_ENDIAN_HOST and image.dtype.itemsize > 1)
-    msg.step = msg.width * channels * image.dtype.itemsize
+    msg.is_bigendian = int(_BIG_ENDIAN_HOST and pixels.dtype.itemsize > 1)
+    msg.step = msg.width * channels * pixels.dtype.itemsize
     data = array.array('B')
-    data.frombytes(image.reshape(-1).view(np.uint8))
+    # numpy declares no buffer protocol (__buffer__) to type checkers before Python 3.12.
+    data.frombytes(cast(Any, pixels.reshape(-1).view(np.uint8)))
     msg.data = data
     return msg
 
 
-def image_from_msg(msg):
+def image_from_msg(msg: Image) -> NDArray[Any]:
     """
     Return the pixels of a sensor_msgs/Image as numpy (H, W) or (H, W, C) (see ENCODINGS).
 
@@ -83,7 +91,7 @@ def image_from_msg(msg):
                    bool(msg.is_bigendian), msg.data)
 
 
-def camera_image_from_msg(msg, encodings):
+def camera_image_from_msg(msg: Image, encodings: Collection[str]) -> NDArray[Any]:
     """
     Return the pixels of an Image from a camera driver, as :func:`image_from_msg` does.
 
@@ -103,7 +111,7 @@ def camera_image_from_msg(msg, encodings):
     return image_from_msg(msg)
 
 
-def image_from_cdr(data):
+def image_from_cdr(data: Bytes) -> NDArray[Any]:
     """
     Return the pixels of a serialized sensor_msgs/Image, as :func:`image_from_msg` would.
 
@@ -120,9 +128,10 @@ def image_from_cdr(data):
     return _pixels(encoding, height, width, step, bigendian, reader.byte_sequence())
 
 
-def _pixels(encoding, height, width, step, bigendian, data):
-    dtype, channels = _encoding(encoding)
-    dtype = np.dtype(dtype)
+def _pixels(encoding: str, height: int, width: int, step: int, bigendian: bool,
+            data: Bytes | array.array[int]) -> NDArray[Any]:
+    kind, channels = _encoding(encoding)
+    dtype = np.dtype(kind)
     row_bytes = width * channels * dtype.itemsize
     if height < 1 or width < 1:
         raise ValueError(f'empty image: {width}x{height}')
@@ -143,7 +152,8 @@ def _pixels(encoding, height, width, step, bigendian, data):
     return pixels.reshape(height, width, channels) if channels > 1 else pixels
 
 
-def camera_info_msg(intrinsics, stamp=None, frame_id=''):
+def camera_info_msg(intrinsics: CameraIntrinsics, stamp: Time | None = None,
+                    frame_id: str = '') -> CameraInfo:
     """Return the sensor_msgs/CameraInfo of an undistorted pinhole :class:`CameraIntrinsics`."""
     msg = CameraInfo()
     if stamp is not None:
@@ -158,14 +168,14 @@ def camera_info_msg(intrinsics, stamp=None, frame_id=''):
     return msg
 
 
-def intrinsics_from_camera_info(msg):
+def intrinsics_from_camera_info(msg: CameraInfo) -> CameraIntrinsics:
     """
     Return the :class:`CameraIntrinsics` of a sensor_msgs/CameraInfo (from K and the size).
 
     Raises ValueError if K is not a pinhole camera matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0,
     1]]`` (finite, fx and fy positive, no skew: nothing here would apply one) or distortion is
     non-zero (the images would need undistorting first). Whether the values are plausible for
-    the camera is the caller's check (:func:`etdmp_ros.perception._vision.check_intrinsics`).
+    the camera is the caller's check (:func:`etdmp_ros.perception._frames.check_intrinsics`).
     """
     k = np.asarray(msg.k, dtype=float).reshape(-1)
     if k.size != 9 or not np.all(np.isfinite(k)) or k[0] <= 0 or k[4] <= 0 or \

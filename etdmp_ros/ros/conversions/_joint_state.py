@@ -6,24 +6,35 @@ UR order); commands are positional, in UR joint order (``JOINT_NAMES``), as the 
 driver's ``forward_velocity_controller`` expects.
 """
 
-import array
+from __future__ import annotations
 
+import array
+from collections.abc import Sequence, Sized
+from typing import Any, cast
+
+from builtin_interfaces.msg import Time
+from etdmp_ros.geometry.arrays import Array as FloatArray
 from etdmp_ros.limits import MAX_JOINT_STATE_JOINTS
 from etdmp_ros.robot import JOINT_NAMES
 import numpy as np
+from numpy.typing import ArrayLike
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from ._cdr import CdrReader
+from ._cdr import Bytes, CdrReader
 
 
-def _doubles(values):
+def _doubles(values: ArrayLike) -> array.array[float]:
     data = array.array('d')
-    data.frombytes(np.ascontiguousarray(values, dtype=np.float64).reshape(-1).view(np.uint8))
+    # numpy declares no buffer protocol (__buffer__) to type checkers before Python 3.12.
+    data.frombytes(cast(Any, np.ascontiguousarray(values, dtype=np.float64).reshape(-1)
+                        .view(np.uint8)))
     return data
 
 
-def joint_state_msg(positions, velocities=None, efforts=None, names=JOINT_NAMES, stamp=None):
+def joint_state_msg(positions: ArrayLike, velocities: ArrayLike | None = None,
+                    efforts: ArrayLike | None = None, names: Sequence[str] = JOINT_NAMES,
+                    stamp: Time | None = None) -> JointState:
     """
     Return a sensor_msgs/JointState for ``names`` (default: the UR10's, in UR order).
 
@@ -41,13 +52,13 @@ def joint_state_msg(positions, velocities=None, efforts=None, names=JOINT_NAMES,
     return msg
 
 
-def _check_lengths(n, position, velocity):
+def _check_lengths(n: int, position: Sized, velocity: Sized) -> None:
     if len(position) != n or len(velocity) not in (0, n):
         raise ValueError(f'joint state has {n} names, {len(position)} positions and '
                          f'{len(velocity)} velocities')
 
 
-def _order(joint_names, names):
+def _order(joint_names: Sequence[str], names: Sequence[str]) -> list[int]:
     """Return the indices of ``names`` in a joint state's ``joint_names``; ValueError if absent."""
     index = {name: i for i, name in enumerate(joint_names)}
     missing = [name for name in names if name not in index]
@@ -57,7 +68,8 @@ def _order(joint_names, names):
     return [index[name] for name in names]
 
 
-def _picked(position, velocity, order):
+def _picked(position: ArrayLike, velocity: Sequence[float] | FloatArray, order: list[int]
+            ) -> tuple[FloatArray, FloatArray | None]:
     positions = np.asarray(position, dtype=float)[order]
     velocities = np.asarray(velocity, dtype=float)[order] if len(velocity) else None
     if not np.all(np.isfinite(positions)) or \
@@ -66,7 +78,8 @@ def _picked(position, velocity, order):
     return positions, velocities
 
 
-def joint_state_arrays(msg, names=JOINT_NAMES):
+def joint_state_arrays(msg: JointState, names: Sequence[str] = JOINT_NAMES
+                       ) -> tuple[FloatArray, FloatArray | None]:
     """
     Return ``(positions, velocities)`` of ``names`` from a JointState, reordered to ``names``.
 
@@ -77,7 +90,8 @@ def joint_state_arrays(msg, names=JOINT_NAMES):
     return _picked(msg.position, msg.velocity, _order(msg.name, names))
 
 
-def joint_state_from_cdr(data, names=JOINT_NAMES):
+def joint_state_from_cdr(data: Bytes, names: Sequence[str] = JOINT_NAMES
+                         ) -> tuple[int, FloatArray, FloatArray | None]:
     """
     Return ``(stamp_ns, positions, velocities)`` of ``names`` from a serialized JointState.
 
@@ -101,14 +115,15 @@ def joint_state_from_cdr(data, names=JOINT_NAMES):
     return sec * 1_000_000_000 + nanosec, positions, velocities
 
 
-def velocity_command_msg(velocities):
+def velocity_command_msg(velocities: ArrayLike) -> Float64MultiArray:
     """Return the Float64MultiArray command of joint velocities (rad/s, UR joint order)."""
     msg = Float64MultiArray()
     msg.data = _doubles(velocities)
     return msg
 
 
-def velocity_command_array(msg, size=len(JOINT_NAMES)):
+def velocity_command_array(msg: Float64MultiArray, size: int = len(JOINT_NAMES)
+                           ) -> FloatArray:
     """Return the velocities (size,) of a Float64MultiArray command; ValueError if malformed."""
     data = np.asarray(msg.data, dtype=float)
     if data.shape != (size,):

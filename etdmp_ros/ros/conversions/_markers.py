@@ -18,7 +18,15 @@ disappears from the display, and carries everything in standard fields:
   3.2``); an empty array (the DELETEALL alone) says there is none.
 """
 
+from __future__ import annotations
+
+from collections.abc import Collection, Iterable
+from typing import Any
+
+from builtin_interfaces.msg import Time
+from etdmp_ros.geometry.arrays import Array as FloatArray
 import numpy as np
+from numpy.typing import ArrayLike
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -32,30 +40,31 @@ CONTACT_COLOR = ColorRGBA(r=1.0, g=0.0, b=1.0, a=1.0)
 CONTACT_SIZE = 0.01
 
 
-def _header(marker, stamp, frame_id):
+def _header(marker: Marker, stamp: Time | int, frame_id: str) -> None:
     marker.header.stamp = stamp if not isinstance(stamp, int) else ns_to_stamp(stamp)
     marker.header.frame_id = frame_id
 
 
-def _delete_all(stamp, frame_id, ns):
+def _delete_all(stamp: Time | int, frame_id: str, ns: str) -> Marker:
     marker = Marker(ns=ns, action=Marker.DELETEALL)
     _header(marker, stamp, frame_id)
     return marker
 
 
-def cylinder_markers(tops, radii, stamp, frame_id='base_link'):
+def cylinder_markers(tops: ArrayLike, radii: ArrayLike, stamp: Time | int,
+                     frame_id: str = 'base_link') -> MarkerArray:
     """
     Return the MarkerArray of upright cylinders standing on z = 0 (obstacle volumes).
 
     ``tops`` (n, 3): the centre of each top face (its z is the height); ``radii`` (n,) in m;
     ``stamp``: a builtin_interfaces Time or integer nanoseconds.
     """
-    tops = np.asarray(tops, dtype=float).reshape(-1, 3)
-    radii = np.asarray(radii, dtype=float).reshape(-1)
-    if len(radii) != len(tops):
-        raise ValueError(f'{len(tops)} cylinders but {len(radii)} radii')
+    points = np.asarray(tops, dtype=float).reshape(-1, 3)
+    sizes = np.asarray(radii, dtype=float).reshape(-1)
+    if len(sizes) != len(points):
+        raise ValueError(f'{len(points)} cylinders but {len(sizes)} radii')
     markers = [_delete_all(stamp, frame_id, OBSTACLES_NS)]
-    for i, (top, radius) in enumerate(zip(tops, radii)):
+    for i, (top, radius) in enumerate(zip(points, sizes)):
         marker = Marker(ns=OBSTACLES_NS, id=i, type=Marker.CYLINDER, action=Marker.ADD)
         _header(marker, stamp, frame_id)
         height = max(float(top[2]), 0.0)
@@ -69,7 +78,8 @@ def cylinder_markers(tops, radii, stamp, frame_id='base_link'):
     return MarkerArray(markers=markers)
 
 
-def cylinders_from_markers(msg, frame_ids=('', 'base_link')):
+def cylinders_from_markers(msg: MarkerArray, frame_ids: Collection[str] = ('', 'base_link')
+                           ) -> tuple[FloatArray, FloatArray]:
     """
     Return ``(tops (n, 3), radii (n,))`` of the CYLINDER markers ADDed in a MarkerArray.
 
@@ -77,7 +87,8 @@ def cylinders_from_markers(msg, frame_ids=('', 'base_link')):
     not in ``frame_ids``, a rotated or non-circular cylinder, or values that are not finite and
     positive where they must be.
     """
-    tops, radii = [], []
+    tops: list[tuple[float, float, float]] = []
+    radii: list[float] = []
     for marker in msg.markers:
         if marker.type != Marker.CYLINDER or marker.action != Marker.ADD:
             continue
@@ -99,7 +110,8 @@ def cylinders_from_markers(msg, frame_ids=('', 'base_link')):
     return np.array(tops, dtype=float).reshape(-1, 3), np.array(radii, dtype=float)
 
 
-def contact_markers(contacts, stamp, frame_id='base_link'):
+def contact_markers(contacts: Iterable[Any], stamp: Time | int, frame_id: str = 'base_link'
+                    ) -> MarkerArray:
     """
     Return the MarkerArray of contacts (:class:`etdmp_ros.sim.Contact` or alike).
 
@@ -120,9 +132,9 @@ def contact_markers(contacts, stamp, frame_id='base_link'):
     return MarkerArray(markers=markers)
 
 
-def contacts_from_markers(msg):
+def contacts_from_markers(msg: MarkerArray) -> list[tuple[str, str, float]]:
     """Return the contacts of :func:`contact_markers`' array: [(part, item, depth m)]."""
-    found = []
+    found: list[tuple[str, str, float]] = []
     for marker in msg.markers:
         if marker.ns != CONTACTS_NS or marker.action != Marker.ADD:
             continue

@@ -13,14 +13,22 @@ relative to the start of the payload: Path = Header (int32 sec, uint32 nanosec, 
 + uint32 count + count * PoseStamped (Header, 3 float64 position, 4 float64 orientation).
 """
 
+from __future__ import annotations
+
 import struct
 
+from etdmp_ros.geometry.arrays import Array as FloatArray
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._cdr import Bytes
 
 _NS = 1_000_000_000
+#: Poses read from a Path: stamps (n,) ns, positions (n, 3), quaternions (n, 4).
+Poses = tuple[NDArray[np.int64], FloatArray, FloatArray]
 
 
-def _string(data, offset, order):
+def _string(data: Bytes, offset: int, order: str) -> tuple[str, int]:
     """Return (text, offset after it) of a CDR string at ``offset`` (payload-relative)."""
     offset += -offset % 4
     (length,) = struct.unpack_from(order + 'I', data, 4 + offset)
@@ -30,7 +38,7 @@ def _string(data, offset, order):
     return raw.decode('utf-8', errors='replace'), offset + 4 + length
 
 
-def path_from_cdr(data, max_poses=None):
+def path_from_cdr(data: Bytes, max_poses: int | None = None) -> tuple[str, set[str], *Poses]:
     """
     Return ``(frame_id, pose_frame_ids, stamps, positions, quaternions)`` of a serialized Path.
 
@@ -66,7 +74,7 @@ def path_from_cdr(data, max_poses=None):
         raise ValueError(f'truncated serialized Path: {exc}') from None
 
 
-def _record_dtype(start, size, order):
+def _record_dtype(start: int, size: int, order: str) -> np.dtype[np.void]:
     """Record layout of one PoseStamped starting at payload offset ``start``."""
     head = start + 12 + size
     doubles = head + (-head % 8)
@@ -77,7 +85,7 @@ def _record_dtype(start, size, order):
                      'itemsize': doubles - start + 56})
 
 
-def _uniform(data, offset, count, order, frame):
+def _uniform(data: Bytes, offset: int, count: int, order: str, frame: str) -> Poses | None:
     """Read all poses with one record layout if they share ``frame``; else return None."""
     size = len(frame.encode('utf-8')) + 1
     first = _record_dtype(offset, size, order)
@@ -101,11 +109,11 @@ def _uniform(data, offset, count, order, frame):
     return sec * _NS + nanosec, pose[:, :3].copy(), pose[:, 3:].copy()
 
 
-def _loop(data, offset, count, order):
+def _loop(data: Bytes, offset: int, count: int, order: str) -> tuple[set[str], *Poses]:
     """Read the poses one by one (frame ids of different lengths)."""
     stamps = np.empty(count, dtype=np.int64)
     pose = np.empty((count, 7))
-    frames = set()
+    frames: set[str] = set()
     sec_fmt, doubles = order + 'iI', order + '7d'
     for i in range(count):
         offset += -offset % 4
@@ -119,7 +127,8 @@ def _loop(data, offset, count, order):
     return frames, stamps, pose[:, :3].copy(), pose[:, 3:].copy()
 
 
-def path_to_cdr(header_ns, pose_ns, positions, quaternions, frame_id='base_link'):
+def path_to_cdr(header_ns: int, pose_ns: ArrayLike, positions: ArrayLike, quaternions: ArrayLike,
+                frame_id: str = 'base_link') -> bytes:
     """
     Return the serialized CDR bytes (little endian) of a nav_msgs/Path, built with numpy.
 
@@ -130,10 +139,10 @@ def path_to_cdr(header_ns, pose_ns, positions, quaternions, frame_id='base_link'
     leaves unset), in about 0.2 ms for 400 poses instead of 8 ms; a Publisher of nav_msgs/Path
     publishes the bytes as they are.
     """
-    pose_ns = np.asarray(pose_ns, dtype=np.int64)
-    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
-    n = len(positions)
-    quaternions = np.broadcast_to(np.asarray(quaternions, dtype=float), (n, 4))
+    stamps = np.asarray(pose_ns, dtype=np.int64)
+    points = np.asarray(positions, dtype=float).reshape(-1, 3)
+    n = len(points)
+    rotations = np.broadcast_to(np.asarray(quaternions, dtype=float), (n, 4))
     frame = frame_id.encode('utf-8')
     size = len(frame) + 1
     out = bytearray(b'\x00\x01\x00\x00')
@@ -148,8 +157,8 @@ def path_to_cdr(header_ns, pose_ns, positions, quaternions, frame_id='base_link'
     first = _record_dtype(offset, size, '<')
     rest = _record_dtype(offset + first.itemsize, size, '<')
     records = [np.zeros(1, dtype=first), np.zeros(n - 1, dtype=rest)]
-    sec, nanosec = np.divmod(pose_ns, _NS)
-    pose = np.hstack([positions, quaternions])
+    sec, nanosec = np.divmod(stamps, _NS)
+    pose = np.hstack([points, rotations])
     for part, rows in zip(records, (slice(0, 1), slice(1, n))):
         part['sec'], part['nanosec'] = sec[rows], nanosec[rows]
         part['length'], part['frame'] = size, frame

@@ -5,12 +5,18 @@ tf2_msgs/TFMessage of :class:`etdmp_ros.robot.Transform` lists (what a tf broadc
 so an install may lack it; ur10_sim then publishes no /tf).
 """
 
-import struct
+from __future__ import annotations
 
+from collections.abc import Iterable
+import struct
+from typing import Any
+
+from builtin_interfaces.msg import Time
+from etdmp_ros.geometry.arrays import Array as FloatArray
 from geometry_msgs.msg import TransformStamped
 
 
-def tf_available():
+def tf_available() -> bool:
     """Return whether tf2_msgs can be imported."""
     try:
         import tf2_msgs.msg  # noqa: F401
@@ -19,7 +25,8 @@ def tf_available():
     return True
 
 
-def _transform_msg(parent, child, translation, quaternion, stamp):
+def _transform_msg(parent: str, child: str, translation: Iterable[float],
+                   quaternion: Iterable[float], stamp: Time | None) -> TransformStamped:
     msg = TransformStamped()
     if stamp is not None:
         msg.header.stamp = stamp
@@ -32,7 +39,7 @@ def _transform_msg(parent, child, translation, quaternion, stamp):
     return msg
 
 
-def tf_message(transforms, stamp):
+def tf_message(transforms: Iterable[Any], stamp: Time | None) -> Any:
     """Return a TFMessage of ``transforms`` (:class:`Transform` list), all stamped ``stamp``."""
     from tf2_msgs.msg import TFMessage
     return TFMessage(transforms=[_transform_msg(t.parent, t.child, t.translation, t.quaternion,
@@ -52,7 +59,8 @@ class MovingTransforms:
     these bytes and compares them with it, field for field.
     """
 
-    def __init__(self, parents, children, translations):
+    def __init__(self, parents: Iterable[str], children: Iterable[str],
+                 translations: Iterable[Iterable[float]]) -> None:
         """Serialize the message once and find where each stamp and rotation lies in it."""
         from rclpy.serialization import serialize_message
         transforms = [_Fixed(p, c, t) for p, c, t in zip(parents, children, translations)]
@@ -64,7 +72,7 @@ class MovingTransforms:
         data = serialize_message(msg)
         if data[:2] != b'\x00\x01':
             raise RuntimeError('TFMessage is not serialized as little-endian CDR')
-        self._offsets = []
+        self._offsets: list[tuple[int, int]] = []
         for i in range(len(transforms)):
             stamp = _find(data, struct.pack('<iI', _SEC_MARK + i, _NSEC_MARK + i))
             marks = (_ROTATION_MARK + 4 * i + k for k in range(4))
@@ -75,7 +83,7 @@ class MovingTransforms:
         if len(self._buffer) != len(data):
             raise RuntimeError('the serialized TFMessage changed size with its values')
 
-    def update(self, quaternions, sec, nanosec):
+    def update(self, quaternions: FloatArray, sec: int, nanosec: int) -> bytes:
         """Return the message's bytes with rotations ``quaternions`` (n, 4) and the stamp."""
         buffer = self._buffer
         for (stamp, rotation), q in zip(self._offsets, quaternions.tolist()):
@@ -89,7 +97,7 @@ _ROTATION = struct.Struct('<4d')
 _SEC_MARK, _NSEC_MARK, _ROTATION_MARK = 0x5EC0000, 0x2EC0000, 1234.56789
 
 
-def _find(data, marker):
+def _find(data: bytes, marker: bytes) -> int:
     """Return the one offset of ``marker`` in ``data``; RuntimeError if not exactly one."""
     offset = data.find(marker)
     if offset < 0 or data.find(marker, offset + 1) >= 0:
@@ -100,6 +108,7 @@ def _find(data, marker):
 class _Fixed:
     """A transform without rotation yet (for :class:`MovingTransforms`)."""
 
-    def __init__(self, parent, child, translation):
+    def __init__(self, parent: str, child: str, translation: Iterable[float]) -> None:
+        """Keep the frames and the translation; the rotation is the identity."""
         self.parent, self.child, self.translation = parent, child, translation
         self.quaternion = (0.0, 0.0, 0.0, 1.0)
