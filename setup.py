@@ -15,8 +15,10 @@ setup(
     # The built-in demonstrations ship inside the Python package and are read with
     # importlib.resources, so they work from a source tree, a venv and a colcon install.
     package_data={'etdmp_ros.dmp': ['data/*.csv'],
-                  # The teaching page (etdmp_ros/nodes/teach.py serves it).
-                  'etdmp_ros': ['teach_page/*.html', 'teach_page/*.js', 'teach_page/*.css']},
+                  # The teaching page (etdmp_ros/nodes/teach.py serves it); py.typed: the
+                  # package's annotations serve type checkers of code that uses it (PEP 561).
+                  'etdmp_ros': ['teach_page/*.html', 'teach_page/*.js', 'teach_page/*.css',
+                                'py.typed']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         (os.path.join('share', package_name), ['package.xml']),

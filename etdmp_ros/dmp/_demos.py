@@ -207,8 +207,8 @@ def _format_csv(demo: Demonstration, precision: int | None) -> str:
     out = io.StringIO()
     quaternions = list(ORIENTATION_COLUMNS) if demo.has_orientation else []
     out.write(','.join(['t'] + _column_names(demo.dim) + quaternions) + '\n')
-    rows = demo.positions if not quaternions else np.hstack(
-        [demo.positions, demo.orientations])  # type: ignore[list-item]
+    q = demo.orientations
+    rows = demo.positions if q is None else np.hstack([demo.positions, q])
     for t, row in zip(demo.t, rows):
         out.write(','.join(_format_number(v, precision) for v in (t, *row)) + '\n')
     return out.getvalue()

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
 from numpy.typing import ArrayLike
 
 #: A point (x, y).
-Point = Sequence[float] | FloatArray
+Point = Sequence[float] | Array
 
 
 def fit_circle_and_radius(points: ArrayLike, start: Point, radius: float, iterations: int = 30
-                          ) -> tuple[FloatArray, float, float]:
+                          ) -> tuple[Array, float, float]:
     """
     Return (centre (2,), radius, rms) of the circle fitted to points (N, 2), radius free.
 
@@ -52,7 +52,7 @@ def rim_arc(points: ArrayLike, centre: ArrayLike) -> float:
 
 
 def fit_circle(points: ArrayLike, radius: float, start: Point, iterations: int = 20
-               ) -> tuple[FloatArray, float]:
+               ) -> tuple[Array, float]:
     """
     Return (centre (2,), rms) of the circle of given radius fitted to points (N, 2).
 

@@ -12,7 +12,7 @@ import math
 from typing import Any
 
 import cv2
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
 from numpy.typing import NDArray
 
@@ -178,7 +178,7 @@ class Detection:
     """
 
     kind: str
-    position: FloatArray
+    position: Array
     pixel: tuple[float, float]
     area: int
     bbox: Box
@@ -210,12 +210,12 @@ class Detections:
     rejected: list[Rejection] = field(default_factory=list)
     bottle: Detection | None = None
 
-    def obstacle_positions(self) -> FloatArray:
+    def obstacle_positions(self) -> Array:
         """Return the obstacle points (N, 3) in base_link (N may be 0)."""
         if not self.obstacles:
             return np.zeros((0, 3))
         return np.array([d.position for d in self.obstacles])
 
-    def obstacle_radii(self) -> FloatArray:
+    def obstacle_radii(self) -> Array:
         """Return the obstacles' radii (N,) in metres, in the order of obstacle_positions."""
         return np.array([d.radius for d in self.obstacles], dtype=float)

@@ -71,7 +71,7 @@ from typing import Any
 
 import cv2
 from etdmp_ros import limits
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
 from etdmp_ros.perception._circle import fit_circle, fit_circle_and_radius, rim_arc
 from etdmp_ros.perception._frames import check_frame
@@ -256,8 +256,8 @@ class Detector:
                     f'depth (at most {most:.0f} px)')
         return ''
 
-    def _implausible_position(self, model: ObjectModel, points: FloatArray,
-                              position: FloatArray, single: bool, radius: float) -> str:
+    def _implausible_position(self, model: ObjectModel, points: Array,
+                              position: Array, single: bool, radius: float) -> str:
         """
         Return why a located object does not fit the workcell, or ''.
 
@@ -380,8 +380,8 @@ class Detector:
                          bbox, median, float(np.count_nonzero(valid)) / area, rim_count,
                          rim_rms, single, radius, measured)
 
-    def _fit_rim(self, model: ObjectModel, rim: FloatArray, inside: FloatArray
-                 ) -> tuple[FloatArray, FloatArray, float, float, bool]:
+    def _fit_rim(self, model: ObjectModel, rim: Array, inside: Array
+                 ) -> tuple[Array, Array, float, float, bool]:
         """
         Return (rim points kept, centre (2,), radius, rms, radius measured) of a blob's rim.
 
@@ -394,8 +394,8 @@ class Detector:
         s = self.settings
         free = model.radius_range is not None
 
-        def fit(points: FloatArray, start: FloatArray, radius: float
-                ) -> tuple[FloatArray, float, float]:
+        def fit(points: Array, start: Array, radius: float
+                ) -> tuple[Array, float, float]:
             """Return (centre, radius, rms); the class's radius unless it is measured."""
             if free:
                 centre, radius, rms = fit_circle_and_radius(points, start, radius)
@@ -419,7 +419,7 @@ class Detector:
 
     def _rim_points(self, model: ObjectModel, blob: NDArray[np.bool_], depth: NDArray[np.uint16],
                     origin: tuple[int, int], median: float, z_top: float,
-                    intrinsics: CameraIntrinsics) -> FloatArray:
+                    intrinsics: CameraIntrinsics) -> Array:
         """Return the blob's real outline points (N, 2): x, y in base_link, see module doc."""
         s = self.settings
         blob8 = blob.view(np.uint8)
@@ -471,10 +471,10 @@ class Detector:
         points[on_top] = self._position + edge_rays[on_top] * t[on_top, None]
         return points[has_depth | on_top, :2]
 
-    def _to_base(self, points_cam: FloatArray) -> FloatArray:
+    def _to_base(self, points_cam: Array) -> Array:
         return points_cam @ self._rotation.T + self._position
 
-    def _to_base_directions(self, vectors_cam: FloatArray) -> FloatArray:
+    def _to_base_directions(self, vectors_cam: Array) -> Array:
         return vectors_cam @ self._rotation.T
 
     def annotate(self, rgb: ArrayLike, detections: Detections, intrinsics: CameraIntrinsics,

@@ -104,7 +104,7 @@ DMP_SERVER = (
     P('obstacle_clearance', _PLAN.obstacle_clearance, "Safety margin added to each obstacle's "
       "radius and the tool's: the gap a plan keeps between the tool's surface and an "
       "obstacle's.", unit='m', value_range=(0.0, 0.5), **_RUNTIME,
-      note="Safety margin between the tool's surface and an obstacle's: 5 mm wanted (issue 25) "
+      note="Safety margin between the tool's surface and an obstacle's: 5 mm wanted "
       '+ 3 mm for what is not exact: the measured radius and centre (under 1 mm), the '
       "controller's tracking (under 0.5 mm) and the plan's sampling."),
     P('goal_clearance', _PLAN.goal_clearance, 'A request with an obstacle closer than this to '

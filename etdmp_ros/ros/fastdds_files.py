@@ -298,7 +298,7 @@ def _stale_port(directory, number, files, unmapped):
     return None
 
 
-_SEMAPHORES = []
+_SEMAPHORES: list['_Semaphores'] = []
 
 
 def _semaphores():

@@ -59,7 +59,7 @@ from dataclasses import dataclass
 import math
 from typing import Any
 
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 from etdmp_ros.geometry.camera import CameraIntrinsics
 from etdmp_ros.robot._scene import (obstacle_radii_for, parse_bottle_position,
                                     parse_goal_position, parse_obstacle_positions,
@@ -87,11 +87,11 @@ class CameraState:
     """
 
     time: float
-    qpos: FloatArray
-    mocap_pos: FloatArray
-    mocap_quat: FloatArray
+    qpos: Array
+    mocap_pos: Array
+    mocap_quat: Array
     obstacles: int
-    obstacle_radii: FloatArray | None = None
+    obstacle_radii: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,7 @@ class Contact:
 
     part: str
     item: str
-    position: FloatArray
+    position: Array
     depth: float
 
 
@@ -168,8 +168,8 @@ class UR10Sim:
         self._command = np.zeros(6)
         self._command_time = -math.inf
         self.braked_at: float | None = None
-        self._obstacles: FloatArray   # set by reset(), like the radii
-        self._radii: FloatArray
+        self._obstacles: Array   # set by reset(), like the radii
+        self._radii: Array
         self.watchdog_active = self.watchdog_timeout > 0
         self.reset()
 
@@ -235,26 +235,26 @@ class UR10Sim:
         return self.model.opt.timestep
 
     @property
-    def q(self) -> FloatArray:
+    def q(self) -> Array:
         """Joint positions (6,) in rad, UR order (a copy)."""
         return self.data.qpos[self._qpos_adr].copy()
 
     @property
-    def qd(self) -> FloatArray:
+    def qd(self) -> Array:
         """Joint velocities (6,) in rad/s, UR order (a copy)."""
         return self.data.qvel[self._dof_adr].copy()
 
     @property
-    def command(self) -> FloatArray:
+    def command(self) -> Array:
         """Velocity command in force (6,): the last accepted one, or 0 if the watchdog braked."""
         return self.data.ctrl[self._actuator_ids].copy()
 
     @property
-    def tool_tip_position(self) -> FloatArray:
+    def tool_tip_position(self) -> Array:
         """Tool tip position (3,) in base_link."""
         return self.data.site_xpos[self.tool_tip_site].copy()
 
-    def site_pose(self, site_id: int) -> tuple[FloatArray, FloatArray]:
+    def site_pose(self, site_id: int) -> tuple[Array, Array]:
         """Return (position (3,), rotation (3, 3)) of a site (e.g. :attr:`tool0_site`)."""
         return (self.data.site_xpos[site_id].copy(),
                 self.data.site_xmat[site_id].reshape(3, 3).copy())
@@ -269,7 +269,7 @@ class UR10Sim:
             self.contacts = self.detect_contacts()
 
     # ------------------------------------------------------------------------------ commands
-    def validate_velocity_command(self, qd: ArrayLike) -> FloatArray:
+    def validate_velocity_command(self, qd: ArrayLike) -> Array:
         """
         Return ``qd`` as a float array (6,) clamped to the velocity limits.
 
@@ -286,7 +286,7 @@ class UR10Sim:
             raise ValueError(f'velocity command must be finite, got {qd.tolist()}')
         return np.clip(qd, -self.velocity_limits, self.velocity_limits)
 
-    def set_velocity_command(self, qd: ArrayLike) -> FloatArray:
+    def set_velocity_command(self, qd: ArrayLike) -> Array:
         """
         Command joint velocities ``qd`` (6,) rad/s, UR order, from now on; return them as applied.
 
@@ -375,7 +375,7 @@ class UR10Sim:
 
     # ------------------------------------------------------------------ goal and obstacles
     @property
-    def goal_position(self) -> FloatArray:
+    def goal_position(self) -> Array:
         """Goal marker position (3,): centre of its top face, base_link."""
         return self.data.mocap_pos[self._goal_mocap].copy()
 
@@ -385,12 +385,12 @@ class UR10Sim:
         mujoco.mj_kinematics(self.model, self.data)   # the camera sees it at once
 
     @property
-    def bottle_position(self) -> FloatArray:
+    def bottle_position(self) -> Array:
         """Bottle position (2,): [x, y] of its axis on the table, base_link."""
         return self.data.mocap_pos[self._bottle_mocap, :2].copy()
 
     @property
-    def bottle_mouth(self) -> FloatArray:
+    def bottle_mouth(self) -> Array:
         """Centre of the bottle's mouth (3,): on its axis at z = its height, base_link."""
         return np.array([*self.bottle_position, self.scene.bottle_height])
 
@@ -400,12 +400,12 @@ class UR10Sim:
         mujoco.mj_kinematics(self.model, self.data)
 
     @property
-    def obstacle_positions(self) -> FloatArray:
+    def obstacle_positions(self) -> Array:
         """Obstacle positions (N, 3): centres of the cylinders' top faces, base_link."""
         return self._obstacles.copy()
 
     @property
-    def obstacle_radii(self) -> FloatArray:
+    def obstacle_radii(self) -> Array:
         """Obstacle radii (N,) in metres, in the order of :attr:`obstacle_positions`."""
         return self._radii[:len(self._obstacles)].copy()
 
@@ -437,7 +437,7 @@ class UR10Sim:
         """Size the obstacles: ``radii`` as in :meth:`set_obstacles`; ValueError if bad."""
         self.set_obstacles(self._obstacles, radii)
 
-    def _set_radii(self, model: Any, radii: FloatArray) -> None:
+    def _set_radii(self, model: Any, radii: Array) -> None:
         """Give the obstacle cylinders of ``model`` these radii (MAX_OBSTACLES,)."""
         half = 0.5 * self.scene.obstacle_height
         for geom, r in zip(self._obstacle_geoms, radii):

@@ -15,7 +15,7 @@ import sys
 from typing import Any
 import xml.etree.ElementTree as ElementTree
 
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
 from etdmp_ros.robot._scene import (GOAL_MARKER_THICKNESS, PEN_RADIUS, PEN_TIP_LENGTH,
                                     PEN_TIP_RADIUS, SceneConfig)
@@ -87,7 +87,7 @@ def _urdf_for_mujoco() -> str:
 
 
 def _tube_mesh(radius: float, height: float, wall: float, floor: float,
-               segments: int = 32) -> tuple[FloatArray, NDArray[np.int_]]:
+               segments: int = 32) -> tuple[Array, NDArray[np.int_]]:
     """Return (vertices, faces) of an open container: a cylinder wall and a floor, watertight."""
     angles = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
     ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)
@@ -108,7 +108,7 @@ def _tube_mesh(radius: float, height: float, wall: float, floor: float,
     return vertices, np.asarray(faces)
 
 
-def _mujoco_camera_quat(pose: CameraPose) -> FloatArray:
+def _mujoco_camera_quat(pose: CameraPose) -> Array:
     """Return the MuJoCo camera orientation (w, x, y, z) for a ROS optical-frame pose."""
     mujoco = import_mujoco()
     rotation = pose.rotation @ np.diag([1.0, -1.0, -1.0])   # optical (z fwd, y down) -> GL
@@ -171,7 +171,7 @@ def _set_options(spec: Any, intrinsics: CameraIntrinsics, timestep: float,
     spec.visual.headlight.specular = [0.05, 0.05, 0.05]
 
 
-def _add_robot(spec: Any, kv: FloatArray) -> None:
+def _add_robot(spec: Any, kv: Array) -> None:
     """Colour and group the URDF's collision meshes; add armature and velocity servos."""
     mujoco = import_mujoco()
     for geom in spec.geoms:      # the robot: URDF collision meshes, drawn in one colour
@@ -193,7 +193,7 @@ def _add_robot(spec: Any, kv: FloatArray) -> None:
         actuator.set_to_velocity(kv=float(gain))
 
 
-def _add_tool(spec: Any, offset: FloatArray) -> None:
+def _add_tool(spec: Any, offset: Array) -> None:
     """Add the sites tool0 and tool_tip (``offset`` from tool0) and the pen between them."""
     mujoco = import_mujoco()
     tool0 = spec.body('tool0')

@@ -21,7 +21,7 @@ from typing import Any, TYPE_CHECKING
 from etdmp_ros import limits
 from etdmp_ros.dmp import check_file_size, DemonstrationError, unit_quaternions
 from etdmp_ros.geometry import quaternion as quat
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -55,13 +55,13 @@ class RecordedPath:
     (:func:`recorded_orientations`).
     """
 
-    positions: FloatArray
-    t: FloatArray | None
+    positions: Array
+    t: Array | None
     topic: str
-    orientations: FloatArray | None = None
+    orientations: Array | None = None
 
 
-def recorded_orientations(values: ArrayLike, where: str = 'path') -> FloatArray | None:
+def recorded_orientations(values: ArrayLike, where: str = 'path') -> Array | None:
     """
     Return the recorded orientations (n, 4) of a path's poses, normalised, or None for none.
 
@@ -250,7 +250,7 @@ def joint_state_path(records: Sequence[tuple[int, Any]], kinematics: UR10Model |
     return RecordedPath(positions[keep], stamps[keep], topic, orientations)
 
 
-def _motion_span(positions: FloatArray) -> tuple[int, int] | None:
+def _motion_span(positions: Array) -> tuple[int, int] | None:
     """Return (first, last) indices of the motion in ``positions``, or None if none."""
     from_start = np.linalg.norm(positions - positions[0], axis=1)
     from_end = np.linalg.norm(positions - positions[-1], axis=1)

@@ -49,7 +49,7 @@ from typing import Any
 
 from etdmp_ros import limits
 from etdmp_ros.dmp import Demonstration, GeneralizationError, METHODS, nrmse, Skill
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 from etdmp_ros.geometry.camera import CameraIntrinsics, CameraPose
 from etdmp_ros.geometry.task_plane import quadrant, TaskPlane
 from etdmp_ros.skills.library import check_skill_name, recorded_path_demo, SkillLibrary
@@ -145,8 +145,8 @@ class Drawing:
     """A checked drawing: canvas pixels ``points`` (n, 2) at times ``t`` (n,) rising from 0 s."""
 
     name: str
-    points: FloatArray
-    t: FloatArray
+    points: Array
+    t: Array
     strokes: int
 
     @property
@@ -177,23 +177,23 @@ class Canvas:
         return self.width_m / self.width_px
 
     @property
-    def centre(self) -> FloatArray:
+    def centre(self) -> Array:
         """Return the canvas centre in pixels (2,), where the task plane's origin is."""
         return np.array([self.width_px, self.height_px], dtype=float) / 2.0
 
-    def to_base_link(self, points: ArrayLike, plane: TaskPlane) -> FloatArray:
+    def to_base_link(self, points: ArrayLike, plane: TaskPlane) -> Array:
         """Return base_link points (n, 3) on ``plane`` of canvas pixels ``points`` (n, 2)."""
         offset = (np.asarray(points, dtype=float).reshape(-1, 2) - self.centre) * \
             self.metres_per_pixel
         return plane.origin + offset[:, 1:2] * plane.x_axis + offset[:, 0:1] * plane.y_axis
 
-    def from_plane(self, uv: ArrayLike, plane: TaskPlane) -> FloatArray:
+    def from_plane(self, uv: ArrayLike, plane: TaskPlane) -> Array:
         """Return canvas pixels (..., 2) of task-plane coordinates ``uv`` (..., 2, demo units)."""
         values = np.asarray(uv, dtype=float)
         return values[..., ::-1] * (plane.scale / self.metres_per_pixel) + self.centre
 
 
-def _stroke(value: object, j: int, canvas: Canvas) -> FloatArray:
+def _stroke(value: object, j: int, canvas: Canvas) -> Array:
     """Return stroke ``j`` as a float (m, 3) array of x, y (px) and t (s); TeachInputError."""
     where = f'stroke {j + 1}'
     if not isinstance(value, list) or not all(isinstance(p, list) for p in value):
@@ -234,11 +234,11 @@ def _shown(value: object) -> str:
     return text if len(text) <= 60 else text[:57] + '...'
 
 
-def _length(stroke: FloatArray) -> float:
+def _length(stroke: Array) -> float:
     return float(np.sum(np.linalg.norm(np.diff(stroke[:, :2], axis=0), axis=1)))
 
 
-def _join(strokes: list[FloatArray]) -> tuple[FloatArray, FloatArray]:
+def _join(strokes: list[Array]) -> tuple[Array, Array]:
     """Join strokes (m_j, 3) into one timeline (see the module docstring); return (n, 3)."""
     drawn_time = sum(s[-1, 2] - s[0, 2] for s in strokes)
     drawn_length = sum(_length(s) for s in strokes)
@@ -302,7 +302,7 @@ def parse_drawing(data: object, canvas: Canvas = Canvas()) -> Drawing:
     return Drawing(name, points, t, len(checked))
 
 
-def resampled(drawing: Drawing) -> tuple[FloatArray, FloatArray]:
+def resampled(drawing: Drawing) -> tuple[Array, Array]:
     """
     Return (points (m, 2), t (m,)) of a drawing at evenly spaced times (about SAMPLE_PERIOD).
 
@@ -323,7 +323,7 @@ def resampled(drawing: Drawing) -> tuple[FloatArray, FloatArray]:
 
 
 def taught_path(drawing: Drawing, canvas: Canvas, plane: TaskPlane
-                ) -> tuple[FloatArray, FloatArray]:
+                ) -> tuple[Array, Array]:
     """
     Return (positions (n, 3) in base_link on ``plane``, times (n,) s) of a drawing: the Path sent.
 
@@ -357,17 +357,17 @@ def learn_drawing(drawing: Drawing, canvas: Canvas, plane: TaskPlane,
     return entry.demo, library.skill(drawing.name)
 
 
-def _rotation(angle: float) -> FloatArray:
+def _rotation(angle: float) -> Array:
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s], [s, c]])
 
 
-def _decimated(x: FloatArray, n: int = GENERALIZATION_POINTS) -> FloatArray:
+def _decimated(x: Array, n: int = GENERALIZATION_POINTS) -> Array:
     index = np.unique(np.linspace(0, len(x) - 1, min(n, len(x))).round().astype(int))
     return x[index]
 
 
-def uniform(t: ArrayLike, x: ArrayLike, n: int | None = None) -> FloatArray:
+def uniform(t: ArrayLike, x: ArrayLike, n: int | None = None) -> Array:
     """
     Return samples (n, d) of a movement ``x`` (m, d) at times ``t`` (m,), evenly spaced in time.
 
@@ -469,7 +469,7 @@ class Trace:
         with self._lock:
             self._points = []
 
-    def points(self) -> FloatArray:
+    def points(self) -> Array:
         """Return the points kept, (n, 3)."""
         with self._lock:
             return np.array(self._points, dtype=float).reshape(-1, 3)

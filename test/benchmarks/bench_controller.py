@@ -50,6 +50,7 @@ import time
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
 
+from _results import add_option, command, printed, publish  # noqa: E402
 from etdmp_ros.geometry import quaternion as quat  # noqa: E402
 from etdmp_ros.robot import ControllerConfig, TrajectoryController, UR10Model  # noqa: E402
 import numpy as np  # noqa: E402
@@ -316,7 +317,9 @@ def main(argv=None):
     parser.add_argument('--json', type=Path, help='also write the figures to this file')
     parser.add_argument('--no-fast', action='store_true',
                         help="time only the controller's numpy path (default: numba and numpy)")
+    add_option(parser)
     args = parser.parse_args(argv)
+    load = os.getloadavg()[0]
     repeats = 3 if args.quick else 8
 
     ur10 = UR10Model(tool_offset=TOOL_OFFSET)
@@ -354,44 +357,50 @@ def main(argv=None):
             rows.append((f'pin-pink solve_ik ({solver})', delay, theirs['step'], theirs))
             results[f'pink_{solver}_delay{delay}'] = theirs
 
-    print('| per control step | plant delay | p50 (us) | p99 (us) | tracking RMS (mm) | '
-          'max (mm) |')
-    print('|---|---|---|---|---|---|')
-    for name, delay, (p50, p99), track in rows:
-        t = (f'{track["rms_mm"]:.4f} | {track["max_mm"]:.4f}' if track else ' | ')
-        print(f'| {name} | {delay} period | {p50:.1f} | {p99:.1f} | {t} |')
-    for kind in ('numba', 'numpy'):
-        ours = results.get(f'ours_{kind}_delay1')
-        if ours is None:
-            continue
-        print(f'\n{kind}: target p99 compute <= 200 us: step {ours["step"][1]:.0f} us, IK core '
-              f'{ours["core"][1]:.0f} us.')
-        for solver in ('daqp', 'quadprog'):
-            key = f'pink_{solver}_delay1'
-            if key in results:
-                ratio = results[key]['step'][0] / ours['step'][0]
-                core = results[key]['step'][0] / ours['core'][0]
-                print(f'pink ({solver}) / ours ({kind}) per step (p50): {ratio:.1f}x for the '
-                      f'whole step, {core:.1f}x for the IK core (target >= 3x); tracking RMS '
-                      f'{results[key]["rms_mm"]:.3f} vs {ours["rms_mm"]:.4f} mm (plant one '
-                      'period late).')
-
-    if not args.no_ros:
-        print('\n| through ROS (ur10_sim + controller) | command period p50 / p99 / max (ms) | '
-              'jitter p50 / p99 (ms) | joint state -> command p50 / p99 (ms) | '
-              'tracking RMS / max (mm) |')
-        print('|---|---|---|---|---|')
-        for rate in (125.0, 500.0):
-            try:
-                r = bench_ros(rate, ur10, path)
-            except (TimeoutError, OSError) as exc:
-                print(f'| {rate:g} Hz | failed: {exc} | | | |')
+    with printed() as tables:
+        print('| per control step | plant delay | p50 (us) | p99 (us) | tracking RMS (mm) | '
+              'max (mm) |')
+        print('|---|---|---|---|---|---|')
+        for name, delay, (p50, p99), track in rows:
+            t = (f'{track["rms_mm"]:.4f} | {track["max_mm"]:.4f}' if track else ' | ')
+            print(f'| {name} | {delay} period | {p50:.1f} | {p99:.1f} | {t} |')
+        for kind in ('numba', 'numpy'):
+            ours = results.get(f'ours_{kind}_delay1')
+            if ours is None:
                 continue
-            results[f'ros_{rate:g}'] = r
-            print(f'| {rate:g} Hz | {r["period_p50_ms"]:.2f} / {r["period_p99_ms"]:.2f} / '
-                  f'{r["period_max_ms"]:.1f} | {r["jitter_p50_ms"]:.2f} / '
-                  f'{r["jitter_p99_ms"]:.2f} | {r["latency_p50_ms"]:.2f} / '
-                  f'{r["latency_p99_ms"]:.2f} | {r["rms_mm"]:.3f} / {r["max_mm"]:.3f} |')
+            print(f'\n{kind}: target p99 compute <= 200 us: step {ours["step"][1]:.0f} us, '
+                  f'IK core {ours["core"][1]:.0f} us.')
+            for solver in ('daqp', 'quadprog'):
+                key = f'pink_{solver}_delay1'
+                if key in results:
+                    ratio = results[key]['step'][0] / ours['step'][0]
+                    core = results[key]['step'][0] / ours['core'][0]
+                    print(f'pink ({solver}) / ours ({kind}) per step (p50): {ratio:.1f}x for the '
+                          f'whole step, {core:.1f}x for the IK core (target >= 3x); tracking RMS '
+                          f'{results[key]["rms_mm"]:.3f} vs {ours["rms_mm"]:.4f} mm (plant one '
+                          'period late).')
+
+        if not args.no_ros:
+            print('\n| through ROS (ur10_sim + controller) | command period p50 / p99 / max '
+                  '(ms) | jitter p50 / p99 (ms) | joint state -> command p50 / p99 (ms) | '
+                  'tracking RMS / max (mm) |')
+            print('|---|---|---|---|---|')
+            for rate in (125.0, 500.0):
+                try:
+                    r = bench_ros(rate, ur10, path)
+                except (TimeoutError, OSError) as exc:
+                    print(f'| {rate:g} Hz | failed: {exc} | | | |')
+                    continue
+                results[f'ros_{rate:g}'] = r
+                print(f'| {rate:g} Hz | {r["period_p50_ms"]:.2f} / {r["period_p99_ms"]:.2f} / '
+                      f'{r["period_max_ms"]:.1f} | {r["jitter_p50_ms"]:.2f} / '
+                      f'{r["jitter_p99_ms"]:.2f} | {r["latency_p50_ms"]:.2f} / '
+                      f'{r["latency_p99_ms"]:.2f} | {r["rms_mm"]:.3f} / {r["max_mm"]:.3f} |')
+    if not args.no_docs:
+        task = ('Task: ET-DMP letter G, 0.2 m, 2 s, 6D tool-tip pose, kinematic plant at 125 Hz; '
+                f'{repeats} runs per row ({max(2, repeats // 2)} for pink).')
+        publish('controller', f'{task}\n\n{tables.getvalue().strip()}',
+                command('controller', argv), load=load)
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
     return 0

@@ -48,6 +48,7 @@ import platform
 import sys
 import time
 
+from _results import add_option, command, printed, publish
 from etdmp_ros.dmp import (builtin_demo, clearance, compare_goal_jump, goal_jump_case,
                            GOAL_JUMP_WAYS, learn, nrmse)
 import numpy as np
@@ -730,6 +731,7 @@ def _parse_args(argv):
                         help='use builtin_demo("G") even when the data set is present')
     parser.add_argument('--strict', action='store_true',
                         help='exit 1 when a target is missed (default: always exit 0)')
+    add_option(parser)
     args = parser.parse_args(argv)
     if args.quick:
         args.repeats, args.batch_repeats = 5, 1
@@ -749,6 +751,7 @@ def _make_peers(positions, t):
 def main(argv=None):
     """Run the benchmark, print the report; return the exit status."""
     args = _parse_args(argv)
+    load = os.getloadavg()[0]
     wall0 = time.perf_counter()
     env = _environment()
     positions, t, start, goal, demo_source = _load_demo(args.builtin_demo)
@@ -882,15 +885,17 @@ def main(argv=None):
                             'pass': bool(stats['p99_ms'] <= ONLINE_LIMIT_MS)})
     jump_rows = goal_jump_rows()
     print('\n## Online ET-DMP\n')
-    print(_online_table(online_rows))
-    print(f'\n({online_runs} runs of {N_STEPS} steps per row after one warm-up run.)\n')
-    print(goal_jump_table(jump_rows))
+    with printed() as online:
+        print(_online_table(online_rows))
+        print(f'\n({online_runs} runs of {N_STEPS} steps per row after one warm-up run.)\n')
+        print(goal_jump_table(jump_rows))
     print('\n' + GOAL_JUMP_NOTES)
 
     # Orientation: learn + generalize with and without it, and movement-primitives' CartesianDMP.
     ori_rows, ori_errors, ori_note = orientation_section(args.repeats, args.batch_repeats)
     print('\n## Orientation\n')
-    print(orientation_tables(ori_rows, ori_errors, ori_note))
+    orientation = orientation_tables(ori_rows, ori_errors, ori_note)
+    print(orientation)
     print('\n' + ORIENTATION_NOTES)
 
     failed = [r['name'] for r in rows + online_rows if not r['pass']]
@@ -899,6 +904,14 @@ def main(argv=None):
     total = len(rows) + len(online_rows)
     print(f'\n{total - len(failed)} of {total} rows meet their target{missed} '
           f'(wall time {wall:.0f} s)')
+    if not args.no_docs:
+        timing = (f'Medians (p90) of {args.repeats} calls per row ({args.batch_repeats} for the '
+                  'peer batch rows) after warm-up; demo: '
+                  + demo_source.replace(str(REPO_ROOT.parent), '..') + '.')
+        run = command('core', argv)
+        publish('core', f'{_table(rows)}\n\n{per_system}\n\n{timing}', run, load=load)
+        publish('core-online', online.getvalue(), run, load=load)
+        publish('core-orientation', orientation, run, load=load)
 
     if args.json:
         result = {'environment': env, 'demo': demo_source, 'start': start.tolist(),

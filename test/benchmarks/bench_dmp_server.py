@@ -286,7 +286,10 @@ def main():
                         help="dmp_server's check_timing (the joint timing check of each plan)")
     parser.add_argument('--floor-server', choices=('single', 'multi'), help=argparse.SUPPRESS)
     parser.add_argument('--worker', type=int, help=argparse.SUPPRESS)
+    from _results import add_option   # test/benchmarks/_results.py
+    add_option(parser)
     args = parser.parse_args()
+    args.load = os.getloadavg()[0]
     if args.floor_server:
         return floor_server(args.floor_server)
     if args.worker is not None:
@@ -360,49 +363,55 @@ def _run(args, tmp, env):
 
     results = {case: _percentiles(s) for case, s in samples.items()}
     floor = results['floor: bare rclpy server (rclpy.spin)']['p50']
-    print(f'\n/generalize round trip, {POSES}-pose plan ({DURATION:g} s at '
-          f'{1 / PERIOD:g} Hz), {results[next(iter(cases))]["n"]} calls per case, '
-          'interleaved:\n')
-    print('| case | p50 (ms) | p90 (ms) | p99 (ms) | p50 / floor |')
-    print('|---|---|---|---|---|')
-    for case, r in results.items():
-        print(f'| {case} | {r["p50"]:.2f} | {r["p90"]:.2f} | {r["p99"]:.2f} | '
-              f'{r["p50"] / floor:.2f} |')
-    verdicts = {case: (r['p50'] <= 1.5 * floor and r['p50'] <= 25.0)
-                for case, r in results.items() if case.startswith('dmp_server')}
-    for case, ok in verdicts.items():
-        print(f'target p50 <= 1.5x floor and <= 25 ms, {case}: {"met" if ok else "MISSED"}')
+    from _results import command, printed, publish
+    with printed() as tables:
+        print(f'\n/generalize round trip, {POSES}-pose plan ({DURATION:g} s at '
+              f'{1 / PERIOD:g} Hz), {results[next(iter(cases))]["n"]} calls per case, '
+              'interleaved:\n')
+        print('| case | p50 (ms) | p90 (ms) | p99 (ms) | p50 / floor |')
+        print('|---|---|---|---|---|')
+        for case, r in results.items():
+            print(f'| {case} | {r["p50"]:.2f} | {r["p90"]:.2f} | {r["p99"]:.2f} | '
+                  f'{r["p50"] / floor:.2f} |')
+        verdicts = {case: (r['p50'] <= 1.5 * floor and r['p50'] <= 25.0)
+                    for case, r in results.items() if case.startswith('dmp_server')}
+        for case, ok in verdicts.items():
+            print(f'target p50 <= 1.5x floor and <= 25 ms, {case}: {"met" if ok else "MISSED"}')
 
-    print(f'\nsustained: 4 client processes x 5 req/s for {args.sustain:g} s ...', flush=True)
-    workers = [subprocess.Popen([sys.executable, __file__, '--worker', str(k), '--sustain',
-                                 str(args.sustain)], env=env, stdout=subprocess.PIPE, text=True)
-               for k in range(4)]
-    reports = [json.loads(w.communicate(timeout=args.sustain + 120)[0]) for w in workers]
-    calls = sum(r['calls'] for r in reports)
-    failures = sum(r['failures'] for r in reports)
-    rate = calls / max(r['wall_s'] for r in reports)
-    sustained = _percentiles([x for r in reports for x in r['latencies_ms']])
-    print(f'{calls} calls, {rate:.1f} req/s achieved, {failures} failures; latency p50 '
-          f'{sustained["p50"]:.2f} ms, p90 {sustained["p90"]:.2f} ms, p99 '
-          f'{sustained["p99"]:.2f} ms -> {"met" if failures == 0 else "MISSED"}')
+        print(f'\nsustained: 4 client processes x 5 req/s for {args.sustain:g} s ...', flush=True)
+        workers = [subprocess.Popen([sys.executable, __file__, '--worker', str(k), '--sustain',
+                                     str(args.sustain)], env=env, stdout=subprocess.PIPE,
+                                    text=True)
+                   for k in range(4)]
+        reports = [json.loads(w.communicate(timeout=args.sustain + 120)[0]) for w in workers]
+        calls = sum(r['calls'] for r in reports)
+        failures = sum(r['failures'] for r in reports)
+        rate = calls / max(r['wall_s'] for r in reports)
+        sustained = _percentiles([x for r in reports for x in r['latencies_ms']])
+        print(f'{calls} calls, {rate:.1f} req/s achieved, {failures} failures; latency p50 '
+              f'{sustained["p50"]:.2f} ms, p90 {sustained["p90"]:.2f} ms, p99 '
+              f'{sustained["p99"]:.2f} ms -> {"met" if failures == 0 else "MISSED"}')
 
-    breakdown = _breakdown()
-    print('\nwhere the time goes (same functions timed in-process, medians):\n')
-    print('| part | ms |')
-    print('|---|---|')
-    for part, ms in breakdown.items():
-        print(f'| {part} | {ms:.3f} |')
-    ours = (breakdown['plan_path (rollout + checks), 0 obstacles'] +
-            breakdown['response Path (path_from_numpy)'] +
-            breakdown['/etdmp/path: the Path serialized at publish'])
-    transport = (breakdown['rclpy: serialize the response (in send_response)'] +
-                 breakdown['rclpy: deserialize it in the client'])
-    print(f"\ndmp_server's own work per request (0 obstacles: plan + response + publish): "
-          f'{ours:.2f} ms. In the floor, rclpy alone converts the 501-pose response twice '
-          f'({transport:.2f} ms: serialize in the server, deserialize in the client); the rest '
-          'of a round trip is DDS and the executors (MultiThreadedExecutor vs rclpy.spin: '
-          f'{results["floor: same, MultiThreadedExecutor"]["p50"] - floor:+.2f} ms at p50 in '
-          'this run).')
+        breakdown = _breakdown()
+        print('\nwhere the time goes (same functions timed in-process, medians):\n')
+        print('| part | ms |')
+        print('|---|---|')
+        for part, ms in breakdown.items():
+            print(f'| {part} | {ms:.3f} |')
+        ours = (breakdown['plan_path (rollout + checks), 0 obstacles'] +
+                breakdown['response Path (path_from_numpy)'] +
+                breakdown['/etdmp/path: the Path serialized at publish'])
+        transport = (breakdown['rclpy: serialize the response (in send_response)'] +
+                     breakdown['rclpy: deserialize it in the client'])
+        print(f"\ndmp_server's own work per request (0 obstacles: plan + response + publish): "
+              f'{ours:.2f} ms. In the floor, rclpy alone converts the 501-pose response twice '
+              f'({transport:.2f} ms: serialize in the server, deserialize in the client); the '
+              'rest '
+              'of a round trip is DDS and the executors (MultiThreadedExecutor vs rclpy.spin: '
+              f'{results["floor: same, MultiThreadedExecutor"]["p50"] - floor:+.2f} ms at p50 in '
+              'this run).')
+    if not args.no_docs:
+        publish('dmp_server', tables.getvalue().strip(), command('dmp_server'), load=args.load)
     if args.json:
         args.json.write_text(json.dumps({'round_trip': results, 'sustained': {
             **sustained, 'calls': calls, 'failures': failures, 'rate': rate},

@@ -45,6 +45,7 @@ sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO / 'test' / 'unit'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
+from _results import add_option, command, printed, publish  # noqa: E402
 from etdmp_ros.perception import detector_from_parameters  # noqa: E402
 from etdmp_ros.ros.conversions import (camera_info_msg, image_from_msg, image_msg,  # noqa: E402
                                        intrinsics_from_camera_info, ns_to_stamp,
@@ -261,6 +262,7 @@ def _parse_args(argv):
     parser.add_argument('--json', type=Path, help='also write the figures to this file')
     parser.add_argument('--strict', action='store_true',
                         help='exit 1 when the detect p50 target is missed')
+    add_option(parser)
     args = parser.parse_args(argv)
     if args.quick:
         args.frames, args.repeats, args.duration = 10, 3, 5.0
@@ -270,45 +272,49 @@ def _parse_args(argv):
 def main(argv=None):
     """Run the benchmark, print the report; return the exit status."""
     args = _parse_args(argv)
+    load = os.getloadavg()[0]
     log_dir = Path(os.environ.get('TMPDIR', '/tmp'))
     print(f'# Perception benchmark ({platform.processor() or platform.machine()}, '
           f'{os.cpu_count()} cores, load {os.getloadavg()[0]:.2f})\n')
     timings, errors = bench_frames(args.frames, args.repeats)
-    print(f'Per 640x480 frame, {args.frames} rendered scenes x {args.repeats} runs:\n')
-    print('| step | p50 ms | p99 ms | max ms |')
-    print('|---|---|---|---|')
-    for name, t in timings.items():
-        print(f'| {name} | {t["p50_ms"]:.2f} | {t["p99_ms"]:.2f} | {t["max_ms"]:.2f} |')
-    met = timings['detect']['p50_ms'] <= TARGET_P50_MS
-    print(f'\ndetect p50 {timings["detect"]["p50_ms"]:.2f} ms vs target <= {TARGET_P50_MS:g} ms:'
-          f' {"met" if met else "MISSED"}')
-    g, o = errors['goal_mm'], errors['obstacle_mm']
-    print(f'errors vs ground truth: goal median {g["median"]:.2f} mm, max {g["max"]:.2f} mm '
-          f'({g["n"]} of {g["expected"]} found); obstacles median {o["median"]:.2f} mm, max '
-          f'{o["max"]:.2f} mm ({o["n"]})')
-    report = {'frame': timings, 'errors': errors, 'target_p50_ms': TARGET_P50_MS}
-    if not args.skip_nodes:
-        print(f'\nEnd to end, image stamp -> /etdmp/goal, ur10_sim (30 fps) + perception, '
-              f'{args.duration:g} s each:\n')
-        print('| image QoS | p50 ms | p99 ms | max ms | goals/s (wall) | goals per sim s |')
-        print('|---|---|---|---|---|---|')
-        report['end_to_end'] = []
-        for reliable in (True, False):
-            r = bench_latency(args.duration, reliable, log_dir)
-            report['end_to_end'].append(r)
-            if r['n']:
-                print(f'| {r["qos"]} | {r["p50_ms"]:.1f} | {r["p99_ms"]:.1f} | '
-                      f'{r["max_ms"]:.1f} | {r["goal_rate_hz"]:.1f} | '
-                      f'{r["goals_per_sim_second"]:.1f} |')
-            else:
-                print(f'| {r["qos"]} | no goals |')
-        print('\nWhere the time goes (perception node in this process, reliable images; ms '
-              'after the tick that stamps the frame):\n')
-        print('| event | p50 ms | p99 ms |')
-        print('|---|---|---|')
-        report['breakdown'] = bench_breakdown(args.duration, log_dir)
-        for name, t in report['breakdown'].items():
-            print(f'| {name} | {t["p50_ms"]:.1f} | {t["p99_ms"]:.1f} |')
+    with printed() as tables:
+        print(f'Per 640x480 frame, {args.frames} rendered scenes x {args.repeats} runs:\n')
+        print('| step | p50 ms | p99 ms | max ms |')
+        print('|---|---|---|---|')
+        for name, t in timings.items():
+            print(f'| {name} | {t["p50_ms"]:.2f} | {t["p99_ms"]:.2f} | {t["max_ms"]:.2f} |')
+        met = timings['detect']['p50_ms'] <= TARGET_P50_MS
+        print(f'\ndetect p50 {timings["detect"]["p50_ms"]:.2f} ms vs target <= '
+              f'{TARGET_P50_MS:g} ms: {"met" if met else "MISSED"}')
+        g, o = errors['goal_mm'], errors['obstacle_mm']
+        print(f'errors vs ground truth: goal median {g["median"]:.2f} mm, max {g["max"]:.2f} mm '
+              f'({g["n"]} of {g["expected"]} found); obstacles median {o["median"]:.2f} mm, max '
+              f'{o["max"]:.2f} mm ({o["n"]})')
+        report = {'frame': timings, 'errors': errors, 'target_p50_ms': TARGET_P50_MS}
+        if not args.skip_nodes:
+            print(f'\nEnd to end, image stamp -> /etdmp/goal, ur10_sim (30 fps) + perception, '
+                  f'{args.duration:g} s each:\n')
+            print('| image QoS | p50 ms | p99 ms | max ms | goals/s (wall) | goals per sim s |')
+            print('|---|---|---|---|---|---|')
+            report['end_to_end'] = []
+            for reliable in (True, False):
+                r = bench_latency(args.duration, reliable, log_dir)
+                report['end_to_end'].append(r)
+                if r['n']:
+                    print(f'| {r["qos"]} | {r["p50_ms"]:.1f} | {r["p99_ms"]:.1f} | '
+                          f'{r["max_ms"]:.1f} | {r["goal_rate_hz"]:.1f} | '
+                          f'{r["goals_per_sim_second"]:.1f} |')
+                else:
+                    print(f'| {r["qos"]} | no goals |')
+            print('\nWhere the time goes (perception node in this process, reliable images; ms '
+                  'after the tick that stamps the frame):\n')
+            print('| event | p50 ms | p99 ms |')
+            print('|---|---|---|')
+            report['breakdown'] = bench_breakdown(args.duration, log_dir)
+            for name, t in report['breakdown'].items():
+                print(f'| {name} | {t["p50_ms"]:.1f} | {t["p99_ms"]:.1f} |')
+    if not args.no_docs:
+        publish('perception', tables.getvalue().strip(), command('perception', argv), load=load)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(report, indent=2))

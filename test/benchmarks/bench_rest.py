@@ -6,7 +6,7 @@ A script, not a pytest test; it needs no peer library. Run from the repository r
     make bench-rest                                    # this code
     make bench-rest BENCH_ARGS="--before 7b7c223"      # and the code of a revision, side by side
     .venv/bin/python test/benchmarks/bench_rest.py [--quick] [--before REV] [--json PATH]
-        [--publish]
+        [--no-docs]
 
 The recordings (none of them built in; docs/design.md#coming-to-rest): the LASA handwriting
 data set (30 shapes x 7 recordings, ``test/support/shapes.py``) as recorded (they start nearly at
@@ -39,7 +39,7 @@ starts in the other quadrants (2D: its start direction turned by 90, 180 and 270
 
 Medians and worst cases; with ``--before REV`` the same figures of the code at git revision REV
 (its ``etdmp_ros`` exported to a temporary directory and imported in a subprocess) next to them.
-``--publish`` writes the table into docs/design.md (block ``rest``).
+The table goes into docs/design.md (block ``rest``) unless ``--no-docs`` is given.
 """
 
 import argparse
@@ -409,7 +409,8 @@ def main(argv=None):
     parser.add_argument('--quick', action='store_true', help='one LASA recording per shape')
     parser.add_argument('--before', metavar='REV', help='also measure the code of git REV')
     parser.add_argument('--json', type=Path, help='also write the figures here')
-    parser.add_argument('--publish', action='store_true', help='write the table into the docs')
+    parser.add_argument('--no-docs', action='store_true',
+                        help='only print the tables; do not write them into docs/design.md')
     parser.add_argument('--ablation', action='store_true',
                         help='also: what each remedy contributes (a quick run per configuration)')
     parser.add_argument('--measure-only', type=Path, help=argparse.SUPPRESS)
@@ -436,14 +437,11 @@ def main(argv=None):
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({'now': now, 'before': before}))
-    if args.publish:
-        from _results import publish   # test/benchmarks/_results.py
-        flags = ' '.join((['--quick'] if args.quick else [])
-                         + ([f'--before {args.before}'] if args.before else []))
-        command = 'make bench-rest' + (f' BENCH_ARGS="{flags}"' if flags else '')
-        publish('rest', table, command, page='docs/design.md', load=load)
+    if not args.no_docs:
+        from _results import command, publish   # test/benchmarks/_results.py
+        publish('rest', table, command('rest', argv), page='docs/design.md', load=load)
         if remedies is not None:
-            publish('rest-ablation', remedies, 'bench_rest.py --ablation (its quick set)',
+            publish('rest-ablation', remedies, command('rest', argv) + ' (its quick set)',
                     page='docs/design.md', load=load)
     return 0
 

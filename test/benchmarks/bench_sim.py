@@ -38,6 +38,7 @@ os.environ.setdefault('MUJOCO_GL', 'egl')
 os.environ.setdefault('ROS_DOMAIN_ID', str(150 + os.getpid() % 50))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
+from _results import add_option, command, printed, publish  # noqa: E402
 from etdmp_ros.demo.cpu_monitor import process_cpu_seconds, tree_cpu_seconds  # noqa: E402
 from etdmp_ros.nodes.ur10_sim import COLOR_TOPIC, DEPTH_TOPIC, UR10SimNode  # noqa: E402
 from etdmp_ros.ros.conversions import image_msg  # noqa: E402
@@ -212,40 +213,43 @@ def main():
                         help='simulated seconds per configuration (default 5)')
     parser.add_argument('--no-subscriber', action='store_true',
                         help='no subscriber process (publishing then costs less)')
+    add_option(parser)
     args = parser.parse_args()
+    load = os.getloadavg()[0]
     rclpy.init(args=['--ros-args', '--log-level', 'warn'])
     subscriber = None if args.no_subscriber else Subscriber()
     time.sleep(1.0)
     print(f'ur10_sim benchmark: {os.cpu_count()} cores, {args.seconds:g} s simulated per row, '
           f'subscriber: {"no" if subscriber is None else "yes"}, load average before: '
           f'{os.getloadavg()[0]:.2f} (other work on the machine slows the paced rows)\n')
-    print('Unpaced (as fast as possible); CPU in ms per simulated second '
-          '(1000 = one core busy at real time):\n')
-    print('| camera Hz | control Hz | max RTF | CPU/sim s | physics | render | publish images'
-          ' | publish state | of which /tf |')
-    print('|---|---|---|---|---|---|---|---|---|')
-    results = {}
-    for camera_rate in (15, 30):
-        for control_rate in (125, 500):
-            rtf, cpu, parts = unpaced(camera_rate, control_rate, args.seconds,
-                                      subscriber is not None)
-            results[camera_rate, control_rate] = rtf, cpu
-            print(f'| {camera_rate} | {control_rate} | {rtf:.1f} | {cpu * 1e3:.0f} | '
-                  f'{parts["physics"] * 1e3:.0f} | {parts["render"] * 1e3:.0f} | '
-                  f'{parts["publish_images"] * 1e3:.0f} | {parts["publish_state"] * 1e3:.0f} | '
-                  f'{parts["publish_tf"] * 1e3:.0f} |')
-    print('\nPaced at real-time factor 1 (the node as it runs):\n')
-    print('| camera Hz | control Hz | achieved RTF | CPU (cores) | subscriber received (Hz), '
-          'its CPU (cores) |')
-    print('|---|---|---|---|---|')
-    paced_results = {}
-    for camera_rate, control_rate in ((30, 125), (30, 500), (15, 125)):
-        if subscriber:
-            subscriber.reset()
-        rtf, cores = paced(camera_rate, control_rate, args.seconds)
-        received = subscriber.report() if subscriber else '-'
-        paced_results[camera_rate, control_rate] = rtf, cores
-        print(f'| {camera_rate} | {control_rate} | {rtf:.3f} | {cores:.2f} | {received} |')
+    with printed() as tables:
+        print('Unpaced (as fast as possible); CPU in ms per simulated second '
+              '(1000 = one core busy at real time):\n')
+        print('| camera Hz | control Hz | max RTF | CPU/sim s | physics | render | publish images'
+              ' | publish state | of which /tf |')
+        print('|---|---|---|---|---|---|---|---|---|')
+        results = {}
+        for camera_rate in (15, 30):
+            for control_rate in (125, 500):
+                rtf, cpu, parts = unpaced(camera_rate, control_rate, args.seconds,
+                                          subscriber is not None)
+                results[camera_rate, control_rate] = rtf, cpu
+                print(f'| {camera_rate} | {control_rate} | {rtf:.1f} | {cpu * 1e3:.0f} | '
+                      f'{parts["physics"] * 1e3:.0f} | {parts["render"] * 1e3:.0f} | '
+                      f'{parts["publish_images"] * 1e3:.0f} | '
+                      f'{parts["publish_state"] * 1e3:.0f} | {parts["publish_tf"] * 1e3:.0f} |')
+        print('\nPaced at real-time factor 1 (the node as it runs):\n')
+        print('| camera Hz | control Hz | achieved RTF | CPU (cores) | subscriber received (Hz), '
+              'its CPU (cores) |')
+        print('|---|---|---|---|---|')
+        paced_results = {}
+        for camera_rate, control_rate in ((30, 125), (30, 500), (15, 125)):
+            if subscriber:
+                subscriber.reset()
+            rtf, cores = paced(camera_rate, control_rate, args.seconds)
+            received = subscriber.report() if subscriber else '-'
+            paced_results[camera_rate, control_rate] = rtf, cores
+            print(f'| {camera_rate} | {control_rate} | {rtf:.3f} | {cores:.2f} | {received} |')
     print('\nsensor_msgs/Image 640x480, median ms: creation via msg.data = arr.tobytes() '
           '(without / with rclpy field checks, ROS_PYTHON_CHECK_FIELDS=1), via '
           'array.array.frombytes (what image_msg does; checks on), image_msg() with its '
@@ -257,9 +261,14 @@ def main():
               f'{t_pub:.2f} |')
     rtf, cores = paced_results[30, 125]
     ok = results[30, 125][0] >= 1.0 and rtf >= 0.98 and cores <= 1.0
-    print(f'\nTarget 30 Hz camera + 125 Hz control: max RTF {results[30, 125][0]:.1f} (>= 1), '
-          f'paced RTF {rtf:.3f} using {cores:.2f} of {os.cpu_count()} cores (<= 1): '
-          f'{"met" if ok else "NOT met"} (load average now {os.getloadavg()[0]:.2f})')
+    target = (f'Target 30 Hz camera + 125 Hz control: max RTF {results[30, 125][0]:.1f} (>= 1), '
+              f'paced RTF {rtf:.3f} using {cores:.2f} of {os.cpu_count()} cores (<= 1): '
+              f'{"met" if ok else "NOT met"}')
+    print(f'\n{target} (load average now {os.getloadavg()[0]:.2f})')
+    if not args.no_docs:
+        publish('sim', f'{tables.getvalue().strip()}\n\n{target}; {args.seconds:g} s simulated '
+                f'per row, subscriber: {"no" if subscriber is None else "yes"}.', command('sim'),
+                load=load)
     if subscriber:
         subscriber.close()
     rclpy.shutdown()

@@ -46,6 +46,7 @@ FAILED_RUNS = REPO / 'out' / 'bench_system_failed'
 sys.path.insert(0, str(REPO / 'test'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
+from _results import add_option, command, publish  # noqa: E402
 from conftest import busy_core  # noqa: E402
 from etdmp_ros.demo import run as demo  # noqa: E402
 from etdmp_ros.ros.processes import isolated_environment  # noqa: E402
@@ -242,7 +243,9 @@ def main(argv=None):
     parser.add_argument('--gc-pauses', action='store_true',
                         help="only time each node's full garbage collection before and after "
                         'freezing its heap')
+    add_option(parser)
     args = parser.parse_args(argv)
+    load = os.getloadavg()[0]
     if args.gc_pauses:
         gc_pauses()
         return 0
@@ -259,7 +262,7 @@ def main(argv=None):
             cases.append(('G', rate, ['idle']))
     print(f'bench_system: {os.cpu_count()} cores, load average before '
           f'{os.getloadavg()[0]:.2f}, {args.runs} runs per case', flush=True)
-    everything = {}
+    everything, tables = {}, []
     with tempfile.TemporaryDirectory(prefix='bench_system_') as tmp:
         for skill, rate, loads in cases:
             results = {load: [] for load in loads}
@@ -278,9 +281,12 @@ def main(argv=None):
                           f'{result.get("tracking_max_mm") or 0:.3f} mm '
                           f'({time.monotonic() - started:.0f} s)', flush=True)
             everything[f'{skill}@{rate:g}'] = results
-            print()
-            print(table(skill, rate, results))
-            print(flush=True)
+            tables.append(table(skill, rate, results))
+            print(f'\n{tables[-1]}\n', flush=True)
+    if not args.no_docs:
+        runs = (f'{args.runs} runs per case, interleaved; busy: one process busy-looping on a '
+                'core beside the demo; medians, and a target met when every run meets it.')
+        publish('system', '\n\n'.join(tables + [runs]), command('system', argv), load=load)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(everything, indent=1) + '\n')

@@ -39,6 +39,7 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
+from support import waiting
 
 #: Start-up of the four nodes on a loaded 2-core machine (numba caches, DDS discovery).
 STARTUP = 180.0
@@ -167,13 +168,7 @@ class Watch(BackgroundNode):
 
 def wait(predicate, timeout, what, processes=()):
     """Wait until ``predicate()``; fail naming ``what`` (and the logs of dead processes)."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        for p in processes:
-            assert p.returncode is None, f'{what}: a node exited:\n{p.log()[-3000:]}'
-        if time.monotonic() > deadline:
-            raise AssertionError(f'timed out after {timeout} s waiting for {what}')
-        time.sleep(0.01)
+    return waiting.wait_for(predicate, timeout, what, processes, period=0.01)
 
 
 class System:
@@ -294,10 +289,10 @@ def write_with_tools(sys_, watch, cli=None):
                                        'rcl_interfaces/srv/GetParameters', '{names: [skill]}'],
                                       'service_call')
         recorder = Recorder(domain, animation=False)      # subscribes every topic
-        time.sleep(0.5)
+        time.sleep(0.5)         # the subject: tools joining for 0.5 s of the motion ...
         if cli is not None:
             tools['leaving'].stop()
-        time.sleep(0.5)
+        time.sleep(0.5)         # ... and one leaving for the next 0.5 s
         recorder.close()
     try:
         joints, _, status = write(watch, sys_, during=during)
@@ -329,7 +324,7 @@ def kill_controller(sys_, watch):
     plan = watch.generalize()
     wait(tracking_started(watch, mark), 30, 'tracking', sys_.running())
     during(watch)
-    time.sleep(1.0)
+    time.sleep(1.0)             # the subject: the arm's stop watched for 1 s after the kill
     joints, _, _ = watch.since(mark)
     wall = np.array([j[0] for j in joints])
     sim = np.array([j[1] for j in joints]) * 1e-9
@@ -386,7 +381,7 @@ def restart(sys_, watch, name):
         serving = time.monotonic()
         wait(lambda: watch.goals[-1][0] > serving, RESTART, 'a goal perceived since',
              sys_.running())
-        time.sleep(1.0)
+        time.sleep(1.0)     # nothing says the service's endpoints matched: no condition
     elif name == 'perception':
         wait(lambda: watch.goals[-1][0] > since, RESTART, 'a goal perceived again',
              sys_.running())
@@ -400,7 +395,7 @@ def after_the_kill(watch, sys_, name):
     killed = {}
 
     def during(_):
-        time.sleep(KILL_AT)
+        time.sleep(KILL_AT)     # the subject: the kill KILL_AT into the path
         killed['wall_ns'] = time.time_ns()
         sys_.kill(name)
     return during, killed

@@ -259,3 +259,84 @@ def test_license_changelog_and_citation_agree_with_package_xml():
     assert 'Euclidean' in citation['preferred-citation']['title']
     for entry in [citation, citation['preferred-citation'], *citation['references']]:
         assert entry['authors'] and entry['title'], entry
+
+
+# ------------------------------------------------------------------ the benchmark results
+
+_RESULTS = re.compile(r'^<!-- results: (\S+) -->$', re.M)
+BENCHMARKS = REPO / 'test' / 'benchmarks'
+
+
+def _results_blocks():
+    """Return {(page, name)} of the results blocks in the README and docs/ (pages relative)."""
+    blocks = set()
+    for page in PAGES:
+        text = page.read_text()
+        for name in _RESULTS.findall(text):
+            assert re.search(f'^<!-- end of results: {re.escape(name)} -->$', text, re.M), (
+                f'{page.name}: the results block {name!r} has no end marker')
+            blocks.add((str(page.relative_to(REPO)), name))
+    return blocks
+
+
+def _publish_calls(scripts):
+    """
+    Return {(page, name): script} of the ``publish(name, ..., page=...)`` calls in ``scripts``.
+
+    The name and the page must be literal strings (a check that cannot see them fails); the
+    page defaults to that of :func:`publish` in test/benchmarks/_results.py.
+    """
+    import ast
+    definition = next(node for node in ast.walk(ast.parse((BENCHMARKS / '_results.py')
+                                                          .read_text()))
+                      if isinstance(node, ast.FunctionDef) and node.name == 'publish')
+    default = definition.args.defaults[definition.args.args.index(
+        next(a for a in definition.args.args if a.arg == 'page')) - len(definition.args.args)]
+    calls = {}
+    for script in scripts:
+        for node in ast.walk(ast.parse(script.read_text())):
+            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id == 'publish'):
+                continue
+            page = next((k.value for k in node.keywords if k.arg == 'page'), default)
+            name = node.args[0] if node.args else None
+            for value in (name, page):
+                assert isinstance(value, ast.Constant) and isinstance(value.value, str), (
+                    f'{script.name}:{node.lineno}: publish() with a name or page that is not a '
+                    'literal string')
+            calls[page.value, name.value] = script.name
+    return calls
+
+
+def _blocks_and_calls():
+    scripts = sorted(p for p in BENCHMARKS.glob('*.py') if p.name != '_results.py')
+    return _results_blocks(), _publish_calls(scripts)
+
+
+@pytest.mark.parametrize('page, name', sorted(_results_blocks()),
+                         ids=lambda value: value.replace('/', '_'))
+def test_every_results_block_is_written_by_a_benchmark_script(page, name):
+    _, calls = _blocks_and_calls()
+    assert (page, name) in calls, (
+        f'{page}: no script in test/benchmarks/ writes its results block {name!r} '
+        f"(publish({name!r}, ..., page='{page}'))")
+
+
+def test_every_script_s_results_have_their_block_in_their_page():
+    blocks, calls = _blocks_and_calls()
+    missing = [f'{script}: publish({name!r}) into {page}, which has no such block'
+               for (page, name), script in sorted(calls.items()) if (page, name) not in blocks]
+    assert not missing, '\n'.join(missing)
+    assert len(calls) >= 7, calls       # core (3), dmp_server, sim, controller, perception, ...
+
+
+def test_the_results_checks_find_what_is_wrong(tmp_path):
+    script = tmp_path / 'bench_x.py'
+    script.write_text("publish('x', table, command('x'))\n"
+                      "publish('y', table, command('y'), page='docs/design.md')\n"
+                      'self.pub.publish(message)\n')
+    assert _publish_calls([script]) == {('docs/benchmarks.md', 'x'): 'bench_x.py',
+                                        ('docs/design.md', 'y'): 'bench_x.py'}
+    script.write_text("publish(f'{name}', table, command('x'))\n")
+    with pytest.raises(AssertionError, match='not a literal string'):
+        _publish_calls([script])

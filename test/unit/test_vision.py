@@ -496,7 +496,7 @@ def test_blobs_that_cannot_be_an_object_are_refused(sim, detector):
     """
     Depth outside the D435's range, blobs too large, objects off the table: a Rejection each.
 
-    The attacks of issue 13: swapped depth bytes put the goal at (-11.8, 1.0, -14.9), an
+    Adversarial frames: swapped depth bytes put the goal at (-11.8, 1.0, -14.9), an
     all-green frame at z = 0.15. Nothing is located from such blobs; a good frame still is.
     """
     scene = sim.scene

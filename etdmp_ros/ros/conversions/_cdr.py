@@ -19,7 +19,7 @@ import importlib
 import struct
 from typing import Any
 
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
 
 #: Serialized message bytes (rclpy gives bytes; views of them are read too).
@@ -105,7 +105,7 @@ class CdrReader:
         self.offset += length
         return memoryview(self.data)[start:start + length]
 
-    def float64_sequence(self, limit: int | None = None) -> FloatArray:
+    def float64_sequence(self, limit: int | None = None) -> Array:
         """
         Return the next sequence<float64> as a numpy array (a copy, native byte order).
 

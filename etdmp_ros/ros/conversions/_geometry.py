@@ -19,7 +19,7 @@ from collections.abc import Iterable
 from typing import Any, cast
 
 from builtin_interfaces.msg import Time
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 from etdmp_ros.ros.conversions._path_cdr import path_to_cdr
 from geometry_msgs.msg import Point, Pose, PoseArray, PoseStamped, Quaternion
 from nav_msgs.msg import Path
@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from std_msgs.msg import Header
 
 #: One orientation (x, y, z, w), or one per pose (n, 4).
-Orientations = tuple[float, ...] | FloatArray
+Orientations = tuple[float, ...] | Array
 
 _NS = 1_000_000_000
 
@@ -44,12 +44,12 @@ def ns_to_stamp(ns: int) -> Time:
     return Time(sec=sec, nanosec=nanosec)
 
 
-def point_to_numpy(point: Any) -> FloatArray:
+def point_to_numpy(point: Any) -> Array:
     """Return a geometry_msgs/Point (or Vector3) as a (3,) array."""
     return np.array((point.x, point.y, point.z), dtype=float)
 
 
-def pose_array_to_numpy(msg: PoseArray) -> FloatArray:
+def pose_array_to_numpy(msg: PoseArray) -> Array:
     """Return the positions of a geometry_msgs/PoseArray as an (n, 3) array."""
     return np.array([(p.position.x, p.position.y, p.position.z) for p in msg.poses],
                     dtype=float).reshape(-1, 3)
@@ -74,7 +74,7 @@ def points_from_numpy(points: ArrayLike) -> list[Point]:
 
 
 def path_to_numpy(msg: Path
-                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
+                  ) -> tuple[Array, Array, Array]:
     """
     Return (t, positions, orientations) of a nav_msgs/Path.
 
@@ -102,7 +102,7 @@ def pose_stamps(n: int, t: ArrayLike | None, stamp: int) -> NDArray[np.int64]:
     return int(stamp) + np.round(times * 1e9).astype(np.int64)
 
 
-def checked_positions(positions: ArrayLike) -> FloatArray:
+def checked_positions(positions: ArrayLike) -> Array:
     """Return positions as a float (n, 3) array; ValueError for another shape."""
     array = np.asarray(positions, dtype=float)
     if array.ndim != 2 or array.shape[1] != 3:
@@ -170,8 +170,8 @@ def path_from_numpy(positions: ArrayLike, t: ArrayLike | None = None, stamp: int
     return path
 
 
-def _path_with_orientations(positions: FloatArray, stamps: NDArray[np.int64], stamp: int,
-                            frame_id: str, orientations: FloatArray) -> Path:
+def _path_with_orientations(positions: Array, stamps: NDArray[np.int64], stamp: int,
+                            frame_id: str, orientations: Array) -> Path:
     """Build the Path of :func:`path_from_numpy` with one orientation (n, 4) per pose."""
     secs, nanosecs = np.divmod(stamps, _NS)
     path = Path()

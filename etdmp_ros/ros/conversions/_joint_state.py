@@ -13,7 +13,7 @@ from collections.abc import Sequence, Sized
 from typing import Any, cast
 
 from builtin_interfaces.msg import Time
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 from etdmp_ros.limits import MAX_JOINT_STATE_JOINTS
 from etdmp_ros.robot import JOINT_NAMES
 import numpy as np
@@ -68,8 +68,8 @@ def _order(joint_names: Sequence[str], names: Sequence[str]) -> list[int]:
     return [index[name] for name in names]
 
 
-def _picked(position: ArrayLike, velocity: Sequence[float] | FloatArray, order: list[int]
-            ) -> tuple[FloatArray, FloatArray | None]:
+def _picked(position: ArrayLike, velocity: Sequence[float] | Array, order: list[int]
+            ) -> tuple[Array, Array | None]:
     positions = np.asarray(position, dtype=float)[order]
     velocities = np.asarray(velocity, dtype=float)[order] if len(velocity) else None
     if not np.all(np.isfinite(positions)) or \
@@ -79,7 +79,7 @@ def _picked(position: ArrayLike, velocity: Sequence[float] | FloatArray, order: 
 
 
 def joint_state_arrays(msg: JointState, names: Sequence[str] = JOINT_NAMES
-                       ) -> tuple[FloatArray, FloatArray | None]:
+                       ) -> tuple[Array, Array | None]:
     """
     Return ``(positions, velocities)`` of ``names`` from a JointState, reordered to ``names``.
 
@@ -91,7 +91,7 @@ def joint_state_arrays(msg: JointState, names: Sequence[str] = JOINT_NAMES
 
 
 def joint_state_from_cdr(data: Bytes, names: Sequence[str] = JOINT_NAMES
-                         ) -> tuple[int, FloatArray, FloatArray | None]:
+                         ) -> tuple[int, Array, Array | None]:
     """
     Return ``(stamp_ns, positions, velocities)`` of ``names`` from a serialized JointState.
 
@@ -123,7 +123,7 @@ def velocity_command_msg(velocities: ArrayLike) -> Float64MultiArray:
 
 
 def velocity_command_array(msg: Float64MultiArray, size: int = len(JOINT_NAMES)
-                           ) -> FloatArray:
+                           ) -> Array:
     """Return the velocities (size,) of a Float64MultiArray command; ValueError if malformed."""
     data = np.asarray(msg.data, dtype=float)
     if data.shape != (size,):

@@ -24,7 +24,7 @@ from collections.abc import Collection, Iterable
 from typing import Any
 
 from builtin_interfaces.msg import Time
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
 from numpy.typing import ArrayLike
 from std_msgs.msg import ColorRGBA
@@ -79,7 +79,7 @@ def cylinder_markers(tops: ArrayLike, radii: ArrayLike, stamp: Time | int,
 
 
 def cylinders_from_markers(msg: MarkerArray, frame_ids: Collection[str] = ('', 'base_link')
-                           ) -> tuple[FloatArray, FloatArray]:
+                           ) -> tuple[Array, Array]:
     """
     Return ``(tops (n, 3), radii (n,))`` of the CYLINDER markers ADDed in a MarkerArray.
 

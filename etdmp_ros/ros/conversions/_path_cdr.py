@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import struct
 
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -25,7 +25,7 @@ from ._cdr import Bytes
 
 _NS = 1_000_000_000
 #: Poses read from a Path: stamps (n,) ns, positions (n, 3), quaternions (n, 4).
-Poses = tuple[NDArray[np.int64], FloatArray, FloatArray]
+Poses = tuple[NDArray[np.int64], Array, Array]
 
 
 def _string(data: Bytes, offset: int, order: str) -> tuple[str, int]:

@@ -12,7 +12,7 @@ import struct
 from typing import Any
 
 from builtin_interfaces.msg import Time
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 from geometry_msgs.msg import TransformStamped
 
 
@@ -83,7 +83,7 @@ class MovingTransforms:
         if len(self._buffer) != len(data):
             raise RuntimeError('the serialized TFMessage changed size with its values')
 
-    def update(self, quaternions: FloatArray, sec: int, nanosec: int) -> bytes:
+    def update(self, quaternions: Array, sec: int, nanosec: int) -> bytes:
         """Return the message's bytes with rotations ``quaternions`` (n, 4) and the stamp."""
         buffer = self._buffer
         for (stamp, rotation), q in zip(self._offsets, quaternions.tolist()):
