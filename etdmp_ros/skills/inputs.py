@@ -29,7 +29,7 @@ class Latest:
     def __init__(self) -> None:
         """Start with nothing received."""
         self.value: Any = None
-        self.received: Optional[float] = None
+        self.received = 0.0         # meaningful once a value was received
 
     def update(self, value: Any) -> None:
         """Keep ``value``, received now."""

@@ -10,15 +10,15 @@ What dmp_server refuses beyond the planning's own checks: goals, plans the arm c
 Each raises ValueError with the reason given to the user (it names the parameters to change).
 """
 
-from typing import Optional
+from typing import NoReturn, Optional
 
 from etdmp_ros import limits
 from etdmp_ros.dmp import Demonstration, Skill
 from etdmp_ros.geometry import quaternion as quat
 from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.robot import DEFAULT_ACCELERATION_LIMITS, UR10Model
-from etdmp_ros.robot._arm_check import arm_obstacle_violation, ArmGeometry
-from etdmp_ros.robot._timing import joint_timing_violation, plan_joints
+from etdmp_ros.robot._arm_check import arm_obstacle_violation, ArmGeometry, ArmViolation
+from etdmp_ros.robot._timing import joint_timing_violation, plan_joints, TimingViolation
 from etdmp_ros.skills.planning import Plan, PlanSettings, Workspace
 import numpy as np
 from numpy.typing import NDArray
@@ -93,7 +93,8 @@ class ArmChecks:
                 _refuse_touch(touch, obstacles, radii, arm_clearance)
 
 
-def _refuse_touch(touch, obstacles, radii, arm_clearance):
+def _refuse_touch(touch: ArmViolation, obstacles: NDArray[np.float64],
+                  radii: NDArray[np.float64], arm_clearance: float) -> NoReturn:
     """Raise the arm check's refusal (an ArmViolation): the part, the obstacle, when."""
     o, r, t = obstacles[touch.obstacle], radii[touch.obstacle], touch.t
     how = (f'{-touch.gap * 1000:.0f} mm into' if touch.gap < 0.0 else
@@ -106,7 +107,8 @@ def _refuse_touch(touch, obstacles, radii, arm_clearance):
         'obstacle or the start')
 
 
-def _refuse_timing(violation, plan, skill, settings):
+def _refuse_timing(violation: TimingViolation, plan: Plan, skill: Skill,
+                   settings: PlanSettings) -> NoReturn:
     """Raise the timing check's refusal; say the shortest feasible duration."""
     tau = settings.duration or skill.tau
     if np.isfinite(violation.slowdown):
