@@ -18,7 +18,7 @@ class TrackingSummary:
     the joint states received and the largest wall-clock gap between two of them.
     """
 
-    def __init__(self, period):
+    def __init__(self, period: float) -> None:
         """Start empty; ``period`` is the control period (s)."""
         self.period = period
         self.steps = 0
@@ -26,16 +26,17 @@ class TrackingSummary:
         self.max_gap = 0.0
         self._sum_sq = 0.0
         self._max_error = 0.0
-        self._first = self._last = None
-        self._max_gap_at = None
+        self._first: float | None = None
+        self._last: float | None = None
+        self._max_gap_at: float | None = None
 
-    def joint_state(self, gap, t):
+    def joint_state(self, gap: float, t: float) -> None:
         """Count a joint state received while tracking (stamp ``t``), ``gap`` s after the last."""
         self.received += 1
         if gap > self.max_gap:
             self.max_gap, self._max_gap_at = gap, t
 
-    def step(self, t, error):
+    def step(self, t: float, error: float) -> None:
         """Count a control step at stamp ``t`` (s) with tracking error ``error`` (m)."""
         self.steps += 1
         self._sum_sq += error * error
@@ -44,11 +45,13 @@ class TrackingSummary:
         self._last = t
 
     @property
-    def periods(self):
+    def periods(self) -> int:
         """Control periods from the first to the last step, both included."""
-        return 0 if self._first is None else round((self._last - self._first) / self.period) + 1
+        if self._first is None or self._last is None:
+            return 0
+        return round((self._last - self._first) / self.period) + 1
 
-    def figures(self):
+    def figures(self) -> dict[str, float]:
         """
         Return the figures as a dict (mm, ms, s; the event ``path_tracked``'s values).
 
@@ -62,7 +65,7 @@ class TrackingSummary:
                 'largest_gap_at_s': (math.nan if self._max_gap_at is None
                                      else float(self._max_gap_at))}
 
-    def summary(self):
+    def summary(self) -> str:
         """Return the figures as one line of text."""
         f = self.figures()
         return (f'error RMS {f["error_rms_mm"]:.3f} mm, max {f["error_max_mm"]:.3f} mm; '
@@ -85,17 +88,18 @@ class InputWatch:
     never the messages' stamps, which a wrong publisher can set to anything.
     """
 
-    def __init__(self, timeout, stall_timeout):
+    def __init__(self, timeout: float, stall_timeout: float) -> None:
         """Timeouts in seconds (``stall_timeout`` applies only to simulated time)."""
         self.timeout = timeout
         self.stall_timeout = stall_timeout
-        self._robot = None      # robot time (ns) of the latest receipt
-        self._wall = None       # steady time (ns) of the latest receipt
-        self._stamp = None      # stamp (ns) of the latest joint state accepted
-        self._arrived = None    # stamp (ns) of the latest plausible joint state to arrive
+        self._robot: int | None = None      # robot time (ns) of the latest receipt
+        self._wall: int | None = None       # steady time (ns) of the latest receipt
+        self._stamp: int | None = None      # stamp (ns) of the latest joint state accepted
+        self._arrived: int | None = None    # stamp (ns) of the latest plausible one to arrive
         self._simulated = False
 
-    def received(self, robot_ns, wall_ns, simulated, stamp_ns=None):
+    def received(self, robot_ns: int, wall_ns: int, simulated: bool,
+                 stamp_ns: int | None = None) -> None:
         """Note a joint state (stamped ``stamp_ns``) received at these robot and steady times."""
         if simulated != self._simulated:
             self._stamp = self._arrived = None
@@ -103,7 +107,8 @@ class InputWatch:
         if stamp_ns is not None:
             self._stamp = stamp_ns
 
-    def implausible(self, stamp_ns, robot_ns, simulated, wall_ns=None):
+    def implausible(self, stamp_ns: int, robot_ns: int, simulated: bool,
+                    wall_ns: int | None = None) -> str:
         """
         Return why a joint state stamped ``stamp_ns`` cannot be the robot's ('' if it can).
 
@@ -128,6 +133,7 @@ class InputWatch:
         """
         if self._stamp is None or simulated != self._simulated:
             return ''
+        assert self._robot is not None and self._wall is not None   # set with _stamp
         advance = (stamp_ns - self._stamp) * 1e-9
         skew = advance - (robot_ns - self._robot) * 1e-9
         if abs(skew) <= self.timeout or (skew < 0.0 and advance > 0.0):
@@ -139,7 +145,7 @@ class InputWatch:
                 f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '
                 f'clock advanced {(robot_ns - self._robot) * 1e-9:.3f} s), not from the robot')
 
-    def gap(self, stamp_ns, simulated):
+    def gap(self, stamp_ns: int, simulated: bool) -> str:
         """
         Return why the joint states before this one (stamped ``stamp_ns``) were lost, or ''.
 
@@ -155,10 +161,11 @@ class InputWatch:
         return (f'none for {(stamp_ns - previous) * 1e-9:.3f} s of {clock} time: those '
                 'between the last two never came')
 
-    def lost(self, robot_ns, wall_ns, simulated):
+    def lost(self, robot_ns: int, wall_ns: int, simulated: bool) -> str:
         """Return why the joint states count as lost at these times ('' if they do not)."""
         if self._wall is None:
             return 'never received'
+        assert self._robot is not None                               # set with _wall
         if simulated != self._simulated:        # use_sim_time switched: start afresh
             self.received(robot_ns, wall_ns, simulated)
             return ''

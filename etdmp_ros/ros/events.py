@@ -22,10 +22,13 @@ finds it late still gets what happened at start-up. Reliable: none is lost to a 
 The human log lines stay as they were; nothing reads their text.
 """
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 import time
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from etdmp_ros.geometry.arrays import Array
 from etdmp_ros.ros import qos, topics
 import numpy as np
 
@@ -39,7 +42,7 @@ WALL_CLOCK = 'wall_clock_ns'
 TYPE_NAME = 'diagnostic_msgs/msg/DiagnosticArray'
 
 
-def _text(value):
+def _text(value: Any) -> str:
     """Return a value as an event's text (see the module docstring)."""
     if isinstance(value, (bool, np.bool_)):
         return 'true' if value else 'false'
@@ -55,12 +58,12 @@ def _text(value):
 class EventPublisher:
     """A node's ``~/events`` publisher (:meth:`publish`, :meth:`flush`)."""
 
-    def __init__(self, node, topic=topics.EVENTS):
+    def __init__(self, node: Any, topic: str = topics.EVENTS) -> None:
         """Create the latched publisher on ``node``."""
         self._node = node
         self._publisher = node.create_publisher(DiagnosticArray, topic, qos.latched(HISTORY))
 
-    def publish(self, kind, message='', level=OK, **values):
+    def publish(self, kind: str, message: str = '', level: int = OK, **values: Any) -> None:
         """
         Publish one event: ``kind``, the human ``message``, its ``level``, its facts ``values``.
 
@@ -75,7 +78,7 @@ class EventPublisher:
         array.header.stamp = self._node.get_clock().now().to_msg()
         self._publisher.publish(array)
 
-    def flush(self, timeout=0.5):
+    def flush(self, timeout: float = 0.5) -> bool:
         """Wait up to ``timeout`` s until every subscriber has every event (before exiting)."""
         from rclpy.duration import Duration
         return self._publisher.wait_for_all_acked(Duration(seconds=timeout))
@@ -90,31 +93,31 @@ class Event:
     level: int
     message: str
     stamp_ns: int
-    values: dict = field(default_factory=dict)
+    values: dict[str, str] = field(default_factory=dict)
 
     @property
-    def wall_ns(self):
+    def wall_ns(self) -> int:
         """Return the wall clock (ns since the epoch) when it happened."""
         return int(self.values[WALL_CLOCK])
 
-    def number(self, key):
+    def number(self, key: str) -> float | None:
         """Return value ``key`` as a float (None if the event has no such value)."""
         return float(self.values[key]) if key in self.values else None
 
-    def integer(self, key):
+    def integer(self, key: str) -> int | None:
         """Return value ``key`` as an int (None if the event has no such value)."""
         return int(self.values[key]) if key in self.values else None
 
-    def numbers(self, key):
+    def numbers(self, key: str) -> Array:
         """Return value ``key`` as a float array (empty if the event has no such value)."""
         return np.array([float(v) for v in self.values.get(key, '').split()])
 
-    def flag(self, key):
+    def flag(self, key: str) -> bool:
         """Return value ``key`` as a bool (False if the event has no such value)."""
         return self.values.get(key) == 'true'
 
 
-def from_message(msg):
+def from_message(msg: Any) -> list['Event']:
     """Return the :class:`Event` s of a DiagnosticArray published by :class:`EventPublisher`."""
     stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
     found = []
@@ -127,6 +130,6 @@ def from_message(msg):
     return found
 
 
-def of_kind(events, node, kind):
+def of_kind(events: Iterable['Event'], node: str, kind: str) -> list['Event']:
     """Return the events of ``node`` (its name, without namespace) of ``kind``, in order."""
     return [e for e in events if e.node == node and e.kind == kind]

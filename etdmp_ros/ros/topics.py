@@ -54,7 +54,7 @@ PAUSE = '~/pause'
 EVENTS = '~/events'
 
 
-def of_node(name, node):
+def of_node(name: str, node: str) -> str:
     """
     Return node ``node``'s private ``~/`` name as another node subscribes it (relative).
 
@@ -66,7 +66,7 @@ def of_node(name, node):
     return f'{node}/{name[2:]}'
 
 
-def absolute(name, node=''):
+def absolute(name: str, node: str = '') -> str:
     """
     Return ``name`` as seen from the root namespace: ``/<name>``, ``/<node>/...`` for ``~/``.
 
