@@ -9,6 +9,7 @@ The launch file runs for real, with `ros2 launch`, in test_ros2_cli.py.
 
 import signal
 import subprocess
+import time
 
 from conftest import sourced
 from etdmp_ros.ros import system
@@ -55,9 +56,16 @@ def test_bringup_runs_the_system_in_one_process(colcon_install, ros_env, tmp_pat
                       'the four nodes', process)
         listener.wait(lambda: len(listener.goals) > 0, 60, 'a perceived goal', process)
         assert listener.generalize.wait_for_service(timeout_sec=30)
-        future = listener.generalize.call_async(GetPlan.Request())   # empty frame ids
-        listener.wait(future.done, 30, 'the /generalize response', process)
-        plan = future.result().plan
+        # dmp_server may not have taken the goal the listener saw yet: it then refuses ("no
+        # perceived goal yet"), an empty plan; ask again until it has, as a client would.
+        deadline = time.monotonic() + 30.0
+        while True:
+            future = listener.generalize.call_async(GetPlan.Request())   # empty frame ids
+            listener.wait(future.done, 30, 'the /generalize response', process)
+            plan = future.result().plan
+            if plan.poses or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
         assert len(plan.poses) > 100, log_path.read_text()
         goal = listener.goals[-1].point
         end = plan.poses[-1].pose.position
