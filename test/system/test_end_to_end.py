@@ -26,8 +26,9 @@ is moved by 4 cm (ur10_sim's ``goal_position``, as ``ros2 param set`` would; the
 ``--move-goal``). The pen ends within 2 mm of the new marker, every command within the
 velocity and acceleration limits, no stop-and-go at the switch of plans (the tool's speed at
 least 20 % of the plan's there, unless the plan itself slows) and no second approach, and the
-trace keeps the demonstration's shape placed at the new goal (nRMSE within twice the no-move
-run's + 0.05; the G-idle run's metrics are reused).
+trace keeps the demonstration's shape placed at the new goal (nRMSE within the move's own
+cost, online ET-DMP's in the core, plus twice the no-move run's + 0.05; the G-idle run's metrics
+are reused).
 
 Contacts: in every run the simulation's ground truth (/ur10_sim/ground_truth/contacts,
 recorded in demo.mcap) shows no link and not the tool touching an obstacle, the bottle or the
@@ -155,8 +156,10 @@ def test_every_letter_is_written_to_its_end_without_contact(letter):
     assert m['min_clearance_mm'] > 0.0
     assert 'contacts (simulation): none' in demo.summary(m, [])
     if m['skill'] == 'W':
-        # In its own 2 s: 3 s with the detour of the obstacle margin, no stop.
-        assert m['plan_duration_s'] == pytest.approx(3.0, abs=0.02)
+        # In its own 2 s, no stop. The plan lasts exactly the 2 s asked for: the detour (the
+        # avoidance with the perceived radii) keeps the obstacle-free timing; only the paper's
+        # coupling adds the run-on obstacle_margin (0.5 tau, which made it 3 s before).
+        assert m['plan_duration_s'] == pytest.approx(2.0, abs=0.02)
         assert 'contacts' in json.loads((out / 'metrics.json').read_text())
 
 
@@ -389,9 +392,17 @@ def test_moved_goal_no_stop_and_go_and_no_second_approach(moved):
 def test_moved_goal_keeps_the_shape(moved):
     m, _, still = moved
     # The trace against the demonstration placed at the new goal (the nRMSE takes the trace
-    # relative to its own end, the moved marker), within twice the no-move run's + 0.05.
-    assert m['nrmse_trace'] <= 2.0 * still['nrmse_trace'] + 0.05, (m['nrmse_trace'],
-                                                                   still['nrmse_trace'])
+    # relative to its own end, the moved marker): what online ET-DMP itself makes of this move
+    # (nrmse_move_reference: the core, no ROS, no obstacles, the same start, goals and switch)
+    # plus twice the no-move run's + 0.05. The move's own cost is there however well the
+    # system follows: the part written before the switch was written for the old goal (G:
+    # ~0.37 with no obstacle at all). The bound without it (2 x no-move + 0.05) held only while
+    # the paper's coupling made the no-move run cost 0.31; the detour's 0.06 leaves 0.17,
+    # which online ET-DMP cannot reach for a goal moved at 45 % of the G.
+    assert m['nrmse_move_reference'] is not None
+    assert m['nrmse_trace'] <= (m['nrmse_move_reference'] + 2.0 * still['nrmse_trace']
+                                + 0.05), (m['nrmse_trace'], m['nrmse_move_reference'],
+                                          still['nrmse_trace'])
     assert m['min_clearance_mm'] > 0.0
     if m['skill'] == 'stir':
         # The stirrer never touched the bottle's wall, measured against the bottle where it

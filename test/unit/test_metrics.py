@@ -4,8 +4,8 @@ import math
 
 from etdmp_ros.demo.metrics import (compute_metrics, contact_figures, cylinder_gap,
                                     executed_plan, fit_tracking_start, FOLLOW_CONFIRMATIONS,
-                                    goal_seen_after_move, Run, switch_index, switch_speeds,
-                                    system_figures)
+                                    goal_seen_after_move, move_reference_nrmse, Run, switch_index,
+                                    switch_speeds, system_figures)
 from etdmp_ros.demo.scenario import Scenario
 from etdmp_ros.geometry.task_plane import quadrant
 from etdmp_ros.ros.events import Event, WALL_CLOCK
@@ -249,6 +249,9 @@ def test_a_moved_goal_is_measured_against_the_new_marker_and_the_executed_plan()
     assert m['switch_speed_ratio_min'] == pytest.approx(1.0, abs=0.03)
     assert m['nrmse_original_plan'] != m['nrmse_plan']
     assert 0.0 < m['nrmse_trace_own_end'] < m['nrmse_trace'] + 0.1
+    # The move's own cost (the core's online ET-DMP at the same switch): a 4 cm move at a third
+    # of the G costs shape however well it is followed.
+    assert m['nrmse_move_reference'] > 0.1
     np.testing.assert_allclose(extra['executed'][1][-1], m['executed_plan_end'])
     follow = m['goal_follow']
     assert follow['goal_moved_at_path_time_s'] == pytest.approx(1.5, abs=2e-4)
@@ -270,6 +273,7 @@ def test_a_moved_goal_not_followed_fails_the_checks():
     # The nRMSE places the demonstration at the moved marker, where the trace did not go.
     assert m['nrmse_trace'] > m['nrmse_trace_own_end'] + 0.05
     assert m['plan_updates'] == 0 and m['switch_path_time_s'] is None
+    assert m['nrmse_move_reference'] is None
     assert m['switch_speed_ratio_min'] is None
     assert m['goal_follow']['dmp_server_ms'] is None and m['goal_follow']['end_to_end_ms'] is None
 
@@ -280,3 +284,15 @@ def test_a_run_without_a_move_keeps_its_keys():
     m, extra = compute_metrics(run)
     assert 'goal_moved_by_mm' not in m and 'goal_follow' not in m and 'switch' not in extra
     assert m['goal_error_mm'] < 1e-6                  # the marker as it was: the plan's end
+
+
+def test_the_move_reference_is_online_etdmp_s_own_cost_of_the_move():
+    """The core's online ET-DMP: a move at the start costs little, later ones more."""
+    scene = Scenario(config_dir=None, skill='G')
+    start, goal = np.array([0.775, 0.164, 0.0]), np.array([0.8385, 0.0997, 0.0])
+    moved = goal + [0.0, 0.04, 0.0]
+    costs = [move_reference_nrmse(scene, start, goal, moved, t, 4.0) for t in (0.0, 1.0, 1.8, 3.0)]
+    assert costs[0] < 0.02 and np.all(np.diff(costs) > 0.0), costs
+    # The demo's move (4 cm at ~45 % of the G): ~0.36 with no obstacle at all.
+    assert 0.3 < costs[2] < 0.45, costs
+    assert move_reference_nrmse(scene, start, goal, goal, 1.8, 4.0) < 0.01    # no move

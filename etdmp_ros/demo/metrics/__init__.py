@@ -26,8 +26,8 @@ from etdmp_ros.demo.metrics._compute import command_ratios, compute_metrics, sta
 from etdmp_ros.demo.metrics._definitions import (DEFINITIONS, MOVE_DEFINITIONS, SLOW_PLAN,
                                                  SWITCH_WINDOW, SYSTEM_DEFINITIONS)
 from etdmp_ros.demo.metrics._moved_goal import (follow_latencies, goal_move_figures,
-                                                goal_seen_after_move, path_speed,
-                                                perceived_goal_rows, switch_speeds)
+                                                goal_seen_after_move, move_reference_nrmse,
+                                                path_speed, perceived_goal_rows, switch_speeds)
 from etdmp_ros.demo.metrics._orientation import demo_turned, orientation_figures
 from etdmp_ros.demo.metrics._run import format_nrmse, MeasurementError, Run
 from etdmp_ros.demo.metrics._system import system_figures
@@ -40,7 +40,8 @@ __all__ = [
     'SLOW_PLAN', 'SWITCH_WINDOW', 'SYSTEM_DEFINITIONS', 'bottle_clearances', 'clearance_mm',
     'command_ratios', 'compute_metrics', 'contact_figures', 'cylinder_gap', 'demo_turned',
     'executed_plan', 'fit_tracking_start', 'follow_latencies', 'format_nrmse',
-    'goal_move_figures', 'goal_seen_after_move', 'matched_errors', 'nrmse_over_tau',
+    'goal_move_figures', 'goal_seen_after_move', 'matched_errors', 'move_reference_nrmse',
+    'nrmse_over_tau',
     'obstacle_radii', 'orientation_figures', 'path_speed', 'perceived_goal_rows',
     'start_direction', 'switch_index', 'switch_speeds', 'system_figures', 'tracking_errors',
 ]

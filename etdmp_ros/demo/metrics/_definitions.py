@@ -71,6 +71,11 @@ MOVE_DEFINITIONS = {
                         'projected onto the task plane; goal_error_vs_first_marker_mm: to '
                         'where it was when the plan was requested',
     'goal_moved_by_mm': 'distance between the marker before and after the move (true positions)',
+    'nrmse_move_reference': "the nRMSE (as nrmse_trace) of the core's online ET-DMP "
+                            '(etdmp_ros.skills.following.FollowedPlan, no ROS, no obstacles) '
+                            "from the run's start to the first goal with the goal moved to the "
+                            'final one at switch_path_time_s: what the move itself costs (the '
+                            'part written before the switch was written for the old goal)',
     'switch': 'switch_path_time_s: first path time at which the executed plan departs from the '
               'original plan (> 1 nm): where dmp_server re-planned from; switch_time_s: that, '
               'simulated s after the /generalize call',

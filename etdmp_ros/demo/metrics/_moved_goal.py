@@ -11,8 +11,10 @@ import math
 from etdmp_ros.demo.metrics._clearance import clearance_mm, obstacle_radii
 from etdmp_ros.demo.metrics._definitions import SLOW_PLAN, SWITCH_WINDOW
 from etdmp_ros.demo.metrics._trace import nrmse_over_tau
+from etdmp_ros.dmp import learn
 from etdmp_ros.ros import events as ev
-from etdmp_ros.skills.following import FOLLOW_CONFIRMATIONS, goal_moved, MovedInput
+from etdmp_ros.skills.following import FOLLOW_CONFIRMATIONS, FollowedPlan, goal_moved, MovedInput
+from etdmp_ros.skills.planning import plan_path, PlanSettings
 import numpy as np
 
 
@@ -193,6 +195,7 @@ def goal_move_figures(run, tr, ex):
         'plan_updates': ex.updates,
         'switch_path_time_s': None, 'switch_time_s': None, 'switch_point': None,
         'switch_speed_ratio_min': None, 'switch_tool_speed_min_fraction': None,
+        'nrmse_move_reference': None,
     }
     seen = perceived_goal_rows(run)
     if len(seen):
@@ -208,8 +211,33 @@ def goal_move_figures(run, tr, ex):
                        switch_point=ex.x[ex.switch].tolist())
         figures.update(switch_speeds(tr.tip_t, tr.tip_x, tr.t0, ex.t, ex.x, t_switch,
                                      min(published) if published else None))
+        figures['nrmse_move_reference'] = move_reference_nrmse(
+            scene, ex.x[0], run.plan[1][-1], tr.goal, t_switch, tr.tau)
     figures['goal_follow'] = follow_latencies(run, ex, tr.t0)
     return figures
+
+
+def move_reference_nrmse(scene, start, goal, moved_goal, t_switch, tau):
+    """
+    Return the nRMSE of the core's online ET-DMP for a goal moved at ``t_switch`` (no obstacles).
+
+    The skill (learned from ``scene.demo`` as dmp_server learns it) is planned from ``start`` to
+    ``goal`` in ``tau`` and followed (:class:`FollowedPlan`) with the goal moved to
+    ``moved_goal`` from path time ``t_switch`` on; measured as ``nrmse_trace`` is, against the
+    demonstration placed at ``moved_goal``. What the move costs by itself, without the system.
+    """
+    server = scene.server
+    skill = learn(scene.demo, n_basis=int(server['n_basis']), formulation=server['formulation'])
+    settings = PlanSettings(mode=int(server.get('mode', 1)),
+                            independent_axis=int(server.get('independent_axis', 2)),
+                            duration=float(tau))
+    plane = scene.plane if scene.planar else None
+    plan = plan_path(skill, np.asarray(start, float), np.asarray(goal, float), (), settings,
+                     plane)
+    followed = FollowedPlan(skill, plan, settings, plane)
+    followed.update(float(t_switch), goal=np.asarray(moved_goal, dtype=float))
+    return nrmse_over_tau(np.asarray(followed.positions), tau, np.asarray(followed.t), scene,
+                          end=moved_goal)
 
 
 def moved_bottle_mouths(run, tr, ex):
