@@ -39,15 +39,13 @@ from typing import Optional, Tuple, Union
 from etdmp_ros import limits
 from etdmp_ros.dmp import (AVOIDANCES, euclidean_transform, GeneralizationError, METHODS,
                            ObstacleGains, Skill, Trajectory)
-from etdmp_ros.geometry.arrays import Array as FloatArray
+from etdmp_ros.geometry.arrays import Array
 from etdmp_ros.geometry.quaternion import unit_and_norm
 from etdmp_ros.geometry.task_plane import TaskPlane
 from etdmp_ros.robot import PEN_RADIUS
 import numpy as np
 from numpy.typing import ArrayLike
 
-#: A float array (its shape in the docstrings).
-Array = FloatArray
 
 #: Tool orientation (x, y, z, w) in base_link that points the tool's z axis down (-z of
 #: base_link), as at the scene's initial joint positions: the pen/stirrer points at the table.
