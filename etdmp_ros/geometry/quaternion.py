@@ -185,7 +185,8 @@ def left_jacobian(r: ArrayLike, r_dot: ArrayLike) -> Array:
     Return ``omega = J(r) dr/dt`` (..., 3): the angular velocity of ``exp(r(t) / 2)``.
 
     ``J(r) = I + (1 - cos a)/a^2 [r]x + (a - sin a)/a^3 [r]x^2`` (``a = |r|``) is the left
-    Jacobian of the rotation group: ``d/dt exp(r/2) = 1/2 omega exp(r/2)``, omega in the fixed frame.
+    Jacobian of the rotation group: ``d/dt exp(r/2) = 1/2 omega exp(r/2)``, omega in the
+    fixed frame.
     """
     r = np.asarray(r, dtype=float)
     r_dot = np.asarray(r_dot, dtype=float)
