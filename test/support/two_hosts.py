@@ -439,7 +439,7 @@ def link_down_mid_letter(hosts, seconds=0.5, at=0.4, timeout=30.0):
         progress(f'taught dmp_server the skill {TAUGHT!r}')
         recorder.set_server_parameters(method='etdmp', execute=True)
         seen = len(recorder.state())
-        _, plan_t, _, _, reason = demo._generalize(recorder, nodes, scenario.request_goal)
+        _, plan_t, _, _, reason = demo._generalize(recorder, scenario.request_goal)
         if not len(plan_t):
             raise RuntimeError(f'/generalize refused the first letter: {reason}')
         tau = float(scenario.server['duration']) or float(scenario.demo.duration)
@@ -464,7 +464,7 @@ def link_down_mid_letter(hosts, seconds=0.5, at=0.4, timeout=30.0):
         _wait(lambda: recorder.sim_ns > since + int(0.1e9), timeout, 'the pen tip', nodes)
         recorder.set_server_parameters(method='etdmp', execute=False, skill=TAUGHT)
         while True:
-            _, plan_t, _, _, reason = demo._generalize(recorder, nodes, scenario.request_goal,
+            _, plan_t, _, _, reason = demo._generalize(recorder, scenario.request_goal,
                                                        attempts=1)
             if len(plan_t):
                 planned = time.monotonic()
