@@ -90,11 +90,14 @@ MOVE_GOAL_BY = {'G': [0.0, 0.04, 0.0], 'P': [0.0, 0.04, 0.0], 'R': [0.04, 0.0, 0
 MOVE_GOAL_AT = 0.4
 #: Stir with ``--move-goal``: the bottle moves by this (base_link, m; ur10_sim's
 #: ``bottle.position``) at MOVE_BOTTLE_AT of the stir's duration, while the stirrer comes down
-#: towards the mouth (at 10 % it is 0.11 m above it, and enters it at about 22 %). Not later:
-#: a bottle put 2 cm away in an instant while the stirrer circles 25 mm from its axis inside
-#: it would push its wall through the stirrer before any plan could follow.
+#: towards the mouth (at 5 % it is 9 cm above it and enters it at about 22 %; the re-plan takes
+#: effect some 0.2 s after the move). Not later: a bottle put 2 cm away in an instant while the
+#: stirrer circles 25 mm from its axis inside it would push its wall through the stirrer before
+#: any plan could follow, and a move at 10 % (since plans end at rest in tau, the stir's 5 s)
+#: left the re-planned stirrer grazing the rim (3-5 ticks of contact, 7.3 mm between the tip and
+#: the wall; at 5 %: none, 9.0 mm).
 MOVE_BOTTLE_BY = [0.0, 0.02, 0.0]
-MOVE_BOTTLE_AT = 0.1
+MOVE_BOTTLE_AT = 0.05
 
 
 class ScenarioError(ValueError):

@@ -37,7 +37,7 @@ and W in its own 2 s (the "unexplained stop" once seen) are run for that too, ea
 its end: tracked, held, the goal reached within 5 mm, commands within the limits.
 
 Case ``stir-move`` (idle only): the same checks while stirring, with the bottle moved by 2 cm
-(ur10_sim's ``bottle.position``) at 10 % of the stir, the stirrer coming down towards its mouth;
+(ur10_sim's ``bottle.position``) at 5 % of the stir, the stirrer coming down towards its mouth;
 the request targets the perceived bottle (/etdmp/bottle, dmp_server's ``goal_object: bottle``
 with the demonstration's goal offset). The stirrer ends within 2 mm of the goal in the moved
 bottle and never touches its wall (the clearance against the bottle where it stood at each
