@@ -48,7 +48,7 @@ import platform
 import sys
 import time
 
-from _results import add_option, command, printed, publish
+from _results import _cpu_model, add_option, command, printed, publish
 from etdmp_ros.dmp import (builtin_demo, clearance, compare_goal_jump, goal_jump_case,
                            GOAL_JUMP_WAYS, learn, nrmse)
 import numpy as np
@@ -610,16 +610,6 @@ def _version(dist):
             import etdmp_ros
             return getattr(etdmp_ros, '__version__', 'source tree')
         return 'not installed'
-
-
-def _cpu_model():
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or 'unknown'
 
 
 def _environment():
