@@ -2,6 +2,6 @@
 
 import sys
 
-from etdmp_ros.demo.run import main
+from etdmp_ros.demo.cli import main
 
 sys.exit(main())

@@ -332,16 +332,22 @@ class DmpServer(Node):
         return self._inputs.perceived_goal(settings.goal_object, settings.goal_max_age,
                                            settings.goal_offset)
 
-    def _current_volumes(self, settings):
+    def _current_volumes(self, settings, new_plan=False):
         """
         Return the obstacles to plan around: (points (m, 3), radii (m,) in metres).
 
         The perceived ones (/etdmp/obstacles), each with the radius of the nearest volume
         (/etdmp/obstacle_volumes), then ``static_obstacles`` (points: radius 0). Stale ones and
-        ones without a volume are warned about.
+        ones without a volume are warned about. For a ``new_plan``, perceived obstacles while
+        /etdmp/obstacle_volumes has a publisher but no volume has arrived yet (its subscription
+        matched after the points') raise ValueError: planned as points they would be hit.
         """
         points, radii, stale, unsized = self._inputs.obstacles_with_radii(
             settings.obstacle_max_age, settings.static_obstacles)
+        if unsized and new_plan and self._inputs.volumes.value is None and \
+                self.count_publishers(topics.OBSTACLE_VOLUMES) > 0:
+            raise ValueError(f'{unsized} perceived obstacle(s) but no volume received yet on '
+                             '/etdmp/obstacle_volumes (it has a publisher)')
         if stale:
             self.get_logger().warn('/etdmp/obstacles is older than obstacle_max_age '
                                    f'{settings.obstacle_max_age:g} s: ignored',
@@ -430,7 +436,7 @@ class DmpServer(Node):
         Raises ValueError or ArithmeticError with the reason: the goal's checks, the planning's
         and the timing check's.
         """
-        obstacles, radii = self._current_volumes(settings)
+        obstacles, radii = self._current_volumes(settings, new_plan=True)
         skill = self._library.skill(settings.skill, settings.formulation, settings.n_basis)
         check_goal(goal, skill, settings.plan.workspace, settings.plane, settings.skill)
         with self._core_lock, np.errstate(over='raise', invalid='raise', divide='raise'):

@@ -50,6 +50,7 @@ import json
 from conftest import busy_core
 import cv2
 from etdmp_ros.demo import run as demo
+from etdmp_ros.demo.cli import summary
 from etdmp_ros.demo.recording import NOT_RECORDED, read_streams
 from etdmp_ros.ros import system
 from etdmp_ros.ros.config_files import read_parameter_file
@@ -154,7 +155,7 @@ def test_every_letter_is_written_to_its_end_without_contact(letter):
     assert m['goal_error_mm'] < 5.0
     assert m['tracking_rms_mm'] < 1.0
     assert m['min_clearance_mm'] > 0.0
-    assert 'contacts (simulation): none' in demo.summary(m, [])
+    assert 'contacts (simulation): none' in summary(m, [])
     if m['skill'] == 'W':
         # In its own 2 s, no stop. The plan lasts exactly the 2 s asked for: the detour (the
         # avoidance with the perceived radii) keeps the obstacle-free timing; only the paper's
