@@ -43,15 +43,21 @@ MAX_PATH_POSES = 20000
 FLOOD = textwrap.dedent("""
     import sys, time
     import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
     rclpy.init()
     node = rclpy.create_node('joint_state_flood')
-    pub = node.create_publisher(JointState, '/joint_states', 10)
+    # Best effort, as the controller reads joint states: matched to the controller alone (not
+    # to the test's reliable reader) and without the reliable protocol's bookkeeping, a UDP
+    # send per message to the subject. (A reliable flood, sent to both readers, reached only
+    # 11.7 of its 13 kHz on an idle AMD EPYC.)
+    pub = node.create_publisher(JointState, '/joint_states',
+                                QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
     # Published as its serialized bytes: the same message on the wire, without rclpy's
     # conversion each time (which kept a flood next to a busy core at 10.6 of its 13 kHz).
     msg = serialize_message(JointState(name=['a', 'b', 'c'], position=[0.0, 1.0, 2.0]))
-    while pub.get_subscription_count() < 2:            # the controller and the test client
+    while pub.get_subscription_count() < 1:            # the controller
         time.sleep(0.05)
     # Matched here; the readers' side may match a moment later, which this process cannot see
     # (the test starts the letter only after 'flooding', so nothing depends on this wait).

@@ -12,7 +12,7 @@ import subprocess
 import time
 
 from conftest import sourced
-from etdmp_ros.ros import system
+from etdmp_ros.ros import fastdds_files, system
 from etdmp_ros.ros.background import BackgroundNode
 from geometry_msgs.msg import PointStamped
 from nav_msgs.srv import GetPlan
@@ -80,6 +80,7 @@ def test_bringup_runs_the_system_in_one_process(colcon_install, ros_env, tmp_pat
         except subprocess.TimeoutExpired:
             process.kill()
             code = process.wait()
+            fastdds_files.clean()      # what a killed process leaves in /dev/shm
         try:
             wait_for(lambda: listener.commands and not np.any(listener.commands[-1]), 10.0,
                      'a zero velocity command after Ctrl-C')

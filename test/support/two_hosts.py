@@ -49,7 +49,7 @@ import threading
 import time
 from xml.etree import ElementTree
 
-from etdmp_ros.ros import system
+from etdmp_ros.ros import fastdds_files, system
 from etdmp_ros.ros.paths import config_path
 
 ROBOT, WORKSTATION = 'robot', 'workstation'
@@ -236,9 +236,15 @@ class TwoHosts:
 
     def close(self):
         """Kill what still runs inside (all of it started here), remove the namespaces."""
-        for pid in self.pids():
+        killed = self.pids()
+        for pid in killed:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
+        deadline = time.monotonic() + 5.0
+        while self.pids() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        if killed:      # their Fast DDS files (/dev/shm is shared): as a next start removes them
+            fastdds_files.clean()
         for name in reversed(self._made):
             _ip('netns', 'del', name, check=False)
         self._made = []
