@@ -14,7 +14,7 @@ LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 ROS_TOOLS   ?= ../shared/ros
 ROS_STAMP   := $(VENV)/.ros-tools
 
-.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs docs-site config bench bench-two-hosts clean distclean help
+.PHONY: venv ros-tools browser test test-fast lint demo teach kinesthetic reproduce docs docs-site config bench bench-two-hosts clean distclean help
 .DEFAULT_GOAL := help
 
 help:
@@ -24,7 +24,8 @@ help:
 	@echo "                then make demo SKILL=stir DEMO_FILE=out/kinesthetic/stir_by_hand.mcap repeats it"
 	@echo "make reproduce  the paper's letter experiments, offline -> out/reproduce/"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
-	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
+	@echo "make test-fast  only the unit tests, on both cores (no ROS processes, no linters)"
+	@echo "make lint       flake8, pep257, mypy and the docs site with warnings as errors"
 	@echo "make docs       regenerate the README pictures in docs/img/"
 	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
@@ -75,8 +76,13 @@ test: $(STAMP) ros-tools browser
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
 
 # The suites are folders: test/unit, test/nodes, test/system (test/conftest.py marks them).
+# test-fast: the unit tests on both cores, without the checks of the whole tree (marked
+# `linter`: flake8, pep257, mypy, the docs site), which `make lint` runs; make test runs all.
 test-fast: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m pytest -q test/unit
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -n 2 -m 'not linter' test/unit
+
+lint: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -m linter test/unit
 
 # The closed loop: camera -> perception -> /generalize -> controller -> MuJoCo UR10 (out/demo/).
 # MOVE_GOAL=1: the goal marker moves by 4 cm while the pen writes (online ET-DMP, --move-goal);
