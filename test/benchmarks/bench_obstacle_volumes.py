@@ -247,7 +247,7 @@ def radii_table(r):
         f'{h["radius_mm"]["median"]:.2f} / {h["radius_mm"]["p90"]:.2f} / '
         f'{h["radius_mm"]["max"]:.2f} | |',
         '',
-        f'Detection per frame (medians of {d["measured"]["n"]} frames each, interleaved): '
+        f'Detection per frame (medians of {d["measured"]["n"]} frames each, interleaved):\n'
         f'{d["measured"]["median"]:.2f} ms with the radii measured, '
         f'{d["known"]["median"]:.2f} ms with the radius known.'])
 

@@ -302,7 +302,7 @@ def main(argv=None):
         rng = np.random.default_rng(args.seed)
         rows = [time_core(name, args.updates, rng) for name in args.skills]
         note = (f"Each sample a fresh FollowedPlan of the demo's plan, its goal moved at a "
-                f'random path time; {WARM_UP} warm-up samples left out.')
+                f'random path time;\n{WARM_UP} warm-up samples left out.')
         print(core_table(rows), flush=True)
         print(f'\n{note}\n')
         if not args.no_docs and args.skills == ['G', 'W', 'stir']:
