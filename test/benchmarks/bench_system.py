@@ -246,7 +246,7 @@ def main(argv=None):
                         'freezing its heap')
     add_option(parser)
     args = parser.parse_args(argv)
-    load = os.getloadavg()[0]
+    load_at_start = os.getloadavg()[0]     # not `load`: the loop below names each case's load
     if args.gc_pauses:
         gc_pauses()
         return 0
@@ -287,7 +287,8 @@ def main(argv=None):
     if not args.no_docs:
         runs = (f'{args.runs} runs per case, interleaved; busy: one process busy-looping on a '
                 'core beside the demo; medians, and a target met when every run meets it.')
-        publish('system', '\n\n'.join(tables + [runs]), command('system', argv), load=load)
+        publish('system', '\n\n'.join(tables + [runs]), command('system', argv),
+                load=load_at_start)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(everything, indent=1) + '\n')
