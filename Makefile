@@ -30,7 +30,7 @@ help:
 	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-demos|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic|bench-faults"
+	@echo "                one of them: make bench-core|bench-demos|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-online|bench-soak|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic|bench-faults"
 	@echo "make bench-two-hosts  the system across two network namespaces (root): rates, latency, link cut"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
@@ -155,6 +155,21 @@ bench: $(addprefix bench-,$(BENCHMARKS))
 # Record a stir by hand, learn it, repeat it (needs no peer library).
 bench-kinesthetic: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_kinesthetic.py $(BENCH_ARGS)
+
+# One online update (the goal followed), the core alone and end to end in the closed loop; writes
+# docs/online_goal.md's tables (needs no peer library).
+bench-online: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_online.py $(BENCH_ARGS)
+
+# /generalize hammered while the arm tracks a long path, junk on its input; writes
+# docs/reliability.md's soak table (needs no peer library).
+bench-soak: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_soak.py $(BENCH_ARGS)
+
+# Obstacles with a size, ROS side: radii measured, contacts found, the arm checked; writes the
+# tables of docs/perception.md, ur10_sim.md and dmp_server.md (needs no peer library).
+bench-obstacle_volumes: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_obstacle_volumes.py $(BENCH_ARGS)
 
 # Every plan at rest at its goal past tau, on recordings that start or end moving (issue 24;
 # needs no peer library). BENCH_ARGS="--before REV" adds the code of git REV beside it.
