@@ -505,9 +505,9 @@ NOTES = """\
   bit-identical); peak acc. ratio: the plan's largest acceleration over the obstacle-free
   plan's; ms/plan: the core's generalize (paper, detour) or this script's numpy loop per start
   of a batch (the others: not comparable).
-- obstacle-free plan: goal err. at tau, and in the far column at 1.5 tau: the obstacle-free
-  plans of some shapes (LASA) leave their goal past tau, which is what the goal
-  errors of the methods that need 1.5 tau show; collisions: the cases whose obstacle-free plan
+- obstacle-free plan: goal err. at tau, and in the far column at 1.5 tau (every plan comes
+  to rest at its goal by tau and stays there: make bench-rest), so the goal errors of the
+  methods that need 1.5 tau are their own; collisions: the cases whose obstacle-free plan
   enters an obstacle (all of them, by construction)."""
 
 
