@@ -238,7 +238,16 @@ def write(watch, sys_, during=None):
     """
     mark = watch.mark()
     plan = watch.generalize()
-    assert len(plan.poses) > 100, 'no plan'
+    for _ in range(20):
+        # Right after a (re)start dmp_server may not have heard the goal or the obstacles'
+        # volumes yet, though this process has: such a refusal says 'yet'; asked again.
+        refusals = [line for line in sys_.nodes.log('dmp_server').splitlines()
+                    if '[ERROR]' in line and '/generalize with skill' in line]
+        if len(plan.poses) or not refusals or ' yet' not in refusals[-1]:
+            break
+        time.sleep(0.2)
+        plan = watch.generalize()
+    assert len(plan.poses) > 100, f'no plan: {refusals[-1] if refusals else "no reason logged"}'
     wait(tracking_started(watch, mark), 30, 'tracking', sys_.running())
     if during is not None:
         during(watch)
