@@ -148,9 +148,7 @@ class UR10SimNode(Node):
         # "[1, 0, 0]" as integer[], "[0.7, 0.2, 0]" as a string and "[]" as bool[];
         # _number_list takes them all as numbers. `obstacle_positions: []` in YAML leaves the
         # parameter unset: no obstacles.
-        for name in ('obstacle_positions', 'obstacle_radii'):
-            if p[name] is None:
-                p[name] = []
+        p.update({n: [] for n in ('obstacle_positions', 'obstacle_radii') if p[n] is None})
         typed = Ur10SimParameters.from_values(p)     # each value by its description
         self._parameter_values = p   # for the camera process (not _parameters: rclpy's name)
         self.sim = UR10Sim.from_parameters(p)   # the workcell (sim layer: from the values)
@@ -193,8 +191,8 @@ class UR10SimNode(Node):
 
     # --------------------------------------------------------------------------- parameters
     def _validate_parameters(self, parameters):
-        for parameter in parameters:
-            try:
+        try:
+            for parameter in parameters:
                 if parameter.name in ('goal_position', 'bottle.position'):
                     self.sim.scene.placed(parameter.name, _number_list(parameter))
                 elif parameter.name == 'obstacle_positions':
@@ -207,9 +205,7 @@ class UR10SimNode(Node):
                         raise ValueError(f'at most {MAX_OBSTACLES} radii, got {len(radii)}')
                 elif parameter.name == 'teach_script' and parameter.value:
                     self._checked_guide = (parameter.value, self._load_guide(parameter.value))
-            except ValueError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
-        try:   # every value by its description (after the checks above, whose reasons say more)
+            # Every value by its description, after the checks above (their reasons say more).
             Ur10SimParameters.from_values(parameter_values(self, DESCRIPTION, parameters))
         except ValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
