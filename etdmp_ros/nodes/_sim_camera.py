@@ -33,7 +33,7 @@ import subprocess
 import sys
 import time
 
-from etdmp_ros.ros import topics
+from etdmp_ros.ros import fastdds_files, topics
 import numpy as np
 
 #: Snapshot header: stamp (ns, int64), simulated time (s, float64), obstacles in use (int32).
@@ -157,6 +157,10 @@ class CameraProcess:
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.process.wait()
+            removed = fastdds_files.clean()     # what the killed process left in /dev/shm
+            self._node.get_logger().warning(
+                f'camera process did not exit within 5 s: killed; {len(removed)} of its Fast '
+                'DDS files removed')
 
 
 def _newest(link):

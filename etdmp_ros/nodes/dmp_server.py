@@ -1,12 +1,11 @@
 """
 dmp_server: learn skills from recorded demonstrations and serve ``/generalize``.
 
-Its place in the system: docs/design.md#nodes-and-interfaces; what it does with bad input:
-docs/design.md#bad-input-policy.
-
-``ros2 run etdmp_ros dmp_server --ros-args --params-file config/scene.yaml --params-file
-config/dmp_server.yaml``. The logic lives in ROS-free modules: :mod:`etdmp_ros.skills.library`
-(demonstrations → skills, persistence), :mod:`etdmp_ros.geometry.task_plane` and
+Its place in the system: docs/design.md#nodes-and-interfaces; bad input:
+docs/design.md#bad-input-policy. ``ros2 run etdmp_ros dmp_server --ros-args --params-file
+config/scene.yaml --params-file config/dmp_server.yaml``. The logic lives in ROS-free
+modules: :mod:`etdmp_ros.skills.library` (demonstrations → skills, persistence),
+:mod:`etdmp_ros.geometry.task_plane` and
 :mod:`etdmp_ros.skills.planning` (request → timed base_link path),
 :mod:`etdmp_ros.skills.plan_checks` (goals and plans the arm cannot take),
 :mod:`etdmp_ros.skills.following` (a plan in execution that follows its goal and obstacles),
@@ -79,8 +78,8 @@ from visualization_msgs.msg import MarkerArray
 NODE_NAME = 'dmp_server'
 DESCRIPTION = system.node(NODE_NAME)
 _THROTTLE = 5.0   # s between repeated warnings about the same bad input
-#: Seconds between two reports of requests refused as busy (each report counts them).
-BUSY_LOG_PERIOD = 2.0
+VOLUMES_WAIT = 1.0   # s a new plan waits for the first obstacle volumes
+BUSY_LOG_PERIOD = 2.0   # s between two reports of requests refused as busy (counted)
 #: /generalize keeps up to MAX_QUEUED_REQUESTS requests waiting (rclpy's default: 10).
 _SERVICE_QOS = QoSProfile(depth=limits.MAX_QUEUED_REQUESTS,
                           reliability=ReliabilityPolicy.RELIABLE)
@@ -337,14 +336,15 @@ class DmpServer(Node):
 
         The perceived ones (/etdmp/obstacles), each with the radius of the nearest volume
         (/etdmp/obstacle_volumes), then ``static_obstacles`` (points: radius 0). Stale ones and
-        ones without a volume are warned about. For a ``new_plan``, perceived obstacles while
-        /etdmp/obstacle_volumes has a publisher but no volume has arrived yet (its subscription
-        matched after the points') raise ValueError: planned as points they would be hit.
+        ones without a volume are warned about. For a ``new_plan`` (in /generalize's thread),
+        perceived obstacles while /etdmp/obstacle_volumes has a publisher but no volume has
+        come yet (its subscription matched after the points') wait up to VOLUMES_WAIT for one,
+        then raise ValueError: planned as points they would be hit.
         """
+        expected = new_plan and self.count_publishers(topics.OBSTACLE_VOLUMES) > 0
         points, radii, stale, unsized = self._inputs.obstacles_with_radii(
-            settings.obstacle_max_age, settings.static_obstacles)
-        if unsized and new_plan and self._inputs.volumes.value is None and \
-                self.count_publishers(topics.OBSTACLE_VOLUMES) > 0:
+            settings.obstacle_max_age, settings.static_obstacles, VOLUMES_WAIT * expected)
+        if unsized and expected and self._inputs.volumes.value is None:
             raise ValueError(f'{unsized} perceived obstacle(s) but no volume received yet on '
                              '/etdmp/obstacle_volumes (it has a publisher)')
         if stale:

@@ -60,7 +60,7 @@ from etdmp_ros.ros.conversions import (contact_markers, joint_state_msg, MovingT
 from etdmp_ros.ros.events import ERROR, EventPublisher, WARN
 from etdmp_ros.ros.node_parameters import Ur10SimParameters
 from etdmp_ros.ros.parameters import declare, values as parameter_values
-from etdmp_ros.ros.spin import rate_qos, run
+from etdmp_ros.ros.spin import normal_scheduling, rate_qos, run, set_realtime_priority
 from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
@@ -320,10 +320,24 @@ class UR10SimNode(Node):
                 contact_ticks=stats['contact_ticks'], contact_pairs=' '.join(pairs))
             self.events.flush()
 
+    def _scheduling(self, paced, realtime):
+        """Give the thread SCHED_FIFO while ``paced`` (thread_priority), else normal; return it."""
+        priority = self.get_parameter('thread_priority').value
+        if paced and priority and realtime is None:
+            reason = set_realtime_priority(priority)
+            (self.get_logger().warning if reason else self.get_logger().info)(
+                f'{reason}: the simulation ticks under normal scheduling (may be late on a busy '
+                'machine)' if reason else f'simulation thread at SCHED_FIFO priority {priority}')
+            return not reason
+        if not paced and realtime:
+            normal_scheduling()     # unpaced it never sleeps: it must not hold a core
+            return None
+        return realtime
+
     def _run(self):
         try:
             wall_start, sim_start = time.monotonic(), self.sim.time
-            last_tick = None
+            last_tick = realtime = None
             while not self._stop.is_set():
                 self._wait_for_the_answer()
                 self.tick()
@@ -332,6 +346,7 @@ class UR10SimNode(Node):
                     self._note_gap(now - last_tick)
                 last_tick = now
                 rtf = self.real_time_factor
+                realtime = self._scheduling(rtf > 0, realtime)
                 if rtf <= 0:
                     continue
                 delay = wall_start + (self.sim.time - sim_start) / rtf - now

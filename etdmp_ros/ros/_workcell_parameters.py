@@ -127,6 +127,15 @@ UR10_SIM = (
     P('watchdog_timeout', 0.1, 'Simulated time without a command before braking to zero '
       'velocity; 0 disables it and the last command then applies forever, like the real '
       'forward_velocity_controller.', unit='s', value_range=(0.0, 60.0), dynamic=True),
+    P('thread_priority', 60, 'SCHED_FIFO priority (1-99) of the simulation thread while it '
+      'runs paced (real_time_factor > 0); 0 = normal scheduling. Needs CAP_SYS_NICE or an '
+      'rtprio limit, else a warning and normal scheduling.', value_range=(0, 99),
+      note='SCHED_FIFO priority of the simulation thread (the physics ticks), while paced: '
+      "the robot's own controller runs on hardware of its own, which no program on this "
+      "machine slows down; above the controller's 50. A tick takes about 1 ms of each 8 ms "
+      'period; unpaced (real_time_factor 0) the thread would never sleep, so it then runs '
+      'under normal scheduling. Needs CAP_SYS_NICE or an rtprio limit (ulimit -r); without, '
+      'a warning and normal scheduling.'),
     P('command_wait', 0.016, "Wall-clock time a tick waits for the controller's command "
       'answering the previous joint states, while a controller answers every tick: a '
       'controller late for a moment (a busy machine) slows the simulation instead of the arm '

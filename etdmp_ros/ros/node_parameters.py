@@ -50,6 +50,7 @@ class Ur10SimParameters:
     physics_timestep: float
     real_time_factor: float
     watchdog_timeout: float
+    thread_priority: int
     command_wait: float
     camera_rate: float
     image_width: int

@@ -109,7 +109,8 @@ class LatestInputs:
                                  f'(goal_max_age {max_age:g} s)')
             return goal + offset
 
-    def obstacles_with_radii(self, max_age: float, static: NDArray[np.float64]
+    def obstacles_with_radii(self, max_age: float, static: NDArray[np.float64],
+                             wait_for_volumes: float = 0.0
                              ) -> Tuple[NDArray[np.float64], NDArray[np.float64], bool, int]:
         """
         Return the obstacles to plan around: (points (m, 3), radii (m,), stale, unsized).
@@ -117,8 +118,14 @@ class LatestInputs:
         The perceived ones, each with the radius of the nearest perceived volume
         (:func:`sized_obstacles`), then the ``static`` ones (points: radius 0). ``stale``: the
         perceived ones were left out, older than ``max_age``; ``unsized``: how many perceived
-        ones have no volume (planned as points).
+        ones have no volume (planned as points). ``wait_for_volumes``: while there are
+        perceived obstacles and no volume was ever received, wait up to this many seconds for
+        one (from another thread than the one that keeps them).
         """
+        deadline = time.monotonic() + wait_for_volumes
+        while self.volumes.value is None and self.obstacles.value is not None and \
+                len(self.obstacles.value) and time.monotonic() < deadline:
+            time.sleep(0.01)
         with self._lock:
             seen = self.obstacles.fresh(max_age)
             stale = seen is None and self.obstacles.value is not None and \

@@ -6,7 +6,7 @@ CLI and launch in .venv/; ``make bench-faults``)::
 
     MUJOCO_GL=egl .venv/bin/python test/benchmarks/bench_faults.py [--cycles 10]
         [--load idle busy] [--end ctrl-c kill] [--kill-runs 1] [--domain-id N]
-        [--install PATH] [--json out/bench_faults.json]
+        [--install PATH] [--json out/bench_faults.json] [--no-docs]
 
 It builds the package with colcon into a temporary folder (or uses ``--install``), then, for
 each load (``busy``: one more process busy-looping on a core, another user of the machine)
@@ -30,7 +30,9 @@ and each way a run ends:
   its 1 s simulation_stall_timeout); each node restarted alone before the next.
 
 It prints the machine's load average before and after (the figures depend on what else runs),
-medians and worst cases, and the targets. ``--json`` writes every figure.
+medians and worst cases, and the targets. ``--json`` writes every figure. Unless ``--no-docs``,
+the tables go into docs/reliability.md (block ``faults``) with the command, date, machine and
+code version (``_results.publish``).
 """
 
 import argparse
@@ -51,8 +53,10 @@ FAILED_RUNS = REPO / 'out' / 'bench_faults_failed'
 #: The node logs of the kill sequences.
 KILL_LOGS = REPO / 'out' / 'bench_faults_kills'
 sys.path.insert(0, str(REPO / 'test'))
+sys.path.insert(0, str(REPO / 'test' / 'benchmarks'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
+from _results import add_option, command, publish  # noqa: E402
 from conftest import busy_core  # noqa: E402
 from etdmp_ros.ros import fastdds_files, system  # noqa: E402
 from etdmp_ros.ros.processes import isolated_environment  # noqa: E402
@@ -281,9 +285,11 @@ def main(argv=None):
     parser.add_argument('--domain-id', type=int, default=None)
     parser.add_argument('--install', type=Path, default=None)
     parser.add_argument('--json', type=Path, default=None)
+    add_option(parser)
     args = parser.parse_args(argv)
     if ros2_cli.missing():
         raise SystemExit(ros2_cli.missing())
+    load_before = os.getloadavg()[0]
     print(f'load average before: {os.getloadavg()}', flush=True)
     results = {'load_before': os.getloadavg(), 'cycles': {}, 'kills': {}}
     tables = []
@@ -328,6 +334,11 @@ def main(argv=None):
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(results, indent=2, default=str) + '\n')
+    if not args.no_docs:
+        # Bold titles, not headings, inside the page's own section.
+        text = re.sub(r'^### (.*)$', r'**\1**\n', '\n\n'.join(tables), flags=re.M)
+        publish('faults', text, command('faults', argv), page='docs/reliability.md',
+                load=load_before)
     return 0
 
 

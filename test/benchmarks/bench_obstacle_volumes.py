@@ -4,7 +4,9 @@ Obstacles with a size, ROS side: radii measured, contacts seen, the arm checked.
 A script, not a pytest test. From the repository root::
 
     MUJOCO_GL=egl .venv/bin/python test/benchmarks/bench_obstacle_volumes.py [--quick] \
-        [--json PATH]
+        [--json PATH] [--no-docs]
+
+or ``make bench-obstacle_volumes BENCH_ARGS="..."``.
 
 In this process, no ROS:
 
@@ -25,6 +27,9 @@ In this process, no ROS:
    (:func:`plan_joints`, 32 poses: shared with the timing check) and the check itself.
 
 Medians of wall-clock times (``time.perf_counter``) on a 2-core machine shared with other work.
+Unless ``--no-docs``, each part's table goes into its node's page (``_results.publish``): the
+radii into docs/perception.md (block ``obstacle-radii``), the contacts into docs/ur10_sim.md
+(``obstacle-contacts``), the arm check into docs/dmp_server.md (``obstacle-arm-check``).
 """
 
 import argparse
@@ -38,8 +43,10 @@ import time
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
 sys.path.insert(0, str(REPO / 'test' / 'unit'))
+sys.path.insert(0, str(REPO / 'test' / 'benchmarks'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
+from _results import add_option, command, publish  # noqa: E402
 from etdmp_ros.demo.scenario import Scenario  # noqa: E402
 from etdmp_ros.dmp import builtin_demo, learn  # noqa: E402
 from etdmp_ros.geometry import quaternion as quat  # noqa: E402
@@ -225,45 +232,79 @@ def bench_arm_check(rounds):
     return figures
 
 
+def radii_table(r):
+    """Return the table of the radii measured against the ground truth; the detection's cost."""
+    e, c = r['in_view']['radius_mm'], r['in_view']['centre_mm']
+    h, d = r['behind_the_arm'], r['detect_ms']
+    return '\n'.join([
+        '| case | obstacles | radius error median / p90 / max (mm) | centre error median / max '
+        '(mm) |', '|---|---|---|---|',
+        f'| fully in view, radii 10-80 mm | {e["n"]} measured, '
+        f'{r["in_view"]["radii_not_measured"]} not | {e["median"]:.2f} / {e["p90"]:.2f} / '
+        f'{e["max"]:.2f} | {c["median"]:.2f} / {c["max"]:.2f} |',
+        f'| partly behind the arm, 25 and 40 mm, 15-90 % visible | {h["radius_mm"]["n"]} '
+        f'measured, {h["radii_not_measured"]} not (obstacle.radius reported) | '
+        f'{h["radius_mm"]["median"]:.2f} / {h["radius_mm"]["p90"]:.2f} / '
+        f'{h["radius_mm"]["max"]:.2f} | |',
+        '',
+        f'Detection per frame (medians of {d["measured"]["n"]} frames each, interleaved):\n'
+        f'{d["measured"]["median"]:.2f} ms with the radii measured, '
+        f'{d["known"]["median"]:.2f} ms with the radius known.'])
+
+
+def contacts_table(contacts):
+    """Return the table of a control tick's cost with and without the contact pass."""
+    lines = ['| scene | tick without the pass (us) | with it (us) | the pass (us) | contacts '
+             'found |', '|---|---|---|---|---|']
+    alone = ''
+    for name, c in contacts.items():
+        if 'us' in c:
+            alone = f'{name.replace("detect_contacts", "`detect_contacts()`")}: {c["us"]:.1f} us.'
+            continue
+        lines.append(f'| {name} | {c["tick_without_us"]:.0f} | {c["tick_with_us"]:.0f} | '
+                     f'{c["contact_pass_us"]:.1f} | {", ".join(c["contacts"]) or "none"} |')
+    return '\n'.join(lines) + (f'\n\n{alone}' if alone else '')
+
+
+def arm_check_table(a):
+    """Return the table of the arm check's cost per demo plan."""
+    lines = ['| plan | poses | IK at 32 poses (ms) | arm check (ms) | refused |',
+             '|---|---|---|---|---|']
+    for name in ('G', 'W', 'stir'):
+        f = a[name]
+        lines.append(f'| {name} | {f["poses"]} | {f["ik_ms"]:.2f} | {f["arm_check_ms"]:.2f} | '
+                     f'{f["refused"] or "no"} |')
+    built = f'The {a["spheres"]} spheres are built once, in {a["build_ms"]:.0f} ms.'
+    return '\n'.join(lines) + f'\n\n{built}'
+
+
 def main(argv=None):
-    """Run the three parts; print the figures (and write them as JSON with ``--json``)."""
+    """Run the three parts; print the tables (and write them as JSON with ``--json``)."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--quick', action='store_true', help='fewer scenes and rounds')
     parser.add_argument('--json', type=Path, help='also write the figures here')
+    add_option(parser)
     args = parser.parse_args(argv)
+    load = os.getloadavg()[0]
     scenes, repeats, rounds = (6, 2, 3) if args.quick else (30, 5, 15)
     figures = {'radii': bench_radii(scenes, repeats), 'contacts': bench_contacts(250, rounds),
                'arm_check': bench_arm_check(rounds), 'load': os.getloadavg()}
-    r = figures['radii']
-    e, c = r['in_view']['radius_mm'], r['in_view']['centre_mm']
-    print('radius measured (rendered 640x480, radii 10-80 mm, fully in view): error median '
-          f'{e["median"]:.2f} mm, p90 {e["p90"]:.2f} mm, max {e["max"]:.2f} mm over {e["n"]} '
-          f'obstacles ({r["in_view"]["radii_not_measured"]} not measured); centre median '
-          f'{c["median"]:.2f} mm, max {c["max"]:.2f} mm')
-    h = r['behind_the_arm']
-    print(f'partly behind the arm (25 and 40 mm, 15-90 % visible): {h["radius_mm"]["n"]} measured,'
-          f' error median {h["radius_mm"]["median"]:.2f} mm, max {h["radius_mm"]["max"]:.2f} mm; '
-          f'{h["radii_not_measured"]} not measured (obstacle.radius reported)')
-    d = r['detect_ms']
-    print(f'detect per frame: radii measured {d["measured"]["median"]:.2f} ms, radius known '
-          f'{d["known"]["median"]:.2f} ms (medians, {d["measured"]["n"]} frames each)')
-    for name, c in figures['contacts'].items():
-        if 'us' in c:
-            print(f'contacts, {name}: {c["us"]:.1f} us')
-            continue
-        print(f'contacts, {name}: tick {c["tick_with_us"]:.0f} us with the pass, '
-              f'{c["tick_without_us"]:.0f} us without: {c["contact_pass_us"]:.1f} us '
-              f'({100 * c["contact_pass_us"] / c["tick_without_us"]:.1f} %); found '
-              f'{c["contacts"] or "none"}')
-    a = figures['arm_check']
-    print(f'arm check: {a["spheres"]} spheres built in {a["build_ms"]:.0f} ms')
-    for name in ('G', 'W', 'stir'):
-        f = a[name]
-        print(f'  {name} ({f["poses"]} poses): IK at 32 poses {f["ik_ms"]:.2f} ms, arm check '
-              f'{f["arm_check_ms"]:.2f} ms, refused: {f["refused"]}')
-    print('load average (1, 5, 15 min): ' + ', '.join(f'{v:.1f}' for v in figures['load']))
+    tables = {'radii': radii_table(figures['radii']),
+              'contacts': contacts_table(figures['contacts']),
+              'arm check': arm_check_table(figures['arm_check'])}
+    for name, table in tables.items():
+        print(f'{name}:\n\n{table}\n')
+    print('load average (1, 5, 15 min) at the end: '
+          + ', '.join(f'{v:.1f}' for v in figures['load']))
     if args.json:
         args.json.write_text(json.dumps(figures, indent=2))
+    if not args.no_docs:
+        run = command('obstacle_volumes', argv)
+        publish('obstacle-radii', tables['radii'], run, page='docs/perception.md', load=load)
+        publish('obstacle-contacts', tables['contacts'], run, page='docs/ur10_sim.md',
+                load=load)
+        publish('obstacle-arm-check', tables['arm check'], run, page='docs/dmp_server.md',
+                load=load)
     return 0
 
 

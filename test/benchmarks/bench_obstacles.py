@@ -5,7 +5,7 @@ A script, not a pytest test. ``make bench-obstacles`` runs it in ``.venv-bench/`
 movement-primitives is installed: its Hoffmann term is checked against ours); it also runs in
 ``.venv/``::
 
-    .venv/bin/python test/benchmarks/bench_obstacles.py [--quick] [--json PATH]
+    .venv/bin/python test/benchmarks/bench_obstacles.py [--quick] [--json PATH] [--no-docs]
 
 Shapes (none of them the built-in demonstrations the defaults were chosen on): the 30 LASA
 handwriting shapes (demonstration 0), the Z as the teaching page draws it, 8 random 2D scribbles,
@@ -50,11 +50,16 @@ length, over the plan's size), goal error (|x(end) - g| over the size), far chan
 |x - x_free| over the size with the far obstacles), peak acceleration over the obstacle-free
 plan's, time per plan. "rim push" is a reference, not a method: every sample inside an obstacle
 moved radially to its rim (the least any method can change the shape; not smooth).
+
+Unless ``--no-docs``, a run of every method writes the table over all cases, the detour's 2D
+and 3D rows and the check of Hoffmann's term into docs/design.md (block ``obstacles``) with the
+command, date, machine and code version (``_results.publish``).
 """
 
 import argparse
 from dataclasses import replace
 import json
+import os
 from pathlib import Path
 import sys
 import time
@@ -65,6 +70,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
+sys.path.insert(0, str(REPO / 'test' / 'benchmarks'))
+from _results import add_option, command, publish  # noqa: E402, I100
 from support import drawings, shapes  # noqa: E402, I100  (test helpers)
 
 N_OUT = 1000            # output steps per tau
@@ -463,7 +470,7 @@ def check_hoffmann_against_movement_primitives():
             f'difference {worst:.2e}')
 
 
-LABELS = {'paper': 'paper Eq. 22-27 (today)', 'hoffmann': 'Hoffmann 2009 steering',
+LABELS = {'paper': 'paper Eq. 22-27 (avoidance="paper")', 'hoffmann': 'Hoffmann 2009 steering',
           'ginesi-static': 'Ginesi 2019 static volumetric',
           'ginesi-dynamic': 'Ginesi 2021 dynamic volumetric', 'cbf': 'CBF safety filter',
           'detour': '**detour (default)**', 'rim push': 'rim push (reference, not smooth)',
@@ -498,9 +505,9 @@ NOTES = """\
   bit-identical); peak acc. ratio: the plan's largest acceleration over the obstacle-free
   plan's; ms/plan: the core's generalize (paper, detour) or this script's numpy loop per start
   of a batch (the others: not comparable).
-- obstacle-free plan: goal err. at tau, and in the far column at 1.5 tau: the obstacle-free
-  plans of some shapes (LASA) leave their goal past tau, which is what the goal
-  errors of the methods that need 1.5 tau show; collisions: the cases whose obstacle-free plan
+- obstacle-free plan: goal err. at tau, and in the far column at 1.5 tau (every plan comes
+  to rest at its goal by tau and stays there: make bench-rest), so the goal errors of the
+  methods that need 1.5 tau are their own; collisions: the cases whose obstacle-free plan
   enters an obstacle (all of them, by construction)."""
 
 
@@ -511,8 +518,10 @@ def main(argv=None):
     parser.add_argument('--json', metavar='PATH', help='also write the per-case rows to PATH')
     parser.add_argument('--methods', default=','.join(METHODS),
                         help=f'comma-separated subset of {",".join(METHODS)}')
+    add_option(parser)
     args = parser.parse_args(argv)
     methods = [m for m in args.methods.split(',') if m]
+    load = os.getloadavg()[0]
     wall = time.perf_counter()
     tuning = make_cases(tuning_shapes(), seed=1)
     cases = make_cases(evaluation_shapes(args.quick), seed=0)
@@ -534,9 +543,19 @@ def main(argv=None):
     results[('free', None)] = reference_rows(cases, 'free')
     print()
     print(table(results, ('2D', '3D', None)))
-    print('\n' + check_hoffmann_against_movement_primitives())
+    checked = check_hoffmann_against_movement_primitives()
+    print('\n' + checked)
     print('\n' + NOTES)
-    print(f'\nwall time {time.perf_counter() - wall:.0f} s')
+    seconds = time.perf_counter() - wall
+    print(f'\nwall time {seconds:.0f} s')
+    if not args.no_docs and set(methods) == set(METHODS):
+        groups = {g: sum(c['group'] == g for c in cases) for g in ('2D', '3D')}
+        head = (f'{len(cases)} cases ({groups["2D"]} 2D, {groups["3D"]} 3D) on '
+                f'{len({c["name"] for c in cases})} shapes; the detour in each group:')
+        detour = {key: rows for key, rows in results.items() if key[0] == 'detour'}
+        publish('obstacles', f'{table(results, (None,))}\n\n{head}\n\n'
+                f'{table(detour, ("2D", "3D"))}\n\n{checked}. Wall time {seconds:.0f} s.',
+                command('obstacles', argv), page='docs/design.md', load=load)
     if args.json:
         out = {f'{m} x{s}': rows for (m, s), rows in results.items()}
         Path(args.json).write_text(json.dumps(out, indent=1, default=float) + '\n')

@@ -5,7 +5,9 @@ A script, not a pytest test; it needs no peer library. Run from the repository r
 
     MUJOCO_GL=egl .venv/bin/python test/benchmarks/bench_online.py [--updates 200] [--runs 3]
         [--skills G W stir] [--demo-skill G] [--load idle] [--json out/bench_online.json]
-        [--no-demo] [--from out/demo_move ...]
+        [--no-demo] [--from out/demo_move ...] [--no-docs]
+
+or ``make bench-online BENCH_ARGS="..."``.
 
 Core: ``etdmp_ros.skills.following.FollowedPlan.update``, what dmp_server calls when a followed
 goal moved (advance the online rollout to the switch, step it with the new goal, roll the
@@ -37,6 +39,10 @@ measures from its recording alone (``etdmp_ros.demo.metrics.follow_latencies``: 
 
 With a few runs, p99 is the worst run. Timing depends on the machine and on what else runs on
 it; the nodes' log stamps and the recorder's receipt times are the same (wall) clock.
+
+Unless ``--no-docs``, the tables go into docs/online_goal.md (``_results.publish``): the core's
+into block ``online-core`` (with the default ``--skills``), the end-to-end one with what the
+runs achieved into ``online-G`` or ``online-stir`` (``--demo-skill``; not with ``--from``).
 """
 
 import argparse
@@ -50,11 +56,13 @@ import time
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / 'test'))
+sys.path.insert(0, str(REPO / 'test' / 'benchmarks'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
+from _results import add_option, command, publish  # noqa: E402
 from conftest import busy_core  # noqa: E402
 from etdmp_ros.demo import run as demo  # noqa: E402
-from etdmp_ros.demo.scenario import Scenario  # noqa: E402
+from etdmp_ros.demo.scenario import Scenario, SKILLS  # noqa: E402
 from etdmp_ros.dmp import builtin_demo  # noqa: E402
 from etdmp_ros.nodes.dmp_server import Settings  # noqa: E402
 from etdmp_ros.robot import UR10Model  # noqa: E402
@@ -249,11 +257,17 @@ def end_to_end_table(rows, runs):
 def quality_lines(metrics):
     """Return what the runs achieved (so that no one compares broken runs)."""
     lines = []
-    for key, label in (('goal_error_mm', 'goal error to the moved marker (mm)'),
+    for key, label in (('goal_moved_by_mm', 'goal moved by (mm)'),
+                       ('goal_error_mm', 'goal error to the moved goal (mm)'),
                        ('nrmse_trace', 'nRMSE of the trace (demo placed at the new goal)'),
+                       ('nrmse_original_plan', 'nRMSE of the first plan'),
+                       ('nrmse_move_reference', "nRMSE of the core's online ET-DMP, same move"),
                        ('switch_speed_ratio_min', 'tool / plan speed after the switch, min'),
-                       ('max_joint_acceleration_ratio', 'largest acceleration / limit'),
-                       ('min_clearance_mm', 'min obstacle clearance (mm)')):
+                       ('max_joint_velocity_ratio', 'largest joint velocity / limit'),
+                       ('max_joint_acceleration_ratio', 'largest joint acceleration / limit'),
+                       ('min_clearance_mm', 'min obstacle clearance (mm)'),
+                       ('bottle_wall_clearance_mm',
+                        "clearance to the bottle's wall, where it stood (mm)")):
         values = [m[key] for m in metrics if m.get(key) is not None]
         if values:
             lines.append(f'- {label}: ' + ', '.join(f'{v:.3g}' for v in values))
@@ -266,7 +280,7 @@ def main(argv=None):
     parser.add_argument('--updates', type=int, default=200,
                         help='core samples per skill (default 200)')
     parser.add_argument('--skills', nargs='+', default=['G', 'W', 'stir'],
-                        choices=demo.SKILLS, help='skills of the core part')
+                        choices=SKILLS, help='skills of the core part')
     parser.add_argument('--runs', type=int, default=3, help='demo runs (default 3)')
     parser.add_argument('--demo-skill', default='G', help='skill of the demo runs (default G)')
     parser.add_argument('--load', default='idle', choices=('idle', 'busy'),
@@ -279,15 +293,21 @@ def main(argv=None):
     parser.add_argument('--seed', type=int, default=14)
     parser.add_argument('--json', type=Path, help='also write the figures here')
     parser.add_argument('--strict', action='store_true', help='exit 1 when a target is missed')
+    add_option(parser)
     args = parser.parse_args(argv)
 
     report, missed = {}, []
+    run, load = command('online', argv), os.getloadavg()[0]
     if not args.no_core:
         rng = np.random.default_rng(args.seed)
         rows = [time_core(name, args.updates, rng) for name in args.skills]
+        note = (f"Each sample a fresh FollowedPlan of the demo's plan, its goal moved at a "
+                f'random path time;\n{WARM_UP} warm-up samples left out.')
         print(core_table(rows), flush=True)
-        print(f"\n(each sample a fresh FollowedPlan of the demo's plan, goal moved at a random "
-              f'path time; {WARM_UP} warm-up samples left out)\n')
+        print(f'\n{note}\n')
+        if not args.no_docs and args.skills == ['G', 'W', 'stir']:
+            publish('online-core', f'{core_table(rows)}\n\n{note}', run,
+                    page='docs/online_goal.md', load=load)
         report['core'] = rows
         missed += [f'core {r["skill"]}' for r in rows
                    if r['update_ms'][1] is None or r['update_ms'][1] > CORE_TARGET_MS]
@@ -299,8 +319,13 @@ def main(argv=None):
                   f'({args.load}):', flush=True)
             metrics = run_demos(args.demo_skill, args.runs, args.load)
         rows = end_to_end_rows(metrics)
-        print('\n' + end_to_end_table(rows, len(metrics)))
-        print('\n' + '\n'.join(quality_lines(metrics)))
+        table = end_to_end_table(rows, len(metrics)) + '\n\n' + '\n'.join(quality_lines(metrics))
+        print('\n' + table)
+        if not args.no_docs and not args.folders and metrics:
+            if args.demo_skill == 'G':
+                publish('online-G', table, run, page='docs/online_goal.md', load=load)
+            elif args.demo_skill == 'stir':
+                publish('online-stir', table, run, page='docs/online_goal.md', load=load)
         report['end_to_end'] = [dict(zip(('key', 'label', 'p50_ms', 'p99_ms', 'max_ms', 'n',
                                           'target_ms'), r)) for r in rows]
         report['runs'] = [m.get('goal_follow') for m in metrics]

@@ -15,7 +15,9 @@ It prints: requests sent, answered with a plan, refused (an empty plan: dmp_serv
 never answered; answer latency p50 / p99 / max; the controller's states over the run (no
 stale-input, no unreachable), how far the tool ended from the path's end and its tracking
 summary; the largest resident memory of every node. Run from the repository with the venv:
-``.venv/bin/python test/benchmarks/bench_soak.py``.
+``.venv/bin/python test/benchmarks/bench_soak.py`` (or ``make bench-soak``). Unless
+``--no-docs``, the table goes into docs/reliability.md (block ``soak``) with the command, date,
+machine and code version (``_results.publish``).
 """
 
 import argparse
@@ -30,7 +32,9 @@ import time
 REPO = Path(__file__).resolve().parents[2]
 os.environ.setdefault('MUJOCO_GL', 'egl')
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / 'test' / 'benchmarks'))
 
+from _results import add_option, command, printed, publish  # noqa: E402
 from etdmp_ros.demo.scenario import Scenario  # noqa: E402
 from etdmp_ros.ros.background import BackgroundNode  # noqa: E402
 from etdmp_ros.ros.conversions import path_to_numpy, point_to_numpy, serialize_path  # noqa: E402
@@ -175,7 +179,9 @@ def main():
     parser.add_argument('--clients', type=int, default=4)
     parser.add_argument('--rate', type=float, default=20.0, help='requests/s per client')
     parser.add_argument('--junk-rate', type=float, default=1000.0)
+    add_option(parser)
     args = parser.parse_args()
+    load = os.getloadavg()[0]
 
     domain = os.getpid() % 100 + 1
     env = isolated_environment(domain)
@@ -236,25 +242,31 @@ def main():
                    if 'path tracked: ' in line]
         refusals = [line for line in nodes.log('dmp_server').splitlines() if '[ERROR]' in line]
         print()
-        print('| figure | value |')
-        print('|---|---|')
-        print(f'| requests sent | {sent} |')
-        print(f'| answered with a plan | {planned} |')
-        print(f'| refused (empty plan, ERROR line) | {len(answers) - planned} |')
-        print(f'| never answered | {sent - len(answers)} |')
-        if latencies:
-            p99 = latencies[min(len(latencies) - 1, int(0.99 * len(latencies)))]
-            print(f'| answer latency p50 / p99 / max (ms) | '
-                  f'{1e3 * statistics.median(latencies):.0f} / {1e3 * p99:.0f} / '
-                  f'{1e3 * latencies[-1]:.0f} |')
-        print(f'| junk joint states sent | {junk.sent} |')
-        order = ' -> '.join(dict.fromkeys(s.split(':')[0] for s in states))
-        print(f'| controller states | {order} |')
-        print(f'| stale-input / unreachable / halted | '
-              f'{sum(s.startswith(("stale-input", "unreachable", "halted")) for s in states)} |')
-        print(f'| tool to the path end (mm) | {1e3 * np.linalg.norm(tip - path_p[-1]):.2f} |')
-        print(f'| tracking | {tracked[-1] if tracked else "-"} |')
-        print('| peak RSS (MB) | ' + ', '.join(f'{k} {v:.0f}' for k, v in peak.items()) + ' |')
+        with printed() as kept:
+            print('| figure | value |')
+            print('|---|---|')
+            print(f'| requests sent | {sent} |')
+            print(f'| answered with a plan | {planned} |')
+            print(f'| refused (empty plan, ERROR line) | {len(answers) - planned} |')
+            print(f'| never answered | {sent - len(answers)} |')
+            if latencies:
+                p99 = latencies[min(len(latencies) - 1, int(0.99 * len(latencies)))]
+                print(f'| answer latency p50 / p99 / max (ms) | '
+                      f'{1e3 * statistics.median(latencies):.0f} / {1e3 * p99:.0f} / '
+                      f'{1e3 * latencies[-1]:.0f} |')
+            print(f'| junk joint states sent | {junk.sent} |')
+            order = ' -> '.join(dict.fromkeys(s.split(':')[0] for s in states))
+            print(f'| controller states | {order} |')
+            bad = sum(s.startswith(('stale-input', 'unreachable', 'halted')) for s in states)
+            print(f'| stale-input / unreachable / halted | {bad} |')
+            print(f'| tool to the path end (mm) | {1e3 * np.linalg.norm(tip - path_p[-1]):.2f} |')
+            print(f'| tracking | {tracked[-1] if tracked else "-"} |')
+            print('| peak RSS (MB) | ' + ', '.join(f'{k} {v:.0f}' for k, v in peak.items()) + ' |')
+        if not args.no_docs:
+            setting = (f'A {path_t[-1]:.0f} s path; {args.clients} clients x {args.rate:g} '
+                       f'requests/s; junk joint states at {args.junk_rate:g}/s.')
+            publish('soak', f'{kept.getvalue()}\n{setting}', command('soak'),
+                    page='docs/reliability.md', load=load)
         if refusals:
             print(f'\nlast refusal: {refusals[-1]}')
         print(f'\nlogs in {out / "logs"}')

@@ -49,6 +49,7 @@ os.environ.setdefault('MUJOCO_GL', 'egl')
 from _results import add_option, command, publish  # noqa: E402
 from conftest import busy_core  # noqa: E402
 from etdmp_ros.demo import run as demo  # noqa: E402
+from etdmp_ros.demo.scenario import SKILLS  # noqa: E402
 from etdmp_ros.ros.processes import isolated_environment  # noqa: E402
 import yaml  # noqa: E402
 
@@ -232,7 +233,7 @@ def main(argv=None):
     """Run the benchmark; print the tables; return 0."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--runs', type=int, default=3, help='demo runs per case (default 3)')
-    parser.add_argument('--skills', nargs='+', default=['G', 'stir'], choices=demo.SKILLS)
+    parser.add_argument('--skills', nargs='+', default=['G', 'stir'], choices=SKILLS)
     parser.add_argument('--load', nargs='+', default=['idle', 'busy'],
                         choices=('idle', 'busy'))
     parser.add_argument('--rates', nargs='+', type=float, default=[125.0, 500.0],
@@ -245,7 +246,7 @@ def main(argv=None):
                         'freezing its heap')
     add_option(parser)
     args = parser.parse_args(argv)
-    load = os.getloadavg()[0]
+    load_at_start = os.getloadavg()[0]     # not `load`: the loop below names each case's load
     if args.gc_pauses:
         gc_pauses()
         return 0
@@ -286,7 +287,8 @@ def main(argv=None):
     if not args.no_docs:
         runs = (f'{args.runs} runs per case, interleaved; busy: one process busy-looping on a '
                 'core beside the demo; medians, and a target met when every run meets it.')
-        publish('system', '\n\n'.join(tables + [runs]), command('system', argv), load=load)
+        publish('system', '\n\n'.join(tables + [runs]), command('system', argv),
+                load=load_at_start)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(everything, indent=1) + '\n')

@@ -4,7 +4,7 @@ Two-hosts benchmark: the closed loop across a UDP link, against one host; the li
 A script, not a pytest test. Run as root from the repository root (``make bench-two-hosts``)::
 
     MUJOCO_GL=egl .venv/bin/python test/benchmarks/bench_two_hosts.py [--runs 3] [--cuts 10]
-        [--splits robot workstation] [--json out/bench_two_hosts.json]
+        [--splits robot workstation] [--json out/bench_two_hosts.json] [--no-docs]
 
 Each run is the demo's letter G (``etdmp_ros.demo.run.run_demo``, no pictures) driven by
 ``test/support/two_hosts.py run``, as the tests run it: on one host (the nodes as ``make demo``
@@ -35,7 +35,8 @@ interleaved, so that the machine's drifting load falls on all alike.
 
 It prints, per case, the median and the worst run of each figure with its target and whether
 every run met it. Timing depends on the machine and on what else runs on it (the load average
-is printed before and after).
+is printed before and after). Unless ``--no-docs``, the tables go into docs/two_hosts.md (block
+``two-hosts``) with the command, date, machine and code version (``_results.publish``).
 """
 
 import argparse
@@ -53,8 +54,10 @@ REPO = Path(__file__).resolve().parents[2]
 #: Where the files of a failed run are kept (the runs themselves write to a temporary folder).
 FAILED_RUNS = REPO / 'out' / 'bench_two_hosts_failed'
 sys.path.insert(0, str(REPO / 'test'))
+sys.path.insert(0, str(REPO / 'test' / 'benchmarks'))
 os.environ.setdefault('MUJOCO_GL', 'egl')
 
+from _results import add_option, command, publish  # noqa: E402
 from etdmp_ros.ros import system  # noqa: E402
 from support import two_hosts  # noqa: E402
 
@@ -224,7 +227,9 @@ def main(argv=None):
                         help='where the controller runs in the two-host G runs')
     parser.add_argument('--calls', type=int, default=20, help='/generalize calls per caller')
     parser.add_argument('--json', type=Path, help="also write every run's figures here")
+    add_option(parser)
     args = parser.parse_args(argv)
+    load = os.getloadavg()[0]
     why = two_hosts.unavailable()
     if why:
         print(f'bench_two_hosts: two hosts cannot be made here: {why}', file=sys.stderr)
@@ -267,20 +272,24 @@ def main(argv=None):
                          if figures['failed'] else ''), flush=True)
     base = medians(g['one host'])
     base['generalize_robot_p50_ms'] = base.get('generalize_p50_ms')
-    print()
+    tables = []
     for case in cases:
         title = ('G on one host' if case == 'one host'
                  else f'G across two hosts, controller on the {case}')
-        print(table(title, g[case], G_ROWS, None if case == 'one host' else base))
-        print()
+        tables.append(table(title, g[case], G_ROWS, None if case == 'one host' else base))
     for split in links:
-        print(table(f'link down 0.5 s, controller on the {split}', links[split], LINK_ROWS))
-        print()
+        if links[split]:
+            tables.append(table(f'link down 0.5 s, controller on the {split}', links[split],
+                                LINK_ROWS))
+    print('\n' + '\n\n'.join(tables) + '\n')
     print(f'load average after: {os.getloadavg()[0]:.2f}', flush=True)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({'G': g, 'link down': links}, indent=1,
                                         default=str) + '\n')
+    if not args.no_docs:
+        publish('two-hosts', '\n\n'.join(tables), command('two-hosts', argv),
+                page='docs/two_hosts.md', load=load)
     return 0
 
 

@@ -30,6 +30,7 @@ _FENCE = re.compile(r'^```[^\n]*\n(.*?)^```', re.S | re.M)
 _SHELL_FENCE = re.compile(r'^```(?:sh|bash|shell|console)\n(.*?)^```', re.S | re.M)
 
 
+@pytest.mark.linter
 def test_the_site_builds_without_a_warning(tmp_path):
     result = subprocess.run(
         [sys.executable, '-m', 'sphinx', '-W', '--keep-going', '-q', '-b', 'html',

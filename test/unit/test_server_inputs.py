@@ -1,5 +1,6 @@
 """dmp_server's ROS-free parts beside planning: latest inputs, checks of goals and plans."""
 
+import threading
 import time
 
 from etdmp_ros.dmp import builtin_demo, learn
@@ -67,6 +68,28 @@ def test_latest_obstacles_take_their_volumes_then_the_static_ones(model):
     points, radii, stale, unsized = inputs.obstacles_with_radii(0.01, static)
     np.testing.assert_array_equal(points, static)
     assert stale and unsized == 0
+
+
+def test_a_plan_waits_for_the_first_volumes_of_its_perceived_obstacles(model):
+    inputs = LatestInputs(model)
+    static = np.zeros((0, 3))
+    inputs.keep('obstacles', np.array([[0.8, 0.1, 0.08]]))
+    # None come: the wait ends at its bound and the obstacle is unsized.
+    start = time.monotonic()
+    _, radii, _, unsized = inputs.obstacles_with_radii(1.0, static, wait_for_volumes=0.2)
+    assert 0.2 <= time.monotonic() - start < 0.5 and unsized == 1 and radii.tolist() == [0.0]
+    # They come from another thread (the executor's) meanwhile: the plan has them.
+    timer = threading.Timer(0.1, inputs.keep, ('volumes', (np.array([[0.8, 0.1, 0.08]]),
+                                                           np.array([0.03]))))
+    timer.start()
+    start = time.monotonic()
+    _, radii, _, unsized = inputs.obstacles_with_radii(1.0, static, wait_for_volumes=2.0)
+    assert 0.05 < time.monotonic() - start < 1.0 and unsized == 0 and radii.tolist() == [0.03]
+    # Once volumes were received, nothing waits (an obstacle without one is a point).
+    inputs.keep('obstacles', np.array([[0.5, 0.5, 0.08]]))
+    start = time.monotonic()
+    assert inputs.obstacles_with_radii(1.0, static, wait_for_volumes=2.0)[3] == 1
+    assert time.monotonic() - start < 0.1
 
 
 def test_goal_checks_reach_and_the_task_plane():

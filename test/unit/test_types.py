@@ -11,6 +11,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[2]
 
 #: Calls that break the public API's types, each with the error code mypy must report.
@@ -37,12 +39,14 @@ def _mypy(*args):
                           text=True, timeout=600)
 
 
+@pytest.mark.linter
 def test_package_type_checks():
     result = _mypy()
     assert result.returncode == 0, result.stdout[-5000:] + result.stderr[-2000:]
     assert result.stdout.startswith('Success: no issues found'), result.stdout
 
 
+@pytest.mark.linter
 def test_wrong_calls_are_found(tmp_path):
     wrong = tmp_path / 'wrong_calls.py'
     wrong.write_text(WRONG, encoding='utf-8')
