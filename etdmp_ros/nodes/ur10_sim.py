@@ -159,8 +159,8 @@ class UR10SimNode(Node):
                 f'control_rate {typed.control_rate} Hz is not a whole number of physics steps '
                 f'of {self.sim.timestep} s: running at {1.0 / self.tick_period:.3f} Hz')
         self.camera_period = 1.0 / typed.camera_rate if typed.camera_rate > 0 else 0.0
-        self.real_time_factor = typed.real_time_factor
-        self.command_wait = typed.command_wait
+        self.real_time_factor, self.command_wait = typed.real_time_factor, typed.command_wait
+        self.thread_priority = typed.thread_priority     # read-only: read once
         return typed
 
     def _create_topics(self):
@@ -322,7 +322,7 @@ class UR10SimNode(Node):
 
     def _scheduling(self, paced, realtime):
         """Give the thread SCHED_FIFO while ``paced`` (thread_priority), else normal; return it."""
-        priority = self.get_parameter('thread_priority').value
+        priority = self.thread_priority
         if paced and priority and realtime is None:
             reason = set_realtime_priority(priority)
             (self.get_logger().warning if reason else self.get_logger().info)(
