@@ -7,21 +7,16 @@ DESCRIPTION), at start and whenever parameters change; the node replaces its sna
 
 from dataclasses import dataclass, field
 
-from etdmp_ros.dmp import AVOIDANCES, FORMULATIONS, METHODS, ObstacleGains
+from etdmp_ros.dmp import ObstacleGains
 from etdmp_ros.geometry.task_plane import TaskPlane
-from etdmp_ros.ros import system
-from etdmp_ros.skills.library import check_skill_name, RECORDED_DIMS
-from etdmp_ros.skills.planning import bounded, PLAN_ORIENTATION_MODES, PlanSettings, Workspace
+from etdmp_ros.ros.node_parameters import DmpServerParameters
+from etdmp_ros.skills.library import check_skill_name
+from etdmp_ros.skills.planning import bounded, PlanSettings, Workspace
 import numpy as np
 
-#: Where dmp_server takes the tool position from (its parameter tool_position_source).
-TOOL_SOURCES = system.node('dmp_server').parameter('tool_position_source').choices
-
-
-def _choice(values, name, choices):
-    if values[name] not in choices:
-        raise ValueError(f'{name} must be one of {", ".join(choices)}, got {values[name]!r}')
-    return values[name]
+#: Points of the workcell: one beyond it is refused naming its coordinate (:func:`bounded`),
+#: which says more than their description's range (the same bound, MAX_REQUEST_COORDINATE).
+WORKCELL_POINTS = ('static_obstacles', 'task_plane.origin')
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,67 +47,65 @@ class Settings:
     follow_threshold: float
     follow_lead: float
     initial_joints: np.ndarray
+    #: Every parameter, typed (the start-up ones read from here: tool_offset, skills_dir ...).
+    parameters: DmpServerParameters
     goal_object: str = 'marker'
     goal_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
     def from_values(cls, values):
-        """Build from {parameter name: value}; raise ValueError saying what is wrong."""
-        check_skill_name(values['skill'])
-        check_skill_name(values['teach_skill_name'])
-        static = np.asarray(values['static_obstacles'], dtype=float)
-        if static.size % 3:
+        """
+        Build from {parameter name: value}; raise ValueError saying what is wrong.
+
+        Each value is checked by its description (type, range, choices: DmpServerParameters);
+        here only what a description cannot say: skill names, the lengths of lists, the task
+        plane's axes (orthogonal), the plan settings together (PlanSettings). Points beyond the
+        workcell first, with their own reason (WORKCELL_POINTS).
+        """
+        for name in WORKCELL_POINTS:
+            if isinstance(values[name], (list, tuple)) and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) for v in values[name]):
+                bounded(values[name], name)
+        p = DmpServerParameters.from_values(values)
+        check_skill_name(p.skill)
+        check_skill_name(p.teach_skill_name)
+        if len(p.static_obstacles) % 3:
             raise ValueError('static_obstacles must be numbers x1, y1, z1, x2, ... (a multiple '
-                             f'of 3), got {len(static)} values')
-        bounded(static, 'static_obstacles')
-        gains = ObstacleGains(gamma=values['obstacle_gamma'], beta=values['obstacle_beta'],
-                              gamma2=values['obstacle_gamma2'],
-                              k_relative=values['obstacle_k_relative'])
-        workspace = Workspace(reach=values['reach_radius'], margin=values['reach_margin'],
-                              min_radius=values['min_reach_radius'],
-                              min_height=values['min_height'])
+                             f'of 3), got {len(p.static_obstacles)} values')
+        gains = ObstacleGains(gamma=p.obstacle_gamma, beta=p.obstacle_beta,
+                              gamma2=p.obstacle_gamma2, k_relative=p.obstacle_k_relative)
+        workspace = Workspace(reach=p.reach_radius, margin=p.reach_margin,
+                              min_radius=p.min_reach_radius, min_height=p.min_height)
         plan = PlanSettings(
-            method=_choice(values, 'method', METHODS), mode=values['mode'],
-            independent_axis=values['independent_axis'], duration=values['duration'],
-            output_period=values['output_period'], gains=gains, obstacle_k=values['obstacle_k'],
-            obstacle_margin=values['obstacle_margin'], goal_clearance=values['goal_clearance'],
-            min_distance=values['min_distance'], orientation=values['tool_orientation'],
-            orientation_mode=_choice(values, 'orientation_mode', PLAN_ORIENTATION_MODES),
-            workspace=workspace, tool_radius=values['tool_radius'],
-            obstacle_clearance=values['obstacle_clearance'],
-            avoidance=_choice(values, 'avoidance', AVOIDANCES))
-        plane = TaskPlane.create(values['task_plane.origin'], values['task_plane.x_axis'],
-                                 values['task_plane.y_axis'], values['task_plane.scale'])
+            method=p.method, mode=p.mode, independent_axis=p.independent_axis,
+            duration=p.duration, output_period=p.output_period, gains=gains,
+            obstacle_k=p.obstacle_k, obstacle_margin=p.obstacle_margin,
+            goal_clearance=p.goal_clearance, min_distance=p.min_distance,
+            orientation=p.tool_orientation, orientation_mode=p.orientation_mode,
+            workspace=workspace, tool_radius=p.tool_radius,
+            obstacle_clearance=p.obstacle_clearance, avoidance=p.avoidance)
+        plane = TaskPlane.create(p.task_plane_origin, p.task_plane_x_axis, p.task_plane_y_axis,
+                                 p.task_plane_scale)
         return cls(
-            skill=values['skill'], formulation=_choice(values, 'formulation', FORMULATIONS),
-            n_basis=values['n_basis'], plan=plan, plane=plane,
-            static_obstacles=static.reshape(-1, 3), obstacle_max_age=values['obstacle_max_age'],
-            goal_max_age=values['goal_max_age'],
-            tool_position_source=_choice(values, 'tool_position_source', TOOL_SOURCES),
-            tool_state_max_age=values['tool_state_max_age'],
-            teach_skill_name=values['teach_skill_name'],
-            recorded_dim=_choice(values, 'recorded_dim', RECORDED_DIMS),
-            plane_tolerance=values['plane_tolerance'], execute=values['execute'],
-            publish_markers=values['publish_markers'], teach_overwrite=values['teach_overwrite'],
-            check_timing=values['check_timing'], check_arm=values['check_arm'],
-            arm_clearance=values['arm_clearance'], max_request_wait=values['max_request_wait'],
-            follow_goal=values['follow_goal'], follow_threshold=values['follow_threshold'],
-            follow_lead=values['follow_lead'],
-            initial_joints=_joints(values['initial_joint_positions']),
-            goal_object=_choice(values, 'goal_object', system.GOAL_OBJECTS),
-            goal_offset=_offset(values['goal_offset']))
+            skill=p.skill, formulation=p.formulation, n_basis=p.n_basis, plan=plan, plane=plane,
+            static_obstacles=np.reshape(p.static_obstacles, (-1, 3)),
+            obstacle_max_age=p.obstacle_max_age, goal_max_age=p.goal_max_age,
+            tool_position_source=p.tool_position_source,
+            tool_state_max_age=p.tool_state_max_age, teach_skill_name=p.teach_skill_name,
+            recorded_dim=p.recorded_dim, plane_tolerance=p.plane_tolerance, execute=p.execute,
+            publish_markers=p.publish_markers, teach_overwrite=p.teach_overwrite,
+            check_timing=p.check_timing, check_arm=p.check_arm, arm_clearance=p.arm_clearance,
+            max_request_wait=p.max_request_wait, follow_goal=p.follow_goal,
+            follow_threshold=p.follow_threshold, follow_lead=p.follow_lead,
+            initial_joints=_sized(p.initial_joint_positions, 'initial_joint_positions', 6,
+                                  '6 finite numbers'),
+            parameters=p, goal_object=p.goal_object,
+            goal_offset=_sized(p.goal_offset, 'goal_offset', 3,
+                               '3 finite numbers [x, y, z] within 2 m'))
 
 
-def _offset(values):
-    offset = np.asarray(values, dtype=float)
-    if offset.shape != (3,) or not np.all(np.isfinite(offset)) or np.any(np.abs(offset) > 2.0):
-        raise ValueError(f'goal_offset must be 3 finite numbers [x, y, z] within 2 m, got '
-                         f'{values!r}')
-    return offset
-
-
-def _joints(values):
-    q = np.asarray(values, dtype=float)
-    if q.shape != (6,) or not np.all(np.isfinite(q)):
-        raise ValueError(f'initial_joint_positions must be 6 finite numbers, got {values!r}')
-    return q
+def _sized(value, name, size, what):
+    """Return a list parameter of ``size`` numbers as an array (its range is checked)."""
+    if len(value) != size:
+        raise ValueError(f'{name} must be {what}, got {list(value)!r}')
+    return np.array(value, dtype=float)

@@ -36,7 +36,7 @@ is followed (a failed check stops it, as any path); any other path is checked fi
 never stalls the control loop (see :mod:`etdmp_ros.ros.conversions._path_cdr`).
 """
 
-from dataclasses import fields, replace
+from dataclasses import fields
 import math
 import sys
 import threading
@@ -51,7 +51,8 @@ from etdmp_ros.ros import qos, system, topics
 from etdmp_ros.ros.conversions import (joint_state_from_cdr, ns_to_stamp, path_from_cdr,
                                        velocity_command_msg)
 from etdmp_ros.ros.events import ERROR, EventPublisher
-from etdmp_ros.ros.parameters import declare
+from etdmp_ros.ros.node_parameters import ControllerParameters
+from etdmp_ros.ros.parameters import declare, values as parameter_values
 from etdmp_ros.ros.spin import normal_scheduling, rate_qos, run, set_realtime_priority
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
@@ -79,10 +80,6 @@ WAIT_FOR_JOINT_STATES = 5.0
 IGNORED_LOG_PERIOD = 2.0
 
 DESCRIPTION = system.node(NODE_NAME)
-#: The controller's own parameters (the scene's are read-only).
-PARAMETERS = frozenset(p.name for p in DESCRIPTION.parameters)
-# Node parameters that are fields of ControllerConfig under another name.
-CONFIG_NAMES = {'control_rate': 'rate', 'joint_acceleration_limits': 'acceleration_limits'}
 
 
 class ControllerNode(Node):
@@ -91,14 +88,12 @@ class ControllerNode(Node):
     def __init__(self, **kwargs):
         """Declare parameters, build the controller, create the topics and the service."""
         super().__init__(NODE_NAME, **kwargs)
-        params = self._declare_parameters()
-        self.config = self._config(params)
-        self.watch = InputWatch(params['joint_state_timeout'],
-                                params['simulation_stall_timeout'])
-        self.untimed_speed = (params['untimed_path_speed'], params['untimed_path_angular_speed'])
-        self.check_paths = params['check_paths']
-        self.max_path_poses = params['max_path_poses']
-        self.model = UR10Model(tool_offset=params['tool_offset'])
+        p, self.config = self._settings(declare(self, DESCRIPTION))
+        self.watch = InputWatch(p.joint_state_timeout, p.simulation_stall_timeout)
+        self.untimed_speed = (p.untimed_path_speed, p.untimed_path_angular_speed)
+        self.check_paths = p.check_paths
+        self.max_path_poses = p.max_path_poses
+        self.model = UR10Model(tool_offset=p.tool_offset)
         self.controller = TrajectoryController(self.model, self.config)
         self.period = self.controller.period
 
@@ -163,52 +158,59 @@ class ControllerNode(Node):
             self.get_logger().info(f'control steps at SCHED_FIFO priority {priority}')
 
     # ---------------------------------------------------------------------------- parameters
-    def _declare_parameters(self):
-        return declare(self, DESCRIPTION)
+    def _values(self, changes=()):
+        return parameter_values(self, DESCRIPTION, changes)
 
     @staticmethod
-    def _config(params, base=None):
-        """Return a validated ControllerConfig from parameter values (ValueError if bad)."""
-        fields_ = {f.name for f in fields(ControllerConfig)}
-        values = {}
-        for name, value in params.items():
-            key = CONFIG_NAMES.get(name, name)
-            if key in fields_:
-                values[key] = tuple(value) if isinstance(value, (list, tuple)) else value
-        if 'actuation_delay' in values and values['actuation_delay'] < 0:
-            values['actuation_delay'] = None
-        if 'posture_gain' in params and 'initial_joint_positions' in params:
-            values['posture'] = tuple(params['initial_joint_positions'])
-        if 'acceleration_limits' in values and len(values['acceleration_limits']) != 6:
+    def _settings(values):
+        """
+        Return the typed parameters and the ControllerConfig of ``values`` ({name: value}).
+
+        Each value is checked by its description (ControllerParameters: ValueError naming it);
+        what a description cannot say is checked here and by ControllerConfig.validate: six
+        acceleration limits, gains below the control rate, condition_halt above
+        condition_slowdown. A negative actuation_delay is one control period (None).
+        """
+        p = ControllerParameters.from_values(values)
+        if len(p.joint_acceleration_limits) != 6:
             raise ValueError('joint_acceleration_limits must have 6 values (UR joint order)')
-        config = replace(base, **values) if base is not None else ControllerConfig(**values)
+        config = ControllerConfig(
+            rate=p.control_rate, position_gain=p.position_gain,
+            orientation_gain=p.orientation_gain,
+            actuation_delay=p.actuation_delay if p.actuation_delay >= 0 else None,
+            velocity_scale=p.velocity_scale, acceleration_limits=p.joint_acceleration_limits,
+            joint_limit_margin=p.joint_limit_margin,
+            singular_value_threshold=p.singular_value_threshold, max_damping=p.max_damping,
+            condition_slowdown=p.condition_slowdown, condition_halt=p.condition_halt,
+            posture=p.initial_joint_positions, posture_gain=p.posture_gain,
+            approach_speed=p.approach_speed, approach_angular_speed=p.approach_angular_speed,
+            approach_acceleration=p.approach_acceleration,
+            approach_tolerance=p.approach_tolerance,
+            approach_angle_tolerance=p.approach_angle_tolerance,
+            resume_ramp_time=p.resume_ramp_time, hold_time=p.hold_time,
+            max_tracking_error=p.max_tracking_error, estimate_delay=p.estimate_delay)
         config.validate()
         if config.condition_halt <= config.condition_slowdown:
             raise ValueError('condition_halt must be above condition_slowdown')
-        return config
+        return p, config
 
     def _validate_parameters(self, parameters):
-        changes = {p.name: p.value for p in parameters if p.name in PARAMETERS}
         try:
-            self._config(changes, base=self.config)
+            self._settings(self._values(parameters))
         except (ValueError, TypeError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters):
-        changes = {p.name: p.value for p in parameters if p.name in PARAMETERS}
+        p, new = self._settings(self._values())
         with self._lock:
-            new = self._config(changes, base=self.config)
-            for f in fields(ControllerConfig):
+            for f in fields(ControllerConfig):      # the controller keeps its config object
                 setattr(self.controller.config, f.name, getattr(new, f.name))
-            self.watch.timeout = changes.get('joint_state_timeout', self.watch.timeout)
-            self.watch.stall_timeout = changes.get('simulation_stall_timeout',
-                                                   self.watch.stall_timeout)
-            self.check_paths = changes.get('check_paths', self.check_paths)
-            self.max_path_poses = changes.get('max_path_poses', self.max_path_poses)
-            self.untimed_speed = (changes.get('untimed_path_speed', self.untimed_speed[0]),
-                                  changes.get('untimed_path_angular_speed',
-                                              self.untimed_speed[1]))
+            self.watch.timeout = p.joint_state_timeout
+            self.watch.stall_timeout = p.simulation_stall_timeout
+            self.check_paths = p.check_paths
+            self.max_path_poses = p.max_path_poses
+            self.untimed_speed = (p.untimed_path_speed, p.untimed_path_angular_speed)
 
     # ------------------------------------------------------------------------------ control
     def _on_joint_state(self, data):

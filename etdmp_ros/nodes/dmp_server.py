@@ -97,14 +97,13 @@ class DmpServer(Node):
         self._state_lock = threading.Lock()
         self._core_lock = threading.Lock()
         try:
-            self._model = UR10Model(tool_offset=self.get_parameter('tool_offset').value)
+            self._model = UR10Model(tool_offset=settings.parameters.tool_offset)
             self._inputs = LatestInputs(self._model)    # keeps the model for itself
             self._arm_checks = ArmChecks(UR10Model(tool_offset=self._model.tool_offset))  # core
         except (OSError, ValueError) as err:   # no example-robot-data, or a bad tool_offset
             log.fatal(f'cannot load the UR10 model: {err}')
             raise InvalidConfiguration(str(err)) from None
-        skills_dir = self.get_parameter('skills_dir').value
-        self._skills_dir = skills_dir or str(default_skills_dir())
+        self._skills_dir = settings.parameters.skills_dir or str(default_skills_dir())
         self._library = SkillLibrary(settings.formulation, settings.n_basis)
         self.events = EventPublisher(self)   # what it did, as data (etdmp_ros.ros.events)
         self._teaching = Teaching(self._library, self._skills_dir, log, self.get_name(),
@@ -207,17 +206,17 @@ class DmpServer(Node):
     def _learn_skills(self, settings):
         log = self.get_logger()
         started = time.perf_counter()
-        for name in self.get_parameter('builtin_skills').value:
+        for name in settings.parameters.builtin_skills:
             try:
                 self._library.add(name, builtin_demo(name), 'built-in')
             except ValueError as err:
                 log.error(f'built-in skill {name!r} not learned: {err}')
         taught = pathlib.Path(self._skills_dir).expanduser()
-        sources = (('demo_files', self._values()['demo_files']),
+        sources = (('demo_files', settings.parameters.demo_files),
                    ('skills_dir', [taught] if taught.is_dir() else []))
         for what, paths in sources:
             added, errors = self._library.add_files(
-                paths, settings.plane, mcap_topic=self.get_parameter('mcap_topic').value or None,
+                paths, settings.plane, mcap_topic=settings.parameters.mcap_topic or None,
                 recorded_dim=settings.recorded_dim, plane_tolerance=settings.plane_tolerance,
                 kinematics=self._model)
             for message in errors:

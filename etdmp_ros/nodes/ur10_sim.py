@@ -58,7 +58,8 @@ from etdmp_ros.ros.conversions import (contact_markers, joint_state_msg, MovingT
                                        ns_to_stamp, pose_array_from_numpy, tf_available,
                                        tf_message, velocity_command_array)
 from etdmp_ros.ros.events import ERROR, EventPublisher, WARN
-from etdmp_ros.ros.parameters import declare
+from etdmp_ros.ros.node_parameters import Ur10SimParameters
+from etdmp_ros.ros.parameters import declare, values as parameter_values
 from etdmp_ros.ros.spin import normal_scheduling, rate_qos, run, set_realtime_priority
 from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
 from geometry_msgs.msg import PointStamped, PoseArray
@@ -129,39 +130,38 @@ class UR10SimNode(Node):
         self._unreported_stall = (0.0, 0.0)     # (gap, simulated time) not reported yet
         self._last_stall_warning = -1.0
         self._create_topics()
-        if p['teach_script']:
-            self._guide_name = p['teach_script']
-            self._guide = self._load_guide(p['teach_script'])   # a bad one: startup fails
+        if p.teach_script:
+            self._guide_name = p.teach_script
+            self._guide = self._load_guide(p.teach_script)   # a bad one: startup fails
             self._publish_teaching('playing')
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         k = self.sim.intrinsics
         self.get_logger().info(
             f'UR10 workcell ready: control {1.0 / self.tick_period:g} Hz, camera '
-            f'{p["camera_rate"]:g} Hz {k.width}x{k.height} (f = {k.fx:.1f} px), watchdog '
+            f'{p.camera_rate:g} Hz {k.width}x{k.height} (f = {k.fx:.1f} px), watchdog '
             f'{self.sim.watchdog_timeout:g} s, real-time factor {self.real_time_factor:g}')
 
     def _build(self, p):
-        """Build the simulation from the parameter values ``p``; return them (completed)."""
+        """Build the simulation from the parameter values ``p``; return them typed."""
         # Dynamic typing of goal_position and obstacle_positions: `ros2 param set` types
         # "[1, 0, 0]" as integer[], "[0.7, 0.2, 0]" as a string and "[]" as bool[];
         # _number_list takes them all as numbers. `obstacle_positions: []` in YAML leaves the
         # parameter unset: no obstacles.
-        for name in ('obstacle_positions', 'obstacle_radii'):
-            if p[name] is None:
-                p[name] = []
-        self._parameter_values = p   # (not _parameters: rclpy Node uses that name)
-        self.sim = UR10Sim.from_parameters(p)
-        self.steps_per_tick = max(1, round(1.0 / (p['control_rate'] * self.sim.timestep)))
+        p.update({n: [] for n in ('obstacle_positions', 'obstacle_radii') if p[n] is None})
+        typed = Ur10SimParameters.from_values(p)     # each value by its description
+        self._parameter_values = p   # for the camera process (not _parameters: rclpy's name)
+        self.sim = UR10Sim.from_parameters(p)   # the workcell (sim layer: from the values)
+        self.steps_per_tick = max(1, round(1.0 / (typed.control_rate * self.sim.timestep)))
         self.tick_period = self.steps_per_tick * self.sim.timestep
-        if abs(self.tick_period * p['control_rate'] - 1.0) > 1e-6:
+        if abs(self.tick_period * typed.control_rate - 1.0) > 1e-6:
             self.get_logger().warning(
-                f'control_rate {p["control_rate"]} Hz is not a whole number of physics steps '
+                f'control_rate {typed.control_rate} Hz is not a whole number of physics steps '
                 f'of {self.sim.timestep} s: running at {1.0 / self.tick_period:.3f} Hz')
-        self.camera_period = 1.0 / p['camera_rate'] if p['camera_rate'] > 0 else 0.0
-        self.real_time_factor = p['real_time_factor']
-        self.command_wait = p['command_wait']
-        return p
+        self.camera_period = 1.0 / typed.camera_rate if typed.camera_rate > 0 else 0.0
+        self.real_time_factor, self.command_wait = typed.real_time_factor, typed.command_wait
+        self.thread_priority = typed.thread_priority     # read-only: read once
+        return typed
 
     def _create_topics(self):
         """Create the publishers and the command subscription; publish the latched state."""
@@ -191,8 +191,8 @@ class UR10SimNode(Node):
 
     # --------------------------------------------------------------------------- parameters
     def _validate_parameters(self, parameters):
-        for parameter in parameters:
-            try:
+        try:
+            for parameter in parameters:
                 if parameter.name in ('goal_position', 'bottle.position'):
                     self.sim.scene.placed(parameter.name, _number_list(parameter))
                 elif parameter.name == 'obstacle_positions':
@@ -205,12 +205,18 @@ class UR10SimNode(Node):
                         raise ValueError(f'at most {MAX_OBSTACLES} radii, got {len(radii)}')
                 elif parameter.name == 'teach_script' and parameter.value:
                     self._checked_guide = (parameter.value, self._load_guide(parameter.value))
-            except ValueError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
+            # Every value by its description, after the checks above (their reasons say more).
+            Ur10SimParameters.from_values(parameter_values(self, DESCRIPTION, parameters))
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters):
+        typed = Ur10SimParameters.from_values(parameter_values(self, DESCRIPTION))
         with self._lock:
+            self.real_time_factor = typed.real_time_factor
+            self.sim.watchdog_timeout = typed.watchdog_timeout
+            self.command_wait = typed.command_wait
             for parameter in parameters:
                 if parameter.name == 'goal_position':
                     self._pending_goal = parse_goal_position(_number_list(parameter))
@@ -220,12 +226,6 @@ class UR10SimNode(Node):
                     self._pending_obstacles = parse_obstacle_positions(_number_list(parameter))
                 elif parameter.name == 'obstacle_radii':
                     self._pending_radii = parse_obstacle_radii(_number_list(parameter))
-                elif parameter.name == 'real_time_factor':
-                    self.real_time_factor = float(parameter.value)
-                elif parameter.name == 'watchdog_timeout':
-                    self.sim.watchdog_timeout = float(parameter.value)
-                elif parameter.name == 'command_wait':
-                    self.command_wait = float(parameter.value)
                 elif parameter.name == 'teach_script':
                     checked, self._checked_guide = self._checked_guide, None
                     if parameter.value and checked and checked[0] == parameter.value:
@@ -322,7 +322,7 @@ class UR10SimNode(Node):
 
     def _scheduling(self, paced, realtime):
         """Give the thread SCHED_FIFO while ``paced`` (thread_priority), else normal; return it."""
-        priority = self.get_parameter('thread_priority').value
+        priority = self.thread_priority
         if paced and priority and realtime is None:
             reason = set_realtime_priority(priority)
             (self.get_logger().warning if reason else self.get_logger().info)(
