@@ -74,7 +74,12 @@ def module_argv(node: str, param_files: Iterable[PathLike], extra_args: Iterable
 def sourced(install: PathLike, command: str) -> list[str]:
     """Return an argv that runs a shell command after sourcing the install, as a user would."""
     # local_setup.sh: colcon-core always writes it (setup.bash needs the colcon-bash extension).
-    return ['sh', '-c', f'. "{install}/local_setup.sh" && exec {command}']
+    # env --default-signal (coreutils): Ctrl-C must reach the command even when this process
+    # ignored SIGINT and SIGQUIT as it started it (C's system() does so in the whole process
+    # while a command runs: seen in the test suite, a `ros2 launch` deaf to Ctrl-C, killed
+    # after 40 s); a non-interactive sh cannot undo what was ignored on entry.
+    return ['env', '--default-signal=INT,QUIT,TERM', 'sh', '-c',
+            f'. "{install}/local_setup.sh" && exec {command}']
 
 
 def installed_argv(install: PathLike, node: str, param_files: Iterable[PathLike],
