@@ -25,9 +25,10 @@ import signal
 import threading
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from etdmp_ros.demo.recording import Recorder
 from etdmp_ros.demo.scenario import Scenario
-from etdmp_ros.ros import system
+from etdmp_ros.ros import events, qos, system
 from etdmp_ros.ros.background import BackgroundNode
 from etdmp_ros.ros.conversions import joint_state_from_cdr
 from etdmp_ros.ros.processes import installed_command, NodeProcess, SystemProcesses
@@ -69,6 +70,7 @@ class Watch(BackgroundNode):
         self.truth = None       # the goal marker's true position
         self.home = None        # the true tool tip when this node first heard of it
         self.logs = []          # (receipt monotonic, node name, text) from /rosout
+        self.refusals = []      # dmp_server's plan_refused events' reasons, in order
         n = self.node
         n.create_subscription(JointState, '/joint_states', self._on_joints,
                               QoSProfile(depth=2000), raw=True)
@@ -81,9 +83,16 @@ class Watch(BackgroundNode):
         # /rosout keeps a node's recent lines for late joiners (transient local).
         n.create_subscription(Log, '/rosout', self._on_log,
                               QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        n.create_subscription(DiagnosticArray, '/dmp_server/events', self._on_events,
+                              qos.latched(events.HISTORY))
         self.generalize_client = n.create_client(GetPlan, '/generalize')
         self.parameters = n.create_client(SetParameters, '/dmp_server/set_parameters')
         self.start()
+
+    def _on_events(self, msg):
+        with self.lock:
+            self.refusals += [e.values.get('reason', e.message) for e in events.from_message(msg)
+                              if e.kind == 'plan_refused']
 
     def _on_joints(self, data):
         try:
@@ -237,17 +246,20 @@ def write(watch, sys_, during=None):
     Returns (joints, commands, statuses) received meanwhile.
     """
     mark = watch.mark()
-    plan = watch.generalize()
+    reason = ''
     for _ in range(20):
         # Right after a (re)start dmp_server may not have heard the goal or the obstacles'
-        # volumes yet, though this process has: such a refusal says 'yet'; asked again.
-        refusals = [line for line in sys_.nodes.log('dmp_server').splitlines()
-                    if '[ERROR]' in line and '/generalize with skill' in line]
-        if len(plan.poses) or not refusals or ' yet' not in refusals[-1]:
+        # volumes yet, though this process has: its plan_refused event says 'yet'; asked again.
+        seen = len(watch.refusals)
+        plan = watch.generalize()
+        if len(plan.poses):
+            break
+        wait(lambda: len(watch.refusals) > seen, 2.0, "dmp_server's plan_refused event")
+        reason = watch.refusals[-1]
+        if ' yet' not in reason:
             break
         time.sleep(0.2)
-        plan = watch.generalize()
-    assert len(plan.poses) > 100, f'no plan: {refusals[-1] if refusals else "no reason logged"}'
+    assert len(plan.poses) > 100, f'no plan: {reason}'
     wait(tracking_started(watch, mark), 30, 'tracking', sys_.running())
     if during is not None:
         during(watch)
