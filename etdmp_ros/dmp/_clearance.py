@@ -94,6 +94,72 @@ if numba is not None:
         return out
 
 
+def distances(x: Array, C: Array, fast: bool = True) -> Array:
+    """Return the distance of every sample of ``x`` (..., n, d) to every centre: (..., n, m)."""
+    if fast and numba is not None:
+        flat = np.ascontiguousarray(x, dtype=float).reshape(-1, x.shape[-1])
+        out = _distances_nb(flat, np.ascontiguousarray(C, dtype=float))
+        return out.reshape(x.shape[:-1] + (len(C),))
+    return np.linalg.norm(x[..., :, None, :] - C, axis=-1)
+
+
+if numba is not None:
+    @numba.njit(cache=True, fastmath=False)
+    def _distances_nb(x: Array, C: Array) -> Array:  # pragma: no cover - numba
+        """Compute :func:`distances`' numpy reference for (n, d) samples in one loop."""
+        n, d = x.shape
+        out = np.empty((n, len(C)))
+        for k in range(n):
+            for j in range(len(C)):
+                acc = 0.0
+                for e in range(d):
+                    diff = x[k, e] - C[j, e]
+                    acc += diff * diff
+                out[k, j] = math.sqrt(acc)
+        return out
+
+
+def least_pushes(W: Array, q: float, directions: Array, fast: bool = True) -> Array:
+    """
+    Return, per direction, the translation that takes every sample of ``W`` (k, d) out.
+
+    ``W``: samples minus a centre, ``q``: the target radius; a sample ``w`` inside leaves
+    along ``n`` at the larger root of ``|w + s n| = q``. ``fast``: one numba loop, else the
+    numpy reference.
+    """
+    if fast and numba is not None:
+        return _least_pushes_nb(np.ascontiguousarray(W, dtype=float), float(q),
+                                np.ascontiguousarray(directions, dtype=float))
+    p = W @ directions.T
+    c = np.einsum('ki,ki->k', W, W) - q * q
+    out = np.where(c[:, None] < 0.0, -p + np.sqrt(np.maximum(p * p - c[:, None], 0.0)), 0.0)
+    return np.max(out, axis=0)
+
+
+if numba is not None:
+    @numba.njit(cache=True, fastmath=False)
+    def _least_pushes_nb(W: Array, q: float,
+                         directions: Array) -> Array:  # pragma: no cover - numba
+        """Compute :func:`least_pushes`' numpy reference in one loop."""
+        k, d = W.shape
+        out = np.zeros(len(directions))
+        for kk in range(k):
+            c = 0.0
+            for e in range(d):
+                c += W[kk, e] * W[kk, e]
+            c -= q * q
+            if c >= 0.0:
+                continue
+            for i in range(len(directions)):
+                p = 0.0
+                for e in range(d):
+                    p += W[kk, e] * directions[i, e]
+                push = -p + math.sqrt(max(p * p - c, 0.0))
+                if push > out[i]:
+                    out[i] = push
+        return out
+
+
 def format_point(point: Iterable[float]) -> str:
     """Return a point as ``(x, y)`` with four significant digits per coordinate."""
     return '(' + ', '.join(f'{c:.4g}' for c in point) + ')'

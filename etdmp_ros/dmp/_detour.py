@@ -42,7 +42,7 @@ from etdmp_ros.geometry.arrays import Array
 import numpy as np
 from numpy.typing import NDArray
 
-from ._clearance import check_clearance, format_point, Obstacles
+from ._clearance import check_clearance, distances, format_point, least_pushes, Obstacles
 from ._displacement import bump, Displacement, Values
 from ._errors import GeneralizationError
 
@@ -242,7 +242,8 @@ def _encounter(t: Array, ds: Array, base: Array,
     Return the best (amplitude, direction, ts, ta, tb, te) for one encounter, or None.
 
     ``span`` = [ts, ta, tb, te, obstacles, need]: the window, the stretch inside the
-    encounter's balls, and per direction the push its inside samples need (:func:`_needs`).
+    encounter's balls, and per direction the push its inside samples need
+    (:func:`~etdmp_ros.dmp._clearance.least_pushes`).
     The directions are ranked by that need; for the best
     TOP_DIRECTIONS (all of them if none of those can pass), each bump shape of PLATEAUS (the
     plateau over the samples needing at least that fraction of the largest push) gets its
@@ -289,7 +290,7 @@ def _options(tw: Array, dsw: Array, W: Array, q: Array, own: NDArray[np.bool_], 
                 np.flatnonzero(push > 0.0)
             lo_t = max(float(tw[top[0]]), ta)
             hi_t = max(float(tw[top[-1]]), lo_t)
-            b = bump(tw, ts, lo_t, hi_t, te)[0]
+            b = bump(tw, ts, lo_t, hi_t, te, fast=False)[0]
             A = amplitude(chords(W, refine), q, n, chords(b, refine), own, 0.0, fast=False)
             cost = A * A * float(np.sum(b * b * dsw))
             if A <= size and (best is None or cost < best[0] * (1.0 - TIE)):
@@ -407,11 +408,11 @@ def detour(t: Array, x: Array, obstacles: Obstacles, margin: float, ramp: float,
         base = x + carry_only(t)[0]
         if len(C) == 0:
             return carry_only
-    q, inside = _target_radii(base, obstacles, margin)
+    q, inside = _target_radii(base, obstacles, margin, fast)
     if not inside.any():
         return carry_only if carry is not None else None
     spans = _spans(t, s, base, C, q, inside, ramp, directions, acceleration, t0,
-                   None if carry is None else blend)
+                   None if carry is None else blend, fast)
     found = _encounters(t, ds, base, obstacles, q, _joined(spans), directions, size, fast,
                         refine, acceleration, t0)
     A = np.array([f[0] for f in found])
@@ -428,8 +429,8 @@ def _carry(displacement: Displacement, t0: float) -> Array | None:
     return carry if np.any(carry) else None
 
 
-def _target_radii(base: Array, obstacles: Obstacles, margin: float) -> tuple[Array, NDArray[
-        np.bool_]]:
+def _target_radii(base: Array, obstacles: Obstacles, margin: float,
+                  fast: bool = True) -> tuple[Array, NDArray[np.bool_]]:
     """
     Return the target radii ``q`` (m,) and which samples of ``base`` (n, d) are within (n, m).
 
@@ -437,7 +438,7 @@ def _target_radii(base: Array, obstacles: Obstacles, margin: float) -> tuple[Arr
     holds the plan's start or end raises GeneralizationError.
     """
     C, r = obstacles.centres, obstacles.radii
-    dist = np.linalg.norm(base[:, None, :] - C[None], axis=2)          # (n, m)
+    dist = distances(base, C, fast)                                       # (n, m)
     ends = np.minimum(dist[0], dist[-1])
     for j in np.flatnonzero(ends < r):
         end = 0 if dist[0, j] < r[j] else -1
@@ -451,12 +452,13 @@ def _target_radii(base: Array, obstacles: Obstacles, margin: float) -> tuple[Arr
 
 def _spans(t: Array, s: Array, base: Array, C: Array, q: Array, inside: NDArray[np.bool_],
            ramp: float, directions: Array, acceleration: float | None, t0: float,
-           blend: float | None) -> list[list[Any]]:
+           blend: float | None, fast: bool = True) -> list[list[Any]]:
     """
     Return the stretches of samples ``inside`` an obstacle: ``[ts, ta, tb, te, {j}, need]``.
 
     ``s`` (n,): the arc length at the samples; ``blend``: the carried displacement's blend
     time, or None without one; ``need``: per direction, the least translation that clears it.
+    ``fast``: numba loops, else the numpy references.
     """
     spans = []
     t_last = float(t[-1])
@@ -466,7 +468,7 @@ def _spans(t: Array, s: Array, base: Array, C: Array, q: Array, inside: NDArray[
             ta, tb = float(t[a]), float(t[b])
             ts = _arc_time(s, t, s[a] - length)
             te = _arc_time(s, t, s[b] + length)
-            need = _needs(base[a:b + 1] - C[j], q[j], directions)
+            need = least_pushes(base[a:b + 1] - C[j], q[j], directions, fast)
             if acceleration:
                 # Long enough for the least translation that clears the stretch.
                 least = _ramp_time(float(need.min()), acceleration)
@@ -514,19 +516,6 @@ def _encounters(t: Array, ds: Array, base: Array, obstacles: Obstacles, q: Array
     return found
 
 
-def _needs(W: Array, q: float, directions: Array) -> Array:
-    """
-    Return, per direction, the translation that takes every sample of ``W`` (k, d) out.
-
-    ``W``: samples minus a centre, ``q``: the target radius; a sample ``w`` inside leaves
-    along ``n`` at the larger root of ``|w + s n| = q``.
-    """
-    p = W @ directions.T
-    c = np.einsum('ki,ki->k', W, W) - q * q
-    out = np.where(c[:, None] < 0.0, -p + np.sqrt(np.maximum(p * p - c[:, None], 0.0)), 0.0)
-    return np.max(out, axis=0)
-
-
 def _ramp_time(amplitude: float, acceleration: float) -> float:
     """Return the ramp duration whose smoothstep keeps ``amplitude`` under ``acceleration``."""
     # The quintic smoothstep's second derivative peaks at 10 / sqrt(3) (at u = 1/2 -+ 1/sqrt(12)).
@@ -544,7 +533,7 @@ def _slower(t: Array, base: Array, C: Array, q: Array, own: NDArray[np.bool_], b
     if new_ts == ts and new_te == te:
         return best
     window = np.flatnonzero((t > new_ts) & (t < new_te))
-    b = bump(t[window], new_ts, ta, tb, new_te)[0]
+    b = bump(t[window], new_ts, ta, tb, new_te, fast)[0]
     A2 = amplitude(chords(base[window][:, None] - C[None], refine), q, n, chords(b, refine), own,
                    0.0, fast)
     return (A2, n, new_ts, ta, tb, new_te) if A2 <= size else best

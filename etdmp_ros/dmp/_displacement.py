@@ -16,6 +16,11 @@ from etdmp_ros.geometry.arrays import Array
 import numpy as np
 from numpy.typing import ArrayLike
 
+try:  # The fast path is optional: without numba the numpy reference serves.
+    import numba
+except ImportError:  # pragma: no cover - numba is pinned in requirements
+    numba = None  # type: ignore[assignment]
+
 #: A displacement's values at the samples: delta, delta', delta'', each (n, d).
 Values = list[Array]
 
@@ -43,14 +48,19 @@ def _hermite_out(u: ArrayLike) -> tuple[Array, Array, Array]:
     return np.stack([h0, h1, h2]), np.stack([d0, d1, d2]), np.stack([e0, e1, e2])
 
 
-def bump(t: ArrayLike, ts: float, ta: float, tb: float, te: float) -> tuple[Array, Array, Array]:
+def bump(t: ArrayLike, ts: float, ta: float, tb: float, te: float,
+         fast: bool = True) -> tuple[Array, Array, Array]:
     """
     Return the bump b(t) and its first two time derivatives at times ``t`` (n,).
 
     0 before ``ts``, rising along the smoothstep to 1 at ``ta``, 1 until ``tb``, falling to 0
     at ``te``, 0 after. A ramp of zero length is a step (only used where no sample lies on it).
+    ``fast``: one numba loop (the detour evaluates bumps many times per plan), else the numpy
+    reference.
     """
     t = np.asarray(t, dtype=float)
+    if fast and numba is not None and t.ndim == 1:
+        return _bump_nb(t, float(ts), float(ta), float(tb), float(te))
     b, b1, b2 = np.zeros_like(t), np.zeros_like(t), np.zeros_like(t)
     rise = ta - ts
     fall = te - tb
@@ -64,6 +74,32 @@ def bump(t: ArrayLike, ts: float, ta: float, tb: float, te: float) -> tuple[Arra
         b[on], b1[on], b2[on] = s, -s1 / fall, s2 / fall ** 2
     b[(t >= ta) & (t <= tb)] = 1.0
     return b, b1, b2
+
+
+if numba is not None:
+    @numba.njit(cache=True, fastmath=False)
+    def _bump_nb(t: Array, ts: float, ta: float, tb: float,
+                 te: float) -> tuple[Array, Array, Array]:  # pragma: no cover - numba
+        """Compute :func:`bump`'s numpy reference in one loop (the same operations)."""
+        n = len(t)
+        b, b1, b2 = np.zeros(n), np.zeros(n), np.zeros(n)
+        rise, fall = ta - ts, te - tb
+        for i in range(n):
+            if t[i] >= ta and t[i] <= tb:
+                b[i] = 1.0
+            elif rise > 0.0 and t[i] > ts and t[i] < ta:
+                u = (t[i] - ts) / rise
+                u2 = u * u
+                b[i] = u2 * u * (10.0 + u * (-15.0 + 6.0 * u))
+                b1[i] = 30.0 * u2 * (1.0 - u) ** 2 / rise
+                b2[i] = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u) / rise ** 2
+            elif fall > 0.0 and t[i] > tb and t[i] < te:
+                u = (te - t[i]) / fall
+                u2 = u * u
+                b[i] = u2 * u * (10.0 + u * (-15.0 + 6.0 * u))
+                b1[i] = -30.0 * u2 * (1.0 - u) ** 2 / fall
+                b2[i] = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u) / fall ** 2
+        return b, b1, b2
 
 
 @dataclass(frozen=True)

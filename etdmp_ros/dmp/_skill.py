@@ -12,6 +12,7 @@ from etdmp_ros.geometry.arrays import Array, Quaternions, Rotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ._clearance import distances
 from ._demos import Demonstration
 from ._detour import candidate_directions, keep_clear, Obstacles
 from ._errors import DemonstrationError, finite_array, GeneralizationError
@@ -268,8 +269,7 @@ class Skill:
         directions = candidate_directions(self.dim)
         sizes = self._placed_size(r.starts, r.goals)
         reach = r.radii + r.gains.clearance_margin * sizes[:, None]           # (B, m)
-        near = np.any(np.linalg.norm(x[:, :, None] - r.obstacles[None, None], axis=3)
-                      < reach[:, None], axis=1).any(axis=1)
+        near = np.any(distances(x, r.obstacles, fast) < reach[:, None], axis=1).any(axis=1)
         for b in np.flatnonzero(near):
             try:
                 peak = float(np.max(np.linalg.norm(a[b], axis=1)))

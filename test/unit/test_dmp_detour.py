@@ -10,6 +10,7 @@ returned; the numba loop agrees with its numpy reference.
 """
 
 from etdmp_ros.dmp import AVOIDANCES, builtin_demo, GeneralizationError, learn, ObstacleGains
+from etdmp_ros.dmp._clearance import distances, least_pushes
 from etdmp_ros.dmp._detour import (amplitude, amplitudes, bump, candidate_directions,
                                    check_clearance, Displacement, Obstacles)
 import numpy as np
@@ -207,6 +208,24 @@ def test_the_bump_is_smooth_and_its_derivatives_are_exact():
     np.testing.assert_allclose(np.gradient(b1, h)[2:-2], b2[2:-2], atol=0.5)
     # C2: no jump in the second derivative anywhere (the quintic's ends are flat).
     assert np.max(np.abs(np.diff(b2))) < 1e-2 * np.abs(b2).max()
+
+
+def test_the_numba_loops_agree_with_their_numpy_references():
+    rng = np.random.default_rng(7)
+    t = np.sort(rng.uniform(0.0, 1.0, 500))
+    for corners in ((0.2, 0.35, 0.5, 0.8), (0.1, 0.1, 0.4, 0.9), (0.3, 0.6, 0.6, 0.6)):
+        for fast, slow in zip(bump(t, *corners), bump(t, *corners, fast=False)):
+            np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=1e-12)
+    for d in (2, 3):
+        x = rng.normal(size=(4, 60, d))
+        C = rng.normal(size=(3, d))
+        np.testing.assert_allclose(distances(x, C), distances(x, C, fast=False), rtol=1e-12)
+        assert distances(x, C).shape == (4, 60, 3)
+        W = rng.normal(scale=0.5, size=(40, d))
+        directions = candidate_directions(d)
+        fast, slow = least_pushes(W, 0.8, directions), least_pushes(W, 0.8, directions, False)
+        np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=1e-15)
+        assert fast.min() > 0.0                   # some samples are inside: every way needs a push
 
 
 def test_a_carried_displacement_starts_where_it_was_and_fades():
