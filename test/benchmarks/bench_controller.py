@@ -258,6 +258,11 @@ def bench_ros(rate, ur10, path, duration_margin=3.0):
     recorder = _Recorder(domain)
     try:
         recorder.wait(lambda: recorder.state() == 'idle', 60.0)
+        # The controller publishes its reference only to a reader it has matched: wait until
+        # this side sees its publisher, then let discovery finish on its side too.
+        recorder.wait(lambda: recorder.node.count_publishers('/etdmp/controller/reference') > 0,
+                      30.0)
+        time.sleep(1.0)
         start = time.perf_counter()
         recorder.path_pub.publish(serialize_path(path.positions, path.t, stamp=0,
                                                  orientation=quat.from_matrix(
