@@ -71,6 +71,7 @@ class Watch(BackgroundNode):
         self.home = None        # the true tool tip when this node first heard of it
         self.logs = []          # (receipt monotonic, node name, text) from /rosout
         self.refusals = []      # dmp_server's plan_refused events' reasons, in order
+        self.brakes = []        # ur10_sim's braked events: (last command, braked) in sim s
         n = self.node
         n.create_subscription(JointState, '/joint_states', self._on_joints,
                               QoSProfile(depth=2000), raw=True)
@@ -85,6 +86,8 @@ class Watch(BackgroundNode):
                               QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         n.create_subscription(DiagnosticArray, '/dmp_server/events', self._on_events,
                               qos.latched(events.HISTORY))
+        n.create_subscription(DiagnosticArray, '/ur10_sim/events', self._on_sim_events,
+                              qos.latched(events.HISTORY))
         self.generalize_client = n.create_client(GetPlan, '/generalize')
         self.parameters = n.create_client(SetParameters, '/dmp_server/set_parameters')
         self.start()
@@ -93,6 +96,11 @@ class Watch(BackgroundNode):
         with self.lock:
             self.refusals += [e.values.get('reason', e.message) for e in events.from_message(msg)
                               if e.kind == 'plan_refused']
+
+    def _on_sim_events(self, msg):
+        with self.lock:
+            self.brakes += [(float(e.values['last_command_s']), float(e.values['braked_s']))
+                            for e in events.from_message(msg) if e.kind == 'braked']
 
     def _on_joints(self, data):
         try:
@@ -318,6 +326,8 @@ def write_with_tools(sys_, watch, cli=None):
     try:
         joints, _, status = write(watch, sys_, during=during)
     finally:
+        if 'call' in tools:     # it ends by itself once it has its answer, maybe after the letter
+            tools['call'].wait(RESTART)
         for tool in tools.values():
             tool.stop()
     figures = motion_figures(sys_, joints, status)
@@ -338,10 +348,14 @@ def kill_controller(sys_, watch):
 
     ``braking_s``: from the kill to the first joint state at half the speed the arm had then;
     ``standstill_s``: to the first under :data:`STILL`; ``moved_again``: the arm moved after
-    that; ``plan_end``: the plan's last position (the goal it went to).
+    that; ``plan_end``: the plan's last position (the goal it went to). From ur10_sim's
+    ``braked`` event, exact in simulated time (the kill's is known only to a joint state's
+    latency): ``last_command_s`` and ``braked_s``, and ``halved_s`` (the first joint state at
+    half speed), None without the event.
     """
     during, killed = after_the_kill(watch, sys_, 'controller')
     mark = watch.mark()
+    n_brakes = len(watch.brakes)
     plan = watch.generalize()
     wait(tracking_started(watch, mark), 30, 'tracking', sys_.running())
     during(watch)
@@ -356,7 +370,10 @@ def kill_controller(sys_, watch):
     halved = np.flatnonzero(after & (speed < 0.5 * moving))
     still = np.flatnonzero(after & (speed < STILL))
     end = plan.poses[-1].pose.position
-    return {'speed_at_kill': float(moving),
+    brake = next((b for b in watch.brakes[n_brakes:] if b[1] > t_kill - 1.0), (None, None))
+    return {'last_command_s': brake[0], 'braked_s': brake[1],
+            'halved_s': float(sim[halved[0]]) if halved.size else None,
+            'speed_at_kill': float(moving),
             'braking_s': float(sim[halved[0]] - t_kill) if halved.size else None,
             'standstill_s': float(sim[still[0]] - t_kill) if still.size else None,
             'moved_again': bool(still.size and np.any(speed[still[0]:] >= STILL)),

@@ -41,6 +41,9 @@ from support.fault_rig import (kill_controller, kill_simulation, kill_while_writ
 
 #: The longest wall-clock gap between two ticks of the simulation while the arm moves (s).
 STALL_LIMIT = 0.05
+# Brake to half speed (simulated s): the velocity servos' time constant is a few ms, seen at
+# the next joint state (8 ms apart); measured 2-4 ms.
+SERVO_HALVING = 0.016
 
 
 @pytest.fixture(scope='module')
@@ -108,12 +111,18 @@ def test_controller_killed_mid_motion_the_watchdog_brakes(faults):
     assert np.linalg.norm(f['plan_end'][:2] - watch.truth[:2]) < 3e-3, f['plan_end']
     assert f['speed_at_kill'] > 0.01, 'the arm did not move when the controller was killed'
     print(f"controller killed: braking {f['braking_s'] * 1e3:.0f} ms, standstill "
-          f"{f['standstill_s'] * 1e3:.0f} ms of robot time after the kill")
+          f"{f['standstill_s'] * 1e3:.0f} ms of robot time after the kill; braked "
+          f"{(f['braked_s'] - f['last_command_s']) * 1e3:.0f} ms after the last command, half "
+          f"speed {(f['halved_s'] - f['braked_s']) * 1e3:.0f} ms after the brake")
     watchdog = system.node('ur10_sim').parameter('watchdog_timeout').default
     period = 1.0 / system.node('ur10_sim').parameter('control_rate').default
-    # The brake comes watchdog_timeout after the last command (sent before the kill); the
-    # velocity servos' time constant is about 10 ms.
-    assert f['braking_s'] <= watchdog + period, f
+    # The brake comes watchdog_timeout after the last command (sent before the kill), at the
+    # first tick after it: in simulated time, from ur10_sim's braked event.
+    assert f['braked_s'] is not None, f'no braked event: {f}'
+    assert f['braked_s'] - f['last_command_s'] <= watchdog + period + 1e-6, f
+    # The figures from the kill (printed) carry the kill's own error: its simulated time is
+    # that of the joint state received just before it, up to a period or two early.
+    assert f['halved_s'] - f['braked_s'] <= SERVO_HALVING, f
     assert f['standstill_s'] <= watchdog + 0.06, f
     assert not f['moved_again'], 'the arm moved again without a controller'
     assert f['largest_gap_s'] <= STALL_LIMIT, f
