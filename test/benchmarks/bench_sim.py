@@ -40,8 +40,9 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 from _results import add_option, command, printed, publish  # noqa: E402
 from etdmp_ros.demo.cpu_monitor import process_cpu_seconds, tree_cpu_seconds  # noqa: E402
-from etdmp_ros.nodes.ur10_sim import COLOR_TOPIC, DEPTH_TOPIC, UR10SimNode  # noqa: E402
+from etdmp_ros.nodes.ur10_sim import UR10SimNode  # noqa: E402
 from etdmp_ros.ros.conversions import image_msg  # noqa: E402
+from etdmp_ros.ros.topics import COLOR as COLOR_TOPIC, DEPTH as DEPTH_TOPIC  # noqa: E402
 import numpy as np  # noqa: E402
 import rclpy  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
