@@ -74,14 +74,15 @@ browser:
 	else echo "note: no chromium + chromedriver and not root: test_teach_page.py will skip"; fi
 
 # The unit suite on both cores (pytest-xdist), then the node and system suites one test at a
-# time (they measure rates and gaps that tests beside them would disturb); fails if either does.
+# time (they measure rates and gaps that tests beside them would disturb; the 15 slowest are
+# listed); fails if either does.
 test: $(STAMP) ros-tools browser
 ifneq ($(strip $(PYTEST_ARGS)),)
 	MUJOCO_GL=egl $(VENV_PY) -m pytest $(PYTEST_ARGS)
 else
 	status=0; \
 	MUJOCO_GL=egl $(VENV_PY) -m pytest -q -n 2 test/unit || status=1; \
-	MUJOCO_GL=egl $(VENV_PY) -m pytest -q test/nodes test/system || status=1; \
+	MUJOCO_GL=egl $(VENV_PY) -m pytest -q --durations=15 test/nodes test/system || status=1; \
 	exit $$status
 endif
 
