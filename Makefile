@@ -206,7 +206,11 @@ bench-two-hosts: $(STAMP)
 bench-faults: $(STAMP) ros-tools
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_faults.py $(BENCH_ARGS)
 
-# make bench-core, bench-obstacles, bench-sim, bench-dmp_server, bench-controller, bench-perception
+# The nodes' own benchmarks run in the nodes' environment (with tf2_msgs: ur10_sim publishes /tf).
+bench-sim bench-dmp_server bench-perception: bench-%: $(STAMP) ros-tools
+	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_$*.py $(BENCH_ARGS)
+
+# make bench-core, bench-obstacles, bench-controller: beside their peer libraries
 bench-%: $(BENCH_STAMP)
 	MUJOCO_GL=egl $(BENCH_VENV)/bin/python test/benchmarks/bench_$*.py $(BENCH_ARGS)
 
