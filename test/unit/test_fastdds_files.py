@@ -128,7 +128,7 @@ def test_lock_owners_and_mappers_name_the_processes(tmp_path):
 
 # ----------------------------------------------------------------- which profile a process gets
 
-def _profile_name(monkeypatch, shared_memory, **env):
+def _profile_name(monkeypatch, shared_memory, realtime=False, **env):
     from etdmp_ros.ros.spin import dds_profile
     for name in ('ROS_AUTOMATIC_DISCOVERY_RANGE', 'ROS_LOCALHOST_ONLY', 'ROS_STATIC_PEERS',
                  'FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE',
@@ -136,7 +136,7 @@ def _profile_name(monkeypatch, shared_memory, **env):
         monkeypatch.delenv(name, raising=False)
     for name, value in env.items():
         monkeypatch.setenv(name, value)
-    path = dds_profile(shared_memory)
+    path = dds_profile(shared_memory, realtime=realtime)
     return None if path is None else path.name
 
 
@@ -194,3 +194,38 @@ def test_the_localhost_profiles_are_the_others_with_localhost_discovery():
         assert peers == ['127.0.0.1']
         assert rtps.find(f'{ns}useBuiltinTransports').text == 'false'
     assert 'etdmp_shm' not in parts('fastdds_udp.xml')[0]
+
+
+def test_real_time_nodes_get_real_time_reception_where_permitted(monkeypatch, tmp_path):
+    from xml.etree import ElementTree
+    from etdmp_ros.ros import spin
+    monkeypatch.setenv('TMPDIR', str(tmp_path))
+    monkeypatch.setattr(spin.tempfile, 'tempdir', None)
+    monkeypatch.setattr(spin, 'may_use_realtime', lambda: False)
+    assert _profile_name(monkeypatch, False, realtime=True) == 'fastdds_udp.xml'
+    monkeypatch.setattr(spin, 'may_use_realtime', lambda: True)
+    local = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    assert _profile_name(monkeypatch, False, realtime=True, **local) == \
+        'fastdds_udp_localhost_realtime.xml'
+    # The package's file, with SCHED_FIFO reception threads on its UDP transport, nothing else.
+    from etdmp_ros.ros.paths import config_path
+    base = config_path('fastdds_udp_localhost.xml')
+    made = spin.realtime_profile(base)
+    assert made.parent.parent == tmp_path
+    ns = '{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}'
+    tree = ElementTree.parse(made).getroot()
+    threads = tree.find(f'{ns}transport_descriptors/{ns}transport_descriptor/'
+                        f'{ns}default_reception_threads')
+    assert threads.findtext(f'{ns}scheduling_policy') == '1'
+    assert int(threads.findtext(f'{ns}priority')) == spin.RECEPTION_PRIORITY
+    for descriptor in tree.iter(f'{ns}transport_descriptor'):
+        descriptor.remove(descriptor.find(f'{ns}default_reception_threads'))
+
+    def canonical(root):
+        return [(e.tag, (e.text or '').strip()) for e in root.iter()]
+    assert canonical(tree) == canonical(ElementTree.parse(base).getroot())
+    assert spin.realtime_profile(base) == made      # the same file, written once
+    # Under the control loop's real-time threads (their thread_priority defaults).
+    from etdmp_ros.ros import system
+    for name in ('controller', 'ur10_sim'):
+        assert system.node(name).parameter('thread_priority').default > spin.RECEPTION_PRIORITY
