@@ -307,9 +307,10 @@ def set_realtime_priority(priority: int) -> str:
     Put the calling thread under SCHED_FIFO at ``priority`` (1-99); 0 changes nothing.
 
     Only this thread: the one that spins the executor, as ros2_control raises only its update
-    loop. The middleware's threads (Fast DDS receives in threads of its own) keep normal
-    scheduling; threads this one starts later inherit the policy (the EventsExecutor's timer
-    thread; :func:`normal_scheduling` lets a worker give it up). Needs CAP_SYS_NICE or an
+    loop. The middleware's threads are not changed here (Fast DDS's UDP reception threads get
+    theirs from the profile, :func:`realtime_profile`); threads this one starts later inherit
+    the policy (the EventsExecutor's timer thread; :func:`normal_scheduling` lets a worker give
+    it up). Needs CAP_SYS_NICE or an
     rtprio limit (``ulimit -r``, /etc/security/limits.conf) of at least ``priority``. Returns
     '' on success, else why not (and changes nothing). The kernel keeps 5 % of each second for
     other tasks (``sched_rt_runtime_us``), so a runaway thread cannot lock the machine up.

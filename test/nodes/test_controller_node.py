@@ -21,7 +21,7 @@ from etdmp_ros.robot import PoseTrajectory, UR10Model
 from etdmp_ros.ros.background import BackgroundNode
 from etdmp_ros.ros.conversions import (joint_state_from_cdr, joint_state_msg, ns_to_stamp,
                                        path_from_cdr, path_from_numpy, serialize_path, stamp_to_ns)
-from etdmp_ros.ros.spin import normal_scheduling, set_realtime_priority
+from etdmp_ros.ros.spin import normal_scheduling, RECEPTION_PRIORITY, set_realtime_priority
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
@@ -697,8 +697,10 @@ def test_parameters_are_validated(rig):
 
 
 def test_control_steps_run_at_the_configured_priority(rig):
-    # The executor's thread (the process's main thread) at SCHED_FIFO 50, Fast DDS's threads
-    # (named dds.*) at normal priority; or, where that is not permitted, a warning.
+    # The executor's thread (the process's main thread) at SCHED_FIFO 50, Fast DDS's UDP
+    # reception threads (dds.udp.*) at SCHED_FIFO RECEPTION_PRIORITY (under it), its other
+    # threads (dds.*) at normal priority; or, where that is not permitted, a warning and all
+    # normal.
     pid = rig.controller.process.pid
     policies = {}
     for tid in os.listdir(f'/proc/{pid}/task'):
@@ -709,12 +711,16 @@ def test_control_steps_run_at_the_configured_priority(rig):
                                   os.sched_getparam(int(tid)).sched_priority)
         except (FileNotFoundError, ProcessLookupError):
             pass
-    middleware = {p[1:] for p in policies.values() if p[0].startswith('dds.')}
+    reception = {p[1:] for p in policies.values() if p[0].startswith('dds.udp.')}
+    middleware = {p[1:] for p in policies.values()
+                  if p[0].startswith('dds.') and not p[0].startswith('dds.udp.')}
     assert middleware == {(os.SCHED_OTHER, 0)}, policies
     log = rig.controller.log()
     if 'SCHED_FIFO priority 50 refused' in log:     # no CAP_SYS_NICE / rtprio limit here
         assert policies[pid][1:] == (os.SCHED_OTHER, 0), policies
+        assert reception == {(os.SCHED_OTHER, 0)}, policies
     else:
+        assert reception == {(os.SCHED_FIFO, RECEPTION_PRIORITY)}, policies
         assert 'control steps at SCHED_FIFO priority 50' in log, log
         assert policies[pid][1:] == (os.SCHED_FIFO, 50), policies
 
