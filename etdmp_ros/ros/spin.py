@@ -146,9 +146,10 @@ def realtime_profile(path: Path) -> Path:
     busy machine can keep it off the CPU while holding that lock, and the real-time thread
     waits with it (a priority inversion): under a flood of 13 000 junk joint states a second
     the controller missed 70 ms of control steps and the simulation's watchdog braked (2 runs
-    of 5); with its reception threads at :data:`RECEPTION_PRIORITY`, 250 of 250 steps (5 of
-    5). Written beside the other runtime files of this user (the system's temporary folder),
-    from the package's file, so there is one description of the transports.
+    of 5); with its reception threads at :data:`RECEPTION_PRIORITY`, 250 of 250 steps (10 of
+    10). Written from the package's file, so there is one description of the transports, into
+    a folder of this user's own in the system's temporary folder; ``path`` itself where that
+    folder is not this user's or cannot be written.
     """
     from xml.etree import ElementTree
     ElementTree.register_namespace('', _PROFILES_NS)
@@ -160,13 +161,18 @@ def realtime_profile(path: Path) -> Path:
             ElementTree.SubElement(threads, f'{ns}scheduling_policy').text = str(os.SCHED_FIFO)
             ElementTree.SubElement(threads, f'{ns}priority').text = str(RECEPTION_PRIORITY)
     folder = Path(tempfile.gettempdir()) / f'etdmp_ros-{os.getuid()}'
-    folder.mkdir(mode=0o700, exist_ok=True)
     target = folder / f'{path.stem}_realtime.xml'
     text = ElementTree.tostring(tree.getroot(), encoding='unicode')
-    if not target.is_file() or target.read_text(encoding='utf-8') != text:
-        scratch = folder / f'.{target.name}.{os.getpid()}'
-        scratch.write_text(text, encoding='utf-8')
-        os.replace(scratch, target)      # whole, also with another node writing it too
+    try:
+        folder.mkdir(mode=0o700, exist_ok=True)
+        if folder.is_symlink() or folder.stat().st_uid != os.getuid():
+            return path
+        if not target.is_file() or target.read_text(encoding='utf-8') != text:
+            scratch = folder / f'.{target.name}.{os.getpid()}'
+            scratch.write_text(text, encoding='utf-8')
+            os.replace(scratch, target)      # whole, also with another node writing it too
+    except OSError:
+        return path
     return target
 
 
