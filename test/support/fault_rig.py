@@ -346,8 +346,10 @@ def kill_controller(sys_, watch):
     """
     Kill the controller KILL_AT into the letter; return robot-time figures of the arm's stop.
 
-    ``braking_s``: from the kill to the first joint state at half the speed the arm had then;
-    ``standstill_s``: to the first under :data:`STILL`; ``moved_again``: the arm moved after
+    ``braking_s``: from the kill (the last command's simulated time when ur10_sim reported
+    the brake, else that of the last joint state received before it) to the first joint
+    state at half the speed the arm had then; ``standstill_s``: to the first under
+    :data:`STILL`; ``moved_again``: the arm moved after
     that; ``plan_end``: the plan's last position (the goal it went to). From ur10_sim's
     ``braked`` event, exact in simulated time (the kill's is known only to a joint state's
     latency): ``last_command_s`` and ``braked_s``, and ``halved_s`` (the first joint state at
@@ -365,12 +367,18 @@ def kill_controller(sys_, watch):
     sim = np.array([j[1] for j in joints]) * 1e-9
     speed = np.array([np.abs(j[2]).max() for j in joints])
     at_kill = np.searchsorted(wall, killed['wall_ns']) - 1
-    t_kill, moving = sim[at_kill], speed[at_kill]
+    t_kill = sim[at_kill]
+    brake = next((b for b in watch.brakes[n_brakes:] if b[1] > t_kill - 1.0), (None, None))
+    if brake[0] is not None:
+        # The last command, in simulated time, is the kill's exact lower bound; this process
+        # may have received the joint states around the kill late (its thread not scheduled).
+        t_kill = brake[0]
+        at_kill = max(int(np.searchsorted(sim, t_kill, side='right')) - 1, 0)
+    moving = speed[at_kill]
     after = sim > t_kill
     halved = np.flatnonzero(after & (speed < 0.5 * moving))
     still = np.flatnonzero(after & (speed < STILL))
     end = plan.poses[-1].pose.position
-    brake = next((b for b in watch.brakes[n_brakes:] if b[1] > t_kill - 1.0), (None, None))
     return {'last_command_s': brake[0], 'braked_s': brake[1],
             'halved_s': float(sim[halved[0]]) if halved.size else None,
             'speed_at_kill': float(moving),
