@@ -116,25 +116,13 @@ def dds_profile(shared_memory: bool = True, environ: Mapping[str, str] | None = 
 
 def may_use_realtime(priority: int = RECEPTION_PRIORITY) -> bool:
     """Return whether this process may put a thread under SCHED_FIFO at ``priority``."""
-    if not hasattr(os, 'sched_setscheduler'):
-        return False
-    return _try_fifo(priority)
-
-
-def _try_fifo(priority: int) -> bool:
-    """Try SCHED_FIFO at ``priority`` in a short-lived thread of this process."""
-    result: list[bool] = []
-
-    def attempt() -> None:
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-            result.append(True)
-        except OSError:
-            result.append(False)
-    thread = threading.Thread(target=attempt, name='fifo_probe')
+    result: list[str] = []
+    # In a short-lived thread: set_realtime_priority changes the calling thread only.
+    thread = threading.Thread(target=lambda: result.append(set_realtime_priority(priority)),
+                              name='fifo_probe')
     thread.start()
     thread.join()
-    return result[0]
+    return result == ['']
 
 
 def realtime_profile(path: Path) -> Path:
