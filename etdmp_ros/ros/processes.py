@@ -33,6 +33,12 @@ PathLike = str | os.PathLike[str]
 #: The argv of one node from its name and parameter files.
 Command = Callable[[str, Iterable[PathLike]], list[str]]
 
+#: The signal that has a node write its threads' stacks to its log (``faulthandler``; set up by
+#: :func:`etdmp_ros.ros.spin.run`); SIGUSR1's default action, for a program that did not set it
+#: up, is to end the process.
+STACKS_SIGNAL = signal.SIGUSR1
+#: Seconds given to a node to write its stacks before it is killed.
+STACKS_WAIT = 1.0
 #: Environment variables that would widen discovery beyond this machine's private domain.
 DISCOVERY_VARIABLES = ('ROS_LOCALHOST_ONLY', 'ROS_STATIC_PEERS')
 
@@ -141,11 +147,18 @@ class NodeProcess:
         """
         Wait up to ``timeout`` s for the exit, then kill; close the log; return the code.
 
-        A killed node leaves its Fast DDS shared-memory files: they are removed then.
+        Before the kill, SIGUSR1 has a node of this package write every thread's Python stack
+        to its log (:data:`STACKS_SIGNAL`): where it hung. A killed node
+        leaves its Fast DDS shared-memory files: they are removed then.
         """
         try:
             self.process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
+            self.process.send_signal(STACKS_SIGNAL)
+            try:
+                self.process.wait(timeout=STACKS_WAIT)
+            except subprocess.TimeoutExpired:
+                pass
             self.process.kill()
             self.process.wait()
             fastdds_files.clean()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping, Sequence
 import contextlib
+import faulthandler
 import gc
 import os
 from pathlib import Path
@@ -354,6 +355,9 @@ def run(make_nodes: Callable[[list[Node]], None], name: str, args: list[str] | N
     # A node with a real-time thread (ur10_sim, the controller) gets real-time reception.
     realtime = spec is not None and any(p.name == 'thread_priority'
                                         for p in spec.all_parameters)
+    # A node that does not stop when told: its launcher asks for the stacks before the kill.
+    from etdmp_ros.ros.processes import STACKS_SIGNAL
+    faulthandler.register(STACKS_SIGNAL, all_threads=True)
     removed = init(args, shared_memory, realtime)
     if removed:
         rclpy.logging.get_logger(name).info(cleaned_message(removed))

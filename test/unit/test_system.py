@@ -313,6 +313,41 @@ def test_a_signal_during_start_up_is_not_lost(ros_env):
     assert done.returncode == 0, done.stderr
 
 
+#: A node program whose clean-up never ends (its node's stop() hangs).
+_HANGS_IN_STOP = """
+import sys, time
+from etdmp_ros.ros import spin as _spin
+from rclpy.node import Node
+
+class Stuck(Node):
+    def __init__(self):
+        super().__init__('stuck')
+        print('made', flush=True)
+
+    def stop(self):
+        print('stopping', flush=True)
+        while True:
+            time.sleep(0.05)   # stuck_in_stop
+
+sys.exit(_spin.run(lambda nodes: nodes.append(Stuck()), 'stuck', ['stuck']))
+"""
+
+
+def test_a_node_that_does_not_stop_leaves_its_stacks_in_its_log(ros_env, tmp_path):
+    import time
+    from etdmp_ros.ros.processes import NodeProcess
+    import sys
+    node = NodeProcess([sys.executable, '-c', _HANGS_IN_STOP], tmp_path / 'stuck.log', ros_env)
+    deadline = time.monotonic() + 20
+    while 'made' not in node.log():
+        assert time.monotonic() < deadline and node.returncode is None, node.log()
+        time.sleep(0.1)
+    assert node.stop(timeout=1.0) == -9
+    log = node.log()
+    # faulthandler's dump: the stuck line and the way to it through spin.run.
+    assert 'Current thread' in log and 'in stop' in log and 'in run' in log, log
+
+
 # ------------------------------------------------------------- a part of the system
 
 
