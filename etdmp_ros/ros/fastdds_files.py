@@ -16,10 +16,12 @@ one:
   sharing for this package's topics, and :func:`clean` leaves them alone).
 
 :func:`clean` removes what belongs to dead processes, deciding as ``fastdds shm clean`` does
-(a segment or port whose lock file nobody holds), and beyond it: a port with no lock file at all,
-i.e. without a reader (its reader exited cleanly while a killed writer's reference kept the
-file; the next reader of that number would reuse it with its stale health-check state), taken
-under the port's mutex as Fast DDS opens ports; and a port semaphore that is taken while no
+(a segment or port whose lock file nobody holds), and beyond it: a port with no lock file at all
+that no live process maps, i.e. without a reader (its reader exited cleanly while a killed
+writer's reference kept the file; the next reader of that number would reuse it with its stale
+health-check state), taken under the port's mutex as Fast DDS opens ports (while a live writer
+maps it, it is kept: the writer goes on sending into that file, and the next reader must find
+it there); and a port semaphore that is taken while no
 process has it mapped (its holder died holding it: every process opening that port would wait
 2 s for it). Why such files froze the robot, and what the nodes do about it:
 docs/reliability.md.
@@ -290,6 +292,10 @@ def _stale_port(directory, number, files, unmapped):
     if port in files:
         # No reader at all (readers lock for life): a reader that exited cleanly while a
         # killed writer's reference kept the file. Removed under the port's mutex (clean).
+        if not unmapped(port):
+            # A live writer still has it open and would go on sending into the removed file
+            # (Fast DDS keeps a port open once it sent to it): the next reader must reuse it.
+            return None
         if mutex in files and _semaphores().taken(mutex[4:]) and unmapped(mutex):
             return every, 'port without reader, its mutex taken by a dead process'
         return every, 'port without reader'

@@ -327,6 +327,26 @@ def normal_scheduling() -> None:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
+def _start(name: str, args: list[str] | None, shared_memory: bool | None) -> None:
+    """Prepare the process of node ``name`` as :func:`run` says, up to rclpy.init."""
+    from etdmp_ros.ros import system
+    try:
+        spec = system.node(name)
+    except KeyError:
+        spec = None
+    if shared_memory is None:
+        shared_memory = True if spec is None else spec.shared_memory
+    # A node with a real-time thread (ur10_sim, the controller) gets real-time reception.
+    realtime = spec is not None and any(p.name == 'thread_priority'
+                                        for p in spec.all_parameters)
+    # A node that does not stop when told: its launcher asks for the stacks before the kill.
+    from etdmp_ros.ros.processes import STACKS_SIGNAL
+    faulthandler.register(STACKS_SIGNAL, all_threads=True)
+    removed = init(args, shared_memory, realtime)
+    if removed:
+        rclpy.logging.get_logger(name).info(cleaned_message(removed))
+
+
 def run(make_nodes: Callable[[list[Node]], None], name: str, args: list[str] | None = None,
         startup_errors: tuple[type[Exception], ...] = (), shared_memory: bool | None = None
         ) -> int:
@@ -345,22 +365,7 @@ def run(make_nodes: Callable[[list[Node]], None], name: str, args: list[str] | N
     from rclpy.exceptions import ParameterException
     bad_configuration: tuple[type[Exception], ...] = (ValueError, ParameterException,
                                                       *startup_errors)
-    from etdmp_ros.ros import system
-    try:
-        spec = system.node(name)
-    except KeyError:
-        spec = None
-    if shared_memory is None:
-        shared_memory = True if spec is None else spec.shared_memory
-    # A node with a real-time thread (ur10_sim, the controller) gets real-time reception.
-    realtime = spec is not None and any(p.name == 'thread_priority'
-                                        for p in spec.all_parameters)
-    # A node that does not stop when told: its launcher asks for the stacks before the kill.
-    from etdmp_ros.ros.processes import STACKS_SIGNAL
-    faulthandler.register(STACKS_SIGNAL, all_threads=True)
-    removed = init(args, shared_memory, realtime)
-    if removed:
-        rclpy.logging.get_logger(name).info(cleaned_message(removed))
+    _start(name, args, shared_memory)
     nodes: list[Node] = []
     code = 0
     # A signal during start-up is remembered, not raised: a KeyboardInterrupt raised inside a

@@ -219,6 +219,11 @@ class System:
         os.kill(process.pid, signal.SIGKILL)
         process.wait()
 
+    def interrupt(self, name):
+        """Stop node ``name`` with Ctrl-C (SIGINT), as a user does; return its exit code."""
+        self.down.add(name)
+        return self.processes[name].stop()
+
     def restart(self, name):
         """Start node ``name`` again, alone, in the same domain (its log: <name>_<n>.log)."""
         self.restarts += 1
@@ -412,9 +417,13 @@ def kill_simulation(sys_, watch):
 
 
 def restart(sys_, watch, name):
-    """Start node ``name`` again, alone, if it was killed; return when it serves."""
+    """
+    Start node ``name`` again, alone, if it was stopped; return when it serves.
+
+    Returns the seconds from the start until it served (None if it was running).
+    """
     if name not in sys_.down:
-        return
+        return None
     since = time.monotonic()
     sys_.restart(name)
     if name == 'dmp_server':
@@ -434,6 +443,7 @@ def restart(sys_, watch, name):
     else:   # the controller, or the simulation: the controller idle again, with joint states
         wait(lambda: watch.status[-1][0] > since and watch.state() == 'idle', RESTART,
              f'the controller idle after the restart of {name}', sys_.running())
+    return time.monotonic() - since
 
 
 def after_the_kill(watch, sys_, name):

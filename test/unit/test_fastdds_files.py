@@ -104,6 +104,22 @@ def test_ports_of_dead_readers_and_without_readers_are_stale(tmp_path, holder):
         [live, f'{live}_el', shared, f'{shared}_sl'])
 
 
+def test_a_port_without_reader_that_a_live_writer_maps_is_kept(tmp_path):
+    # Its reader exited cleanly; the writer keeps the port open and sends into that file: the
+    # next reader of that number must find it there (removed, the writer sent into the
+    # removed file and the new reader saw nothing).
+    port = f'fastrtps_port{PORT}'
+    make(tmp_path, port, f'sem.{port}_mutex')
+    with open(tmp_path / port, 'r+b') as f:
+        view = mmap.mmap(f.fileno(), 64)
+        try:
+            assert stale(tmp_path) == []
+        finally:
+            view.close()
+    assert stale(tmp_path) == [([port, f'{port}_el', f'{port}_sl', f'sem.{port}_mutex'],
+                                'port without reader')]
+
+
 def test_a_left_over_lock_and_mutex_alone_are_stale(tmp_path):
     make(tmp_path, 'fastrtps_00000000000000c1_el', f'sem.fastrtps_port{PORT}_mutex')
     assert sorted(clean(tmp_path)) == ['fastrtps_00000000000000c1_el',
