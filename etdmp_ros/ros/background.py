@@ -45,8 +45,10 @@ class BackgroundNode:
         while self.context.ok():
             try:
                 self.executor.spin_once(timeout_sec=_spin.SLICE)
-            except Exception:   # noqa: B902 - the context was shut down while waiting
-                break
+            except Exception:   # noqa: B902
+                if self.context.ok():
+                    raise       # a callback failed: said (threading.excepthook), not hidden
+                break           # the context was shut down while waiting
 
     def close(self) -> None:
         """Stop spinning, shut the context down and destroy the node."""
