@@ -565,8 +565,10 @@ class DmpServer(Node):
         # Its bytes written with numpy: 0.2 ms where building the message takes ~8.
         orientation = p.orientation if isinstance(p.orientation, tuple) else \
             p.orientation[keep:]
-        self._path_pub.publish(serialize_path(p.positions[keep:], p.t[keep:], f.stamp,
-                                              'base_link', orientation))
+        message = serialize_path(p.positions[keep:], p.t[keep:], f.stamp, 'base_link',
+                                 orientation)
+        published_ns = time.time_ns()
+        self._path_pub.publish(message)
         took = (time.perf_counter() - received) * 1e3
         what = ' and '.join(
             ([f'goal moved to ({new_goal[0]:.3f}, {new_goal[1]:.3f}, {new_goal[2]:.3f})']
@@ -580,7 +582,8 @@ class DmpServer(Node):
             'followed', text, goal=[] if new_goal is None else new_goal,
             obstacles=[] if new_obstacles is None else new_obstacles[0],
             from_path_time_s=p.t[first], controller_path_time_s=tau_c, poses=len(p.t) - keep,
-            end_s=p.duration, took_ms=took, update=p.updates, stamp_ns=f.stamp)
+            end_s=p.duration, took_ms=took, update=p.updates, stamp_ns=f.stamp,
+            published_wall_ns=published_ns)
         self.get_logger().info(text)
         if settings.publish_markers and self._markers.wanted():
             shown = Plan(p.t, p.positions, p.velocities, p.orientation, f.start, p.goal,

@@ -187,8 +187,12 @@ def test_goal_seen_after_move_confirms_as_dmp_server_does():
     assert FOLLOW_CONFIRMATIONS == following.FOLLOW_CONFIRMATIONS
 
 
-def _moved_run(follow=True):
-    """Return a synthetic run of G whose marker moved 40 mm at 1.5 s of path time."""
+def _moved_run(follow=True, **followed):
+    """
+    Return a synthetic run of G whose marker moved 40 mm at 1.5 s of path time.
+
+    ``followed``: more values of dmp_server's ``followed`` event.
+    """
     scene = Scenario(None, 'G')
     t, original, moved = _moved_plan()
     executed = moved if follow else original
@@ -217,7 +221,8 @@ def _moved_run(follow=True):
                       stamp + np.round(t[later] * 1e9).astype(np.int64), executed[later]))
         events = [_event(int(published + 1e5), 'dmp_server', 'followed', goal='0.85 0.14 0.0',
                          from_path_time_s='2.0', controller_path_time_s='1.8',
-                         poses=str(later.sum()), end_s='6.0', took_ms='4.1', update='1'),
+                         poses=str(later.sum()), end_s='6.0', took_ms='4.1', update='1',
+                         **followed),
                   _event(int(published + 6e6), 'controller', 'path_accepted',
                          poses=str(later.sum()), continued='false',
                          duration_s=str(t[later][-1] - t[later][0]))]
@@ -258,6 +263,11 @@ def test_a_moved_goal_is_measured_against_the_new_marker_and_the_executed_plan()
     assert follow['dmp_server_ms'] == 4.1
     assert follow['dmp_server_recorded_ms'] == pytest.approx(4.0, abs=1e-3)
     assert follow['controller_accept_ms'] == pytest.approx(6.0, abs=1e-3)
+    # From dmp_server's own time of publication when its event says it: the recorder may
+    # receive the path after the controller accepted it.
+    received = int(run.rec['paths'][1][1])       # the path's receipt here
+    late = compute_metrics(_moved_run(published_wall_ns=str(received - 2_000_000)))[0]
+    assert late['goal_follow']['controller_accept_ms'] == pytest.approx(8.0, abs=1e-3)
     # The first command after the controller's 'new path' line: the 8 ms grid of commands.
     assert 6.0 < follow['controller_first_command_ms'] <= 14.0 + 1e-6
     assert follow['end_to_end_ms'] == pytest.approx(

@@ -90,8 +90,9 @@ MOVE_DEFINITIONS = {
                    'threshold from where it was; received here, simulated s) -> the '
                    'confirming one (FOLLOW_CONFIRMATIONS-th); dmp_server_ms: its own figure '
                    "(its 'followed' event: confirming message -> remainder published); "
-                   "controller: path received here -> its 'path_accepted' event -> first "
-                   'command after it received here; end_to_end_ms: the confirming message '
+                   "controller: path published (dmp_server's clock, its 'followed' event's "
+                   "published_wall_ns) -> its 'path_accepted' event -> first command after "
+                   'it received here; end_to_end_ms: the confirming message '
                    'received here (dmp_server receives it at about the same time) -> that '
                    "first command received here (wall clock: the events' and the receipt "
                    'times)',
