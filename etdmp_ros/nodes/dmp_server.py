@@ -563,10 +563,8 @@ class DmpServer(Node):
         p = f.plan
         keep = f.remainder_start(tau_c)
         # Its bytes written with numpy: 0.2 ms where building the message takes ~8.
-        orientation = p.orientation if isinstance(p.orientation, tuple) else \
-            p.orientation[keep:]
-        message = serialize_path(p.positions[keep:], p.t[keep:], f.stamp, 'base_link',
-                                 orientation)
+        orientation = p.orientation if isinstance(p.orientation, tuple) else p.orientation[keep:]
+        message = serialize_path(p.positions[keep:], p.t[keep:], f.stamp, 'base_link', orientation)
         published_ns = time.time_ns()
         self._path_pub.publish(message)
         took = (time.perf_counter() - received) * 1e3

@@ -147,13 +147,16 @@ class NodeProcess:
         """
         Wait up to ``timeout`` s for the exit, then kill; close the log; return the code.
 
-        Before the kill, SIGUSR1 has a node of this package write every thread's Python stack
-        to its log (:data:`STACKS_SIGNAL`): where it hung. A killed node
-        leaves its Fast DDS shared-memory files: they are removed then.
+        Before the kill, where it hung goes to its log: every thread's native and Python
+        stack from ``py-spy dump --native`` where py-spy is installed beside this Python (the
+        test environment), and SIGUSR1 has a node of this package write its Python stacks
+        (:data:`STACKS_SIGNAL`). A killed node leaves its Fast DDS shared-memory files: they
+        are removed then.
         """
         try:
             self.process.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
+            self._dump_native_stacks()
             self.process.send_signal(STACKS_SIGNAL)
             try:
                 self.process.wait(timeout=STACKS_WAIT)
@@ -164,6 +167,18 @@ class NodeProcess:
             fastdds_files.clean()
         self._log.close()
         return self.process.returncode
+
+    def _dump_native_stacks(self) -> None:
+        spy = Path(sys.executable).parent / 'py-spy'
+        if not spy.is_file():
+            return
+        self._log.write(f'\n--- {spy.name} dump --native: not stopped when told ---\n')
+        self._log.flush()
+        try:
+            subprocess.run([str(spy), 'dump', '--native', '--pid', str(self.pid)],
+                           stdout=self._log, stderr=subprocess.STDOUT, timeout=STACKS_WAIT * 20)
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            self._log.write(f'{spy.name} failed: {exc}\n')
 
     def stop(self, timeout: float = 10.0) -> int:
         """SIGINT, then kill after ``timeout`` s; return the exit code."""

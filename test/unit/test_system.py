@@ -334,9 +334,10 @@ sys.exit(_spin.run(lambda nodes: nodes.append(Stuck()), 'stuck', ['stuck']))
 
 
 def test_a_node_that_does_not_stop_leaves_its_stacks_in_its_log(ros_env, tmp_path):
+    from pathlib import Path
+    import sys
     import time
     from etdmp_ros.ros.processes import NodeProcess
-    import sys
     node = NodeProcess([sys.executable, '-c', _HANGS_IN_STOP], tmp_path / 'stuck.log', ros_env)
     deadline = time.monotonic() + 20
     while 'made' not in node.log():
@@ -346,6 +347,8 @@ def test_a_node_that_does_not_stop_leaves_its_stacks_in_its_log(ros_env, tmp_pat
     log = node.log()
     # faulthandler's dump: the stuck line and the way to it through spin.run.
     assert 'Current thread' in log and 'in stop' in log and 'in run' in log, log
+    if (Path(sys.executable).parent / 'py-spy').is_file():     # and the native stacks
+        assert 'py-spy dump --native' in log and 'Thread' in log, log
 
 
 # ------------------------------------------------------------- a part of the system
