@@ -15,16 +15,13 @@ velocities in rad/s, UR order). Publishes, stamped with the simulated time:
   ``stalled`` (at most one a second), ``stopped`` with the loop's figures, ``failed``; its
   camera process's on ``/ur10_sim_camera/events``;
 - ``/ur10_sim/ground_truth/contacts`` (visualization_msgs/MarkerArray, transient local): the
-  robot's contacts with the obstacles, the bottle, the table and the floor
-  (:attr:`etdmp_ros.sim.UR10Sim.contacts`; a SPHERE per contact, its text ``<part> <item>
-  <depth mm>``, see :mod:`etdmp_ros.ros.conversions._markers`), at every tick while there are
-  any, once empty when they end (and at start);
+  robot's contacts (:attr:`etdmp_ros.sim.UR10Sim.contacts`; a SPHERE each, text ``<part> <item>
+  <depth mm>``) at every tick while there are any, once empty when they end (and at start);
 - as a UR driver, robot_state_publisher and realsense-ros would: ``/robot_description``
-  (std_msgs/String, transient local: the UR10 URDF the simulation is built from, with the tool
-  tip link ``tool_tip``), ``/tf`` (the six joint transforms, base_link ... wrist_3_link, at
-  ``control_rate``) and ``/tf_static`` (the URDF's fixed joints: tool0, tool_tip, ...; and
-  base_link -> camera_link -> camera_color_frame -> camera_color_optical_frame at
-  ``camera.pose``). Without tf2_msgs (it is not on PyPI) one warning, and no /tf or /tf_static.
+  (transient local: the UR10 URDF the simulation is built from, tool tip link ``tool_tip``),
+  ``/tf`` (the six joint transforms at ``control_rate``) and ``/tf_static`` (the URDF's fixed
+  joints; base_link -> camera_link -> ... -> camera_color_optical_frame at ``camera.pose``).
+  Without tf2_msgs (it is not on PyPI) one warning, and no /tf or /tf_static.
 
 Threads and processes. The simulation thread runs one control period per tick: apply the
 latest command (and scene changes), step the physics, publish the state, then sleep to keep
@@ -33,16 +30,17 @@ latest command (and scene changes), step the physics, publish the state, then sl
 (:mod:`etdmp_ros.nodes._sim_camera`, node ``ur10_sim_camera``), which renders it (milliseconds)
 and publishes the images: the physics and the joint states never wait for rendering or image
 transport, nor share an interpreter lock with them. The executor thread only receives commands
-and parameter changes, validates them and hands them over. Parameters: config/scene.yaml and
+and parameter changes, validates them and hands them over (at SCHED_FIFO 49 with
+``thread_priority``: :meth:`UR10SimNode.use_executor_priority`). Parameters: config/scene.yaml,
 config/ur10_sim.yaml (their values are also the built-in defaults: etdmp_ros.ros.system);
 ``goal_position``, ``obstacle_positions``, ``obstacle_radii``, ``bottle.position``,
 ``real_time_factor``, ``watchdog_timeout`` and ``teach_script`` can be changed at runtime.
 
 Teaching mode (kinesthetic teaching, simulated): with ``teach_script`` set, a script leads the
-tool as a hand in freedrive would (:class:`etdmp_ros.robot.GuidedMotion`) while velocity commands
-are ignored; ``~/teaching`` (std_msgs/String, transient local) says ``playing <file>``, then
-``done <file>`` (or ``idle``). Record ``/joint_states`` meanwhile and learn from the recording
-(dmp_server ``demo_files``; ``python -m etdmp_ros.demo.kinesthetic`` does both steps' first half).
+tool as a hand in freedrive would (:class:`etdmp_ros.robot.GuidedMotion`), velocity commands
+ignored; ``~/teaching`` (transient local) says ``playing <file>``, then ``done <file>`` (or
+``idle``). Record ``/joint_states`` meanwhile and learn from it (dmp_server ``demo_files``;
+``python -m etdmp_ros.demo.kinesthetic`` does both).
 """
 
 import threading
@@ -60,7 +58,8 @@ from etdmp_ros.ros.conversions import (contact_markers, joint_state_msg, MovingT
 from etdmp_ros.ros.events import ERROR, EventPublisher, WARN
 from etdmp_ros.ros.node_parameters import Ur10SimParameters
 from etdmp_ros.ros.parameters import declare, values as parameter_values
-from etdmp_ros.ros.spin import normal_scheduling, rate_qos, run, set_realtime_priority
+from etdmp_ros.ros.spin import (normal_scheduling, rate_qos, RECEPTION_PRIORITY, run,
+                                set_realtime_priority)
 from etdmp_ros.sim import MAX_OBSTACLES, UR10Sim
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
@@ -78,9 +77,8 @@ NODE_NAME = 'ur10_sim'
 OPTICAL_FRAME = CAMERA_OPTICAL_FRAME
 DESCRIPTION = system.node(NODE_NAME)
 #: Fell more than this many ticks behind real time (a stall: overload, a debugger): the
-#: simulation slips, i.e. its time stops with the stall, as a physics simulator's does under
-#: load, instead of bursting through the missed ticks on the command of before the stall (the
-#: controller could not answer those ticks). A late tick or two is caught up.
+#: simulation's time stops with the stall, as a physics simulator's does under load, instead of
+#: bursting through the missed ticks on the command of before it. A tick or two is caught up.
 MAX_LAG_TICKS = 2
 #: A wall-clock gap between two ticks longer than this many periods is a stall (warned).
 LATE_TICKS = 3
@@ -101,25 +99,18 @@ class UR10SimNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         p = self._build(declare(self, DESCRIPTION))
         self._answered = threading.Event()   # a command arrived since the last joint states
-        self._answered_ticks = 0
+        self._answered_ticks = self._ignored_commands = 0
         self._lock = threading.Lock()
         self._guide = None            # the teaching mode's script, while it plays
         self._guide_name = ''
         self._checked_guide = None    # (file, GuidedMotion) checked, not yet applied
-        self._ignored_commands = 0
-        self._pending_command = None
-        self._pending_goal = None
-        self._pending_bottle = None
-        self._pending_obstacles = None
-        self._pending_radii = None
+        self._pending_command = self._pending_goal = self._pending_bottle = None
+        self._pending_obstacles = self._pending_radii = None
         self._in_contact = None       # the contacts last published (None: nothing published)
-        self._stop = threading.Event()
-        self._thread = None
-        self.failed = False
-        self._commands_seen = False
+        self._stop, self._thread = threading.Event(), None
+        self.failed = self._commands_seen = False
         self._watchdog_was_active = self.sim.watchdog_active
-        self._next_camera_time = 0.0
-        self._next_truth_time = 0.0
+        self._next_camera_time = self._next_truth_time = 0.0
         self._camera = None   # the camera process, once started
         # CPU seconds per part; publish_tf (the /tf messages) is a part of publish_state.
         self.stats = {'physics': 0.0, 'render': 0.0, 'publish_images': 0.0,
@@ -173,17 +164,15 @@ class UR10SimNode(Node):
         # robot's simulation remaps it to its own (-r /clock:=clock, as the launch file does).
         self._clock_pub = self.create_publisher(Clock, topics.CLOCK, state)
         self._goal_pub = self.create_publisher(PointStamped, topics.GROUND_TRUTH_GOAL, reliable)
-        self._obstacles_pub = self.create_publisher(PoseArray, topics.GROUND_TRUTH_OBSTACLES,
-                                                    reliable)
-        self._bottle_pub = self.create_publisher(PointStamped, topics.GROUND_TRUTH_BOTTLE,
-                                                 reliable)
-        self._tool_pub = self.create_publisher(PointStamped, topics.GROUND_TRUTH_TOOL_TIP, state)
+        pub = self.create_publisher
+        self._obstacles_pub = pub(PoseArray, topics.GROUND_TRUTH_OBSTACLES, reliable)
+        self._bottle_pub = pub(PointStamped, topics.GROUND_TRUTH_BOTTLE, reliable)
+        self._tool_pub = pub(PointStamped, topics.GROUND_TRUTH_TOOL_TIP, state)
         # Every message matters (the metrics count them), and a late subscriber gets the latest.
-        self._contacts_pub = self.create_publisher(MarkerArray, topics.GROUND_TRUTH_CONTACTS,
-                                                   qos.latched(state.depth))
+        self._contacts_pub = pub(MarkerArray, topics.GROUND_TRUTH_CONTACTS,
+                                 qos.latched(state.depth))
         self.events = EventPublisher(self)
-        self._camera_publishers = None   # made by frame(), for run_for(): images in-process
-        self._tf_pub = None
+        self._camera_publishers = self._tf_pub = None   # made by frame() (run_for), for /tf
         self._publish_description()
         self._teaching_pub = self.create_publisher(String, topics.TEACHING, qos.LATCHED)
         self._teaching_pub.publish(String(data='idle'))
@@ -319,6 +308,16 @@ class UR10SimNode(Node):
                 command_waits_in_vain=stats['waits_expired'],
                 contact_ticks=stats['contact_ticks'], contact_pairs=' '.join(pairs))
             self.events.flush()
+
+    def use_executor_priority(self):
+        """
+        Put the calling (executor's) thread at RECEPTION_PRIORITY if thread_priority is set.
+
+        Commands reach the simulation thread through it (at normal priority a SCHED_FIFO 20
+        flood starved it; the watchdog braked). Call after :meth:`start`.
+        """
+        if self.thread_priority and not set_realtime_priority(RECEPTION_PRIORITY):
+            self.get_logger().info(f'commands received at SCHED_FIFO {RECEPTION_PRIORITY}')
 
     def _scheduling(self, paced, realtime):
         """Give the thread SCHED_FIFO while ``paced`` (thread_priority), else normal; return it."""
@@ -593,6 +592,7 @@ def main(args=None):
     def make(nodes):
         nodes.append(UR10SimNode())
         nodes[-1].start()
+        nodes[-1].use_executor_priority()
     return run(make, NODE_NAME, args)
 
 

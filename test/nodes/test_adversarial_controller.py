@@ -40,17 +40,25 @@ FLOOD_RATE = 13000
 #: message (their reception threads real-time): a fresh clone on a slower machine reached
 #: 8 800/s once. What the test asserts of the letter does not depend on this floor.
 FLOOD_MIN_RATE = 6250
+#: The flood's SCHED_FIFO priority: above every normal process, so that the machine's other
+#: work cannot starve it (a fresh clone's flood at normal priority reached 4 340/s), under the
+#: nodes' real-time threads (50, 60) and their reception threads (49). It found the loop's
+#: one normal-priority link, ur10_sim's executor thread that takes the commands: starved, the
+#: watchdog braked and the letter stopped 'unreachable' (now at 49 too).
+FLOOD_PRIORITY = 20
 #: The shipped max_path_poses (config/controller.yaml).
 MAX_PATH_POSES = 20000
 #: A flood from another process: joint states naming other joints at argv[2] per second (in
 #: bursts every millisecond, as serialized bytes), from the moment the controller is matched,
-#: for argv[1] seconds.
+#: for argv[1] seconds, at SCHED_FIFO priority argv[3] where the test may use it.
 FLOOD = textwrap.dedent("""
     import sys, time
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
+    from etdmp_ros.ros.spin import set_realtime_priority
+    set_realtime_priority(int(sys.argv[3]))    # where allowed (FLOOD_PRIORITY)
     rclpy.init()
     node = rclpy.create_node('joint_state_flood')
     # Best effort, as the controller reads joint states: matched to the controller alone (not
@@ -127,7 +135,8 @@ def past_stamps(rig):
 def joint_state_flood(rig):
     """Another process floods /joint_states with other joints (13 kHz) through the letter."""
     seconds = 5.0
-    flood = subprocess.Popen([sys.executable, '-c', FLOOD, str(seconds), str(FLOOD_RATE)],
+    flood = subprocess.Popen([sys.executable, '-c', FLOOD, str(seconds), str(FLOOD_RATE),
+                              str(FLOOD_PRIORITY)],
                              text=True,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                              env=dict(os.environ))

@@ -33,6 +33,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool
+from support import threads
 from support.controller_plans import g_plan, path_time_offset, Q_INITIAL, stir_plan, TOOL_OFFSET
 from support.waiting import wait_for
 
@@ -702,18 +703,8 @@ def test_control_steps_run_at_the_configured_priority(rig):
     # threads (dds.*) at normal priority; or, where that is not permitted, a warning and all
     # normal.
     pid = rig.controller.process.pid
-    policies = {}
-    for tid in os.listdir(f'/proc/{pid}/task'):
-        try:
-            with open(f'/proc/{pid}/task/{tid}/comm') as comm:
-                name = comm.read().strip()
-            policies[int(tid)] = (name, os.sched_getscheduler(int(tid)),
-                                  os.sched_getparam(int(tid)).sched_priority)
-        except (FileNotFoundError, ProcessLookupError):
-            pass
-    reception = {p[1:] for p in policies.values() if p[0].startswith('dds.udp.')}
-    middleware = {p[1:] for p in policies.values()
-                  if p[0].startswith('dds.') and not p[0].startswith('dds.udp.')}
+    policies = threads.scheduling(pid)
+    reception, middleware = threads.middleware(policies)
     assert middleware == {(os.SCHED_OTHER, 0)}, policies
     log = rig.controller.log()
     if 'SCHED_FIFO priority 50 refused' in log:     # no CAP_SYS_NICE / rtprio limit here

@@ -22,6 +22,7 @@ from etdmp_ros.ros.config_files import read_parameter_file
 from etdmp_ros.ros.conversions import (contacts_from_markers, image_from_msg,
                                        intrinsics_from_camera_info, stamp_to_ns)
 from etdmp_ros.ros.paths import config_path
+from etdmp_ros.ros.spin import RECEPTION_PRIORITY
 from geometry_msgs.msg import PointStamped, PoseArray
 import numpy as np
 import pytest
@@ -30,6 +31,7 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
+from support import threads
 from support.waiting import wait_for
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -297,6 +299,25 @@ def test_a_late_controller_is_waited_for_not_missed(launch):
     assert stalls - 2 <= waits <= late + 2
     assert in_vain <= 1
     assert rtf_unanswered > 0.9
+
+
+def test_the_loop_and_the_commands_it_takes_run_real_time(launch):
+    # The simulation thread at SCHED_FIFO thread_priority (60); the executor's thread (the
+    # process's main thread, which hands the commands over) and Fast DDS's UDP reception
+    # threads under it (RECEPTION_PRIORITY); Fast DDS's other threads normal. Or, where that is
+    # not permitted, a warning and all normal.
+    sim, _ = launch({'camera_rate': 0.0})
+    policies = threads.scheduling(sim.process.pid)
+    reception, middleware = threads.middleware(policies)
+    # Python does not name its threads for the kernel: the loop is the one at 60.
+    every = sorted(p[1:] for p in policies.values())
+    assert middleware == {(os.SCHED_OTHER, 0)}, policies
+    if 'SCHED_FIFO priority 60 refused' in sim.log():
+        assert set(every) == {(os.SCHED_OTHER, 0)}, policies
+    else:
+        assert every.count((os.SCHED_FIFO, 60)) == 1, policies
+        assert reception == {(os.SCHED_FIFO, RECEPTION_PRIORITY)}, policies
+        assert policies[sim.process.pid][1:] == (os.SCHED_FIFO, RECEPTION_PRIORITY), policies
 
 
 def test_commands_watchdog_and_runtime_parameters(launch):
