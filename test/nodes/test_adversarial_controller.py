@@ -36,9 +36,9 @@ RSS_GROWTH_LIMIT = 64e6
 #: Joint states per second of the flood: the rate that stopped every letter before.
 FLOOD_RATE = 13000
 #: The least the flood must reach to count as one: 50 junk joint states per robot's one (at 125
-#: Hz). Its process shares the 2 cores with the nodes it floods, which spend CPU on every junk
-#: message (their reception threads real-time): a fresh clone on a slower machine reached
-#: 8 800/s once. What the test asserts of the letter does not depend on this floor.
+#: Hz). At FLOOD_PRIORITY it reached 12 700-13 000/s here, idle and beside a busy loop; without
+#: the permission it runs at normal priority and a busy machine can starve it (4 340/s once).
+#: What the test asserts of the letter does not depend on this floor.
 FLOOD_MIN_RATE = 6250
 #: The flood's SCHED_FIFO priority: above every normal process, so that the machine's other
 #: work cannot starve it (a fresh clone's flood at normal priority reached 4 340/s), under the

@@ -46,7 +46,7 @@ STALL_LIMIT = 0.05
 # the next joint state (8 ms apart); measured 2-4 ms.
 SERVO_HALVING = 0.016
 #: Wall-clock seconds from a restart of perception to its first goal: start-up (1.5-2 s),
-#: discovery, the camera's next frame; measured 1.5-4.2 s.
+#: discovery, the camera's next frame; 1.4-5.0 s in `make bench-perception_restarts`.
 PERCEPTION_BACK = 8.0
 
 
