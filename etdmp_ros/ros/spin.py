@@ -306,9 +306,9 @@ def set_realtime_priority(priority: int) -> str:
     theirs from the profile, :func:`realtime_profile`); threads this one starts later inherit
     the policy (the EventsExecutor's timer thread; :func:`normal_scheduling` lets a worker give
     it up). Needs CAP_SYS_NICE or an rtprio limit (``ulimit -r``, /etc/security/limits.conf)
-    of at least ``priority``. Returns
-    '' on success, else why not (and changes nothing). The kernel keeps 5 % of each second for
-    other tasks (``sched_rt_runtime_us``), so a runaway thread cannot lock the machine up.
+    of at least ``priority``. Returns '' on success, else why not (and changes nothing). The
+    kernel keeps 5 % of each second for other tasks (``sched_rt_runtime_us``), so a runaway
+    thread cannot lock the machine up.
     """
     if priority == 0:
         return ''
