@@ -79,6 +79,12 @@ def pytest_sessionfinish(session, exitstatus):
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
+def pytest_runtest_logstart(nodeid, location):
+    """Tell the leftovers' watch which test runs (a leftover names the test it came from)."""
+    if _LEFTOVERS is not None:
+        _LEFTOVERS.test = nodeid
+
+
 def pytest_collection_modifyitems(config, items):
     """Mark every test with its folder's suite."""
     for item in items:

@@ -91,6 +91,7 @@ class Leftovers:
             pass     # not Linux: orphans escape the tree, the environment mark still finds them
         self.token = os.environ.setdefault(SESSION_VARIABLE, uuid.uuid4().hex)
         self.ours = {}          # (name, inode) -> a description of who used it
+        self.test = None        # the test running (conftest), named in the descriptions
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._watch, daemon=True, name='leftovers')
         self._thread.start()
@@ -107,11 +108,16 @@ class Leftovers:
         files = fastdds_files.listing()
         by_inode = {stat.st_ino: name for name, stat in files.items()}
         for inode, holders in fastdds_files.lock_owners().items():
-            if inode in by_inode and holders & pids:
-                self.ours.setdefault((by_inode[inode], inode), f'locked by {sorted(holders)}')
+            if inode in by_inode and holders & pids and (by_inode[inode], inode) not in self.ours:
+                self.ours[by_inode[inode], inode] = self._who('locked', holders)
         for name, users in fastdds_files.mappers(pids=pids).items():
-            if name in files:
-                self.ours.setdefault((name, files[name].st_ino), f'mapped by {sorted(users)}')
+            if name in files and (name, files[name].st_ino) not in self.ours:
+                self.ours[name, files[name].st_ino] = self._who('mapped', users)
+
+    def _who(self, how, pids):
+        """Describe the processes using a file, and when (so that a leftover can be traced)."""
+        names = ', '.join(f'{pid} {_describe(pid)[:80]}' for pid in sorted(pids))
+        return f'{how} by {names}; seen first during {self.test}'
 
     def finish(self):
         """
