@@ -287,7 +287,7 @@ class UR10SimNode(Node):
         if self._camera is not None:
             self._camera.stop()
         self.sim.close()
-        stats = self.stats
+        stats, age = self.stats, self.sim.largest_command_age
         if stats['ticks']:
             pairs = sorted(f'{a}/{b}' for a, b in stats['contact_pairs'])
             text = (f'stopped at {self.sim.time:.2f} s simulated; {stats["ticks"]} ticks, '
@@ -296,8 +296,8 @@ class UR10SimNode(Node):
                     f'ms; camera frames published {stats["frames"]}, dropped '
                     f'{stats["frames_dropped"]}; waited for a late command {stats["waits"]} '
                     f'times ({stats["wait_time"] * 1e3:.0f} ms), {stats["waits_expired"]} in '
-                    f'vain; contacts in {stats["contact_ticks"]} ticks'
-                    + (': ' + ', '.join(pairs) if pairs else ''))
+                    f'vain; a moving command in force {age * 1e3:.0f} ms at most; contacts in '
+                    f'{stats["contact_ticks"]} ticks' + (': ' + ', '.join(pairs) if pairs else ''))
             self.get_logger().info(text)
             self.events.publish(
                 'stopped', text, t_s=self.sim.time, ticks=stats['ticks'],
@@ -305,7 +305,7 @@ class UR10SimNode(Node):
                 largest_tick_gap_ms=stats['max_tick_gap'] * 1e3, frames=stats['frames'],
                 frames_dropped=stats['frames_dropped'], command_waits=stats['waits'],
                 command_wait_ms=stats['wait_time'] * 1e3,
-                command_waits_in_vain=stats['waits_expired'],
+                command_waits_in_vain=stats['waits_expired'], largest_command_age_ms=age * 1e3,
                 contact_ticks=stats['contact_ticks'], contact_pairs=' '.join(pairs))
             self.events.flush()
 

@@ -19,7 +19,7 @@ from ._scene import (obstacle_radii_for, parse_bottle_position, parse_goal_posit
 from ._trajectory import (MinimumJerkMove, PoseTrajectory, quaternions_to_rotations,
                           trajectory_from_path, TrajectoryError)
 from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_urdf_path,
-                    UR10Model)
+                    UR10Model, WATCHDOG_TIMEOUT)
 from ._watch import InputWatch, TrackingSummary
 
 __all__ = [
@@ -32,4 +32,5 @@ __all__ = [
     'chain_pose', 'obstacle_radii_for', 'parse_bottle_position', 'parse_goal_position',
     'parse_obstacle_positions', 'parse_obstacle_radii', 'quaternions_to_rotations',
     'robot_data_dir', 'robot_description', 'trajectory_from_path', 'ur10_urdf_path',
+    'WATCHDOG_TIMEOUT',
 ]

@@ -23,6 +23,11 @@ import pinocchio as pin
 JOINT_NAMES = ('shoulder_pan_joint', 'shoulder_lift_joint', 'elbow_joint', 'wrist_1_joint',
                'wrist_2_joint', 'wrist_3_joint')
 OFFICIAL_VELOCITY_LIMITS = np.radians([120.0, 120.0, 180.0, 180.0, 180.0, 180.0])
+#: Simulated s without a velocity command before the robot brakes (ur10_sim's watchdog): 7
+#: missed commands at 125 Hz; the speed servos bring the arm to rest some 20 ms later, within
+#: 0.1 s of the last command. A real UR stops its external-control program when no command
+#: arrives within its receive timeout (ur_client_library: 20 ms by default, 200 ms at most).
+WATCHDOG_TIMEOUT = 0.06
 TOOL_FRAME = 'tool_tip'
 FLANGE_FRAME = 'tool0'
 #: Joint positions (rad) or velocities (rad/s), (6,) in the order of JOINT_NAMES, or (n, 6).

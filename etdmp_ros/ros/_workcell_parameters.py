@@ -12,7 +12,7 @@ import math
 from typing import Any
 
 from etdmp_ros import limits
-from etdmp_ros.robot import SCENE_PARAMETERS
+from etdmp_ros.robot import SCENE_PARAMETERS, WATCHDOG_TIMEOUT
 from etdmp_ros.ros.specs import DOUBLE_ARRAY, Parameter, parameter
 
 P = parameter
@@ -124,9 +124,10 @@ UR10_SIM = (
       'them.', unit='s', value_range=(1e-4, 0.02)),
     P('real_time_factor', 1.0, 'Simulated seconds per wall-clock second; 0 runs as fast as '
       'the CPU allows.', value_range=(0.0, 100.0), dynamic=True),
-    P('watchdog_timeout', 0.1, 'Simulated time without a command before braking to zero '
-      'velocity; 0 disables it and the last command then applies forever, like the real '
-      'forward_velocity_controller.', unit='s', value_range=(0.0, 60.0), dynamic=True),
+    P('watchdog_timeout', WATCHDOG_TIMEOUT, 'Simulated time without a command before '
+      'braking to zero velocity (the arm is at rest some 20 ms later); 0 disables it and the '
+      'last command then applies forever, like the real forward_velocity_controller.',
+      unit='s', value_range=(0.0, 60.0), dynamic=True),
     P('thread_priority', 60, 'SCHED_FIFO priority (1-99) of the simulation thread while it '
       'runs paced (real_time_factor > 0); 0 = normal scheduling. Needs CAP_SYS_NICE or an '
       'rtprio limit, else a warning and normal scheduling.', value_range=(0, 99),

@@ -16,7 +16,9 @@ one:
   sharing for this package's topics, and :func:`clean` leaves them alone).
 
 :func:`clean` removes what belongs to dead processes, deciding as ``fastdds shm clean`` does
-(a segment or port whose lock file nobody holds), and beyond it: a port with no lock file at all
+(a segment or port whose lock file nobody holds; but a killed reader's port that a live writer
+still maps is locked for this process's life instead, so that no new reader takes its number
+while the writer goes on sending into that file), and beyond it: a port with no lock file at all
 that no live process maps, i.e. without a reader (its reader exited cleanly while a killed
 writer's reference kept the file; the next reader of that number would reuse it with its stale
 health-check state), taken under the port's mutex as Fast DDS opens ports (while a live writer
@@ -222,6 +224,27 @@ class _Semaphores:
             self._close(sem)
 
 
+def _quarantine(lock):
+    """Hold ``lock`` (a port's ``_el``) for this process's life: no reader takes its number."""
+    if lock.name in _QUARANTINED:
+        return
+    try:
+        fd = os.open(lock, os.O_RDWR)
+    except FileNotFoundError:
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)          # a new reader took it first: it is alive again
+        return
+    _QUARANTINED[lock.name] = fd
+
+
+def quarantined():
+    """Return the names of the port locks this process holds for killed readers (:func:`clean`)."""
+    return sorted(_QUARANTINED)
+
+
 def _remove(directory, names, removed):
     for name in names:
         try:
@@ -288,6 +311,13 @@ def _stale_port(directory, number, files, unmapped):
             return [mutex], 'port mutex taken by a dead process'
         return None
     if locks:
+        if f'{port}_el' in locks and port in files and not unmapped(port):
+            # Its reader was killed and a live writer still sends into this file. Removed, the
+            # next reader of that number would make a new file that the writer never opens:
+            # it goes on sending into this one (Fast DDS notices a dead reader only if it
+            # died waiting, not while it handled a message). Locked, no reader takes this
+            # number again and the writer opens the new reader's port afresh (clean).
+            return [f'{port}_el'], QUARANTINE
         return every, 'port lock not held'
     if port in files:
         # No reader at all (readers lock for life): a reader that exited cleanly while a
@@ -305,6 +335,10 @@ def _stale_port(directory, number, files, unmapped):
 
 
 _SEMAPHORES: list['_Semaphores'] = []
+#: The reason :func:`stale` gives a killed reader's port that a live process still maps.
+QUARANTINE = 'port of a killed reader, a live writer maps it'
+#: ``{lock file name: descriptor}`` of the ports this process keeps locked (:func:`clean`).
+_QUARANTINED: dict[str, int] = {}
 
 
 def _semaphores():
@@ -325,6 +359,9 @@ def clean(directory=SHM_DIR):
         return []
     removed = []
     for names, reason in stale(directory):
+        if reason == QUARANTINE:
+            _quarantine(directory / names[0])
+            continue
         if reason == 'port without reader':
             # Fast DDS opens a port holding its mutex: holding it here, no process can be
             # between finding this file and locking it as its reader.

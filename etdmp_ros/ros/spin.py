@@ -214,11 +214,17 @@ def dds_settings(shared_memory: bool = True, realtime: bool = False) -> Iterator
 
 
 def cleaned_message(removed: Sequence[str]) -> str:
-    """Return the log line about the files :func:`dds_settings` removed ('' if none)."""
-    if not removed:
-        return ''
-    return (f'removed {len(removed)} Fast DDS shared-memory files that processes killed '
-            'earlier had left in /dev/shm (docs/reliability.md)')
+    """Return the log line about the files :func:`dds_settings` removed or locked ('' if none)."""
+    from etdmp_ros.ros import fastdds_files
+    kept = fastdds_files.quarantined()
+    lines = []
+    if removed:
+        lines.append(f'removed {len(removed)} Fast DDS shared-memory files that processes '
+                     'killed earlier had left in /dev/shm (docs/reliability.md)')
+    if kept:
+        lines.append(f'locked the shared-memory ports of killed readers that live writers still '
+                     f'use ({", ".join(kept)}): no reader takes their numbers again')
+    return '; '.join(lines)
 
 
 def init(args: list[str] | None = None, shared_memory: bool = True, realtime: bool = False
@@ -342,9 +348,9 @@ def _start(name: str, args: list[str] | None, shared_memory: bool | None) -> Non
     # A node that does not stop when told: its launcher asks for the stacks before the kill.
     from etdmp_ros.ros.processes import STACKS_SIGNAL
     faulthandler.register(STACKS_SIGNAL, all_threads=True)
-    removed = init(args, shared_memory, realtime)
-    if removed:
-        rclpy.logging.get_logger(name).info(cleaned_message(removed))
+    message = cleaned_message(init(args, shared_memory, realtime))
+    if message:
+        rclpy.logging.get_logger(name).info(message)
 
 
 def run(make_nodes: Callable[[list[Node]], None], name: str, args: list[str] | None = None,

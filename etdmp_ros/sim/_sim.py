@@ -41,7 +41,8 @@ a disc (its floor), since MuJoCo collides a mesh by its convex hull, which would
 
 Watchdog. A real ``forward_velocity_controller`` applies the last command forever; here a
 command older than ``watchdog_timeout`` seconds of simulated time is replaced by zero (brake),
-until the next command. ``watchdog_timeout = 0`` disables it.
+until the next command. ``watchdog_timeout = 0`` disables it; the default is
+:data:`etdmp_ros.robot.WATCHDOG_TIMEOUT` (why: its comment).
 
 Camera. A D435-style colour camera with aligned depth, at :attr:`SceneConfig.camera_pose`;
 intrinsics from the vertical field of view (:meth:`CameraIntrinsics.from_fovy`). MuJoCo cameras
@@ -64,7 +65,7 @@ from etdmp_ros.geometry.camera import CameraIntrinsics
 from etdmp_ros.robot._scene import (obstacle_radii_for, parse_bottle_position,
                                     parse_goal_position, parse_obstacle_positions,
                                     parse_obstacle_radii, SceneConfig)
-from etdmp_ros.robot._ur10 import JOINT_NAMES, UR10Model
+from etdmp_ros.robot._ur10 import JOINT_NAMES, UR10Model, WATCHDOG_TIMEOUT
 from etdmp_ros.sim._camera import OffscreenCamera
 from etdmp_ros.sim._workcell import (build_model, CAMERA_NAME, DEFAULT_KV, has_geom,
                                      HIDDEN_GROUP, import_mujoco, MAX_OBSTACLES, VISIBLE_GROUP,
@@ -122,7 +123,8 @@ class UR10Sim:
     """
 
     def __init__(self, scene: SceneConfig, *, timestep: float = 0.002,
-                 watchdog_timeout: float = 0.1, image_size: tuple[int, int] = (640, 480),
+                 watchdog_timeout: float = WATCHDOG_TIMEOUT,
+                 image_size: tuple[int, int] = (640, 480),
                  fovy_deg: float = 42.5, depth_range: tuple[float, float] = (0.1, 3.0),
                  depth_noise: float = 0.0, seed: int | None = None, multisamples: int = 0,
                  kv: ArrayLike = DEFAULT_KV, detect_contacts: bool = True) -> None:
@@ -168,6 +170,8 @@ class UR10Sim:
         self._command = np.zeros(6)
         self._command_time = -math.inf
         self.braked_at: float | None = None
+        #: Simulated s: the longest a non-zero command stayed in force unreplaced (reset()).
+        self.largest_command_age = 0.0
         self._obstacles: Array   # set by reset(), like the radii
         self._radii: Array
         self.watchdog_active = self.watchdog_timeout > 0
@@ -217,6 +221,7 @@ class UR10Sim:
         self._command[:] = 0.0
         self._command_time = -math.inf
         self.braked_at = None
+        self.largest_command_age = 0.0
         self.watchdog_active = self.watchdog_timeout > 0
         self.set_goal(self.scene.goal_position)
         self.set_bottle(self.scene.bottle_position)
@@ -294,6 +299,7 @@ class UR10Sim:
         ValueError and changes nothing. Each accepted command re-arms the watchdog.
         """
         qd = self.validate_velocity_command(qd)
+        self._note_command_age()
         self._command[:] = qd
         self._command_time = self.data.time
         self.watchdog_active = False
@@ -305,9 +311,16 @@ class UR10Sim:
         """Return the simulated time (s) of the last accepted velocity command (-inf: none)."""
         return self._command_time
 
+    def _note_command_age(self) -> None:
+        """Keep the longest a moving command was in force (how near the watchdog came)."""
+        if not self.watchdog_active and np.any(self._command):
+            age = self.data.time - self._command_time
+            self.largest_command_age = max(self.largest_command_age, age)
+
     def _check_watchdog(self) -> None:
         if (not self.watchdog_active and self.watchdog_timeout > 0
                 and self.data.time - self._command_time > self.watchdog_timeout):
+            self._note_command_age()
             self.watchdog_active = True
             self.braked_at = self.data.time     # simulated s; see command_time
             self.data.ctrl[self._actuator_ids] = 0.0

@@ -50,9 +50,11 @@ from _results import add_option, command, publish  # noqa: E402
 from conftest import busy_core  # noqa: E402
 from etdmp_ros.demo import run as demo  # noqa: E402
 from etdmp_ros.demo.scenario import SKILLS  # noqa: E402
+from etdmp_ros.ros import system as description  # noqa: E402
 from etdmp_ros.ros.processes import isolated_environment  # noqa: E402
 import yaml  # noqa: E402
 
+WATCHDOG_MS = description.node('ur10_sim').parameter('watchdog_timeout').default * 1e3
 #: (key, label, target text, check) of the table's rows; check(value, rate) -> bool. The CPU
 #: targets are the default configuration's (125 Hz); at 500 Hz only the step share has one.
 ROWS = (
@@ -86,6 +88,8 @@ ROWS = (
     ('late_ticks', 'simulation ticks > 3 periods late (whole run)', '', None),
     ('command_waits', 'ticks that waited for a late command (whole run)', '', None),
     ('command_waits_in_vain', '... of which in vain (stepped on the old command)', '', None),
+    ('largest_command_age_ms', 'longest a moving command stayed in force (robot ms)',
+     f'< watchdog ({WATCHDOG_MS:g})', lambda v, rate: v < WATCHDOG_MS),
     ('stale_halts', 'stale-input halts', '0', lambda v, rate: v == 0),
 )
 
@@ -108,6 +112,7 @@ def figures(metrics):
         'late_ticks': system.get('simulation', {}).get('late_ticks'),
         'command_waits': system.get('simulation', {}).get('command_waits'),
         'command_waits_in_vain': system.get('simulation', {}).get('command_waits_in_vain'),
+        'largest_command_age_ms': system.get('simulation', {}).get('largest_command_age_ms'),
         'stale_halts': int(str(metrics.get('controller_failure') or '').startswith('stale')),
         'joint_states_received': controller.get('joint_states_received'),
         'largest_joint_state_gap_ms': controller.get('largest_joint_state_gap_ms'),

@@ -62,6 +62,7 @@ from etdmp_ros.ros import system  # noqa: E402
 from support import two_hosts  # noqa: E402
 
 PERIOD_MS = 8.0       # 125 Hz
+WATCHDOG = system.node('ur10_sim').parameter('watchdog_timeout').default
 #: (key, label, target text, check(value, one_host) -> bool or None, worst: max or min).
 G_ROWS = (
     ('steps_share', 'control steps / control periods while tracking', '>= 99 %',
@@ -83,7 +84,8 @@ G_ROWS = (
 )
 LINK_ROWS = (
     ('braked_after_last_command_s', 'zero command in force after the last command (robot s)',
-     '<= 0.1 (+ a 2 ms physics step)', lambda v, base: v <= 0.102 + 1e-9, max),
+     f'<= {WATCHDOG:g} (+ a 2 ms physics step)', lambda v, base: v <= WATCHDOG + 0.002 + 1e-9,
+     max),
     ('zero_velocity_after_last_command_s',
      'all joints < 1e-3 rad/s after the last command (robot s)', '<= 0.1',
      lambda v, base: v <= 0.1, max),

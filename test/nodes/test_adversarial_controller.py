@@ -10,7 +10,7 @@ from another process, a Path of 10^5 poses, a path at the length limit. For ever
 - the letter still ends on its last pose (0.5 mm) with the status ``idle``, no stale-input, no
   early end, every command within the velocity and acceleration limits;
 - the controller says why it ignored the input (a WARN or ERROR line naming it);
-- the control loop kept its rate: the simulation never went ``watchdog_timeout`` (0.1 s)
+- the control loop kept its rate: the simulation never went ``watchdog_timeout`` (0.06 s)
   without a command;
 - the controller is alive and its memory grows by less than :data:`RSS_GROWTH_LIMIT`; the
   next row is the next good request.

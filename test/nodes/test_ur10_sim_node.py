@@ -16,7 +16,7 @@ from conftest import NodeProcess
 from diagnostic_msgs.msg import DiagnosticArray
 from etdmp_ros.geometry.camera import CameraIntrinsics
 from etdmp_ros.robot import JOINT_NAMES, UR10Model
-from etdmp_ros.ros import events, qos
+from etdmp_ros.ros import events, qos, system
 from etdmp_ros.ros.background import BackgroundNode
 from etdmp_ros.ros.config_files import read_parameter_file
 from etdmp_ros.ros.conversions import (contacts_from_markers, image_from_msg,
@@ -337,16 +337,17 @@ def test_commands_watchdog_and_runtime_parameters(launch):
     assert (q1[0] - q0[0]) / (t1 - t0) == pytest.approx(0.2, rel=0.02)
     assert qd1[0] == pytest.approx(0.2, rel=0.02)
     assert np.allclose(qd1[1:], 0.0, atol=1e-3)
-    # The watchdog (0.1 s) brakes once commands stop.
+    # The watchdog (watchdog_timeout, 0.06 s) brakes once commands stop.
     time.sleep(0.5)             # the subject: a silence that must trigger the watchdog
     _, q2, qd2 = client.joint_state()
     assert np.abs(qd2).max() < 1e-3
     assert q2[0] - q1[0] < 0.2 * 0.5                 # stopped well before 0.5 s of motion
     client.wait_for(lambda: client.events('braked'), 5.0, 'the watchdog event', sim)
     braked = client.events('braked')[0]
-    assert braked.number('timeout_s') == pytest.approx(0.1)
+    timeout = system.node('ur10_sim').parameter('watchdog_timeout').default
+    assert braked.number('timeout_s') == pytest.approx(timeout)
     assert braked.number('braked_s') - braked.number('last_command_s') == \
-        pytest.approx(0.1, abs=0.01)
+        pytest.approx(timeout, abs=0.01)
     assert 'braking' in sim.log()
     # Bad commands are rejected (with a warning), never applied.
     for bad in ([0.3] * 5, [0.3] * 7, [0.3, float('nan'), 0, 0, 0, 0], [float('inf')] * 6):

@@ -15,8 +15,8 @@ system for the whole module:
    alone and sees the goal again within seconds; then stopped with Ctrl-C and started again,
    the same;
 3. the next plan goes to the goal perceived anew; the controller killed while the arm writes
-   it: the simulation's command watchdog brakes the arm 0.1 s of robot time after the
-   controller's last command; the controller is restarted alone;
+   it: the simulation's command watchdog brakes the arm, at rest within 0.1 s of robot time
+   after the controller's last command; the controller is restarted alone;
 4. the next plan is tracked by the new controller; the simulation killed meanwhile: the
    controller sends zero velocity and says why (status stale-input, joint states lost) within
    its simulation_stall_timeout of wall time; the simulation is restarted alone;
@@ -142,7 +142,7 @@ def test_controller_killed_mid_motion_the_watchdog_brakes(faults):
     assert f['braked_s'] - f['last_command_s'] <= watchdog + period + 1e-6, f
     # From the kill: from the last command (ur10_sim's event), the kill's lower bound.
     assert f['halved_s'] - f['braked_s'] <= SERVO_HALVING, f
-    assert f['standstill_s'] <= watchdog + 0.06, f
+    assert f['standstill_s'] <= 0.1, f        # at rest within 0.1 s of robot time
     assert not f['moved_again'], 'the arm moved again without a controller'
     assert f['largest_gap_s'] <= STALL_LIMIT, f
 

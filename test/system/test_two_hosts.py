@@ -14,8 +14,8 @@ not. One run serves all the checks of a case:
   over UDP.
 - ``link down`` (the controller on the workstation, so that its 125 Hz velocity stream crosses
   the link): the link goes down for 0.5 s while the pen writes; in robot time, seen on the
-  robot's side, the arm is braked within 0.1 s of the cut (ur10_sim's command watchdog: the
-  side that lost its input), stopped and stays so; the controller's status says why
+  robot's side, the arm is at rest within 0.1 s of the last command that crossed (ur10_sim's
+  command watchdog: the side that lost its input), and stays so; the controller's status says why
   (stale-input); when the link is back, a skill taught before the cut still plans, and a new
   /generalize plans and executes within 2 s (the demo's checks again) without a node restarted.
 """
@@ -38,7 +38,9 @@ NRMSE_FLOOR = 1e-3
 #: How long the link is down (s, wall clock), and when: this part of the letter's duration.
 CUT, CUT_AT = 0.5, 0.4
 #: The simulation's command watchdog (config/ur10_sim.yaml).
-WATCHDOG = 0.1
+WATCHDOG = system.node('ur10_sim').parameter('watchdog_timeout').default
+#: Robot s from the last command to the arm at rest (every joint below 1e-3 rad/s).
+AT_REST = 0.1
 
 
 def _run(colcon_install, out, robot_nodes, *extra):
@@ -112,8 +114,8 @@ def test_link_down_brakes_the_arm_within_the_watchdog(link_down):
     assert link['watchdog_braked'], link
     assert WATCHDOG < link['braked_after_last_command_s'] <= WATCHDOG + 0.002 + 1e-6, link
     # ... the arm at rest soon after (every joint below 1e-3 rad/s: the speed servos take
-    # milliseconds), and so while the link was down.
-    assert link['zero_velocity_after_last_command_s'] < WATCHDOG + 0.05, link
+    # some 20 ms), within 0.1 s of the last command, and so while the link was down.
+    assert link['zero_velocity_after_last_command_s'] <= AT_REST, link
     assert link['stayed_stopped'], link
     assert link['robot_time_down_s'] >= CUT - 0.1, link   # the simulation ran on meanwhile
 

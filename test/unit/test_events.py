@@ -99,7 +99,8 @@ def _recording(path, wording):
                                    late_ticks=6, late_after_periods=3, largest_tick_gap_ms=75.25,
                                    frames=300, frames_dropped=2, command_waits=9,
                                    command_wait_ms=12.5, command_waits_in_vain=1,
-                                   contact_ticks=0, contact_pairs='')
+                                   largest_command_age_ms=24.0, contact_ticks=0,
+                                   contact_pairs='')
     with bag.BagWriter(path) as writer:
         receipt = 1_700_000_000_000_000_000
         for topic, name in EVENT_TOPICS.items():
@@ -128,7 +129,7 @@ def test_the_system_figures_are_the_events_of_the_recording(tmp_path):
     assert figures['simulation'] == {
         'late_ticks': 6, 'largest_tick_gap_ms': 75.25, 'frames': 300, 'frames_dropped': 2 + 7,
         'command_waits': 9, 'command_wait_ms': 12.5, 'command_waits_in_vain': 1,
-        'frames_rendered': 280}
+        'largest_command_age_ms': 24.0, 'frames_rendered': 280}
 
 
 def test_rewording_a_log_line_changes_no_figure(tmp_path):

@@ -120,6 +120,32 @@ def test_a_port_without_reader_that_a_live_writer_maps_is_kept(tmp_path):
                                 'port without reader')]
 
 
+def test_a_killed_readers_port_that_a_live_writer_maps_is_locked_not_removed(tmp_path):
+    # Removed, the restarted reader took the same number in a new file, and the camera went on
+    # sending into the old one: perception blind for 90 s. Locked, the new reader takes
+    # another number, which the writer opens afresh.
+    port = f'fastrtps_port{PORT}'
+    make(tmp_path, port, f'{port}_el', f'sem.{port}_mutex')
+    writer = subprocess.Popen(
+        [sys.executable, '-c', 'import mmap, sys\n'
+         'f = open(sys.argv[1], "r+b"); m = mmap.mmap(f.fileno(), 64)\n'
+         'print("mapped", flush=True); sys.stdin.read()', str(tmp_path / port)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert writer.stdout.readline().strip() == 'mapped'
+        assert stale(tmp_path) == [([f'{port}_el'], fastdds_files.QUARANTINE)]
+        assert clean(tmp_path) == []
+        assert fastdds_files.quarantined() == [f'{port}_el']
+        assert fastdds_files.lock_held(tmp_path / f'{port}_el')     # as Fast DDS probes it
+        assert stale(tmp_path) == []                 # held: a live reader's, to everyone
+        assert clean(tmp_path) == [] and fastdds_files.quarantined() == [f'{port}_el']
+    finally:
+        writer.communicate('')
+        os.close(fastdds_files._QUARANTINED.pop(f'{port}_el'))
+    # The writer gone, this process's lock released: a killed reader's port, removed.
+    assert sorted(clean(tmp_path)) == sorted([port, f'{port}_el', f'sem.{port}_mutex'])
+
+
 def test_a_left_over_lock_and_mutex_alone_are_stale(tmp_path):
     make(tmp_path, 'fastrtps_00000000000000c1_el', f'sem.fastrtps_port{PORT}_mutex')
     assert sorted(clean(tmp_path)) == ['fastrtps_00000000000000c1_el',

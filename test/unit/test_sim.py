@@ -132,6 +132,24 @@ def test_watchdog_brakes_when_commands_stop():
         assert not s.watchdog_active and np.allclose(s.qd, VELOCITY, rtol=0.05)
 
 
+def test_the_longest_a_moving_command_stayed_in_force_is_kept():
+    """How near the watchdog came: a moving command's age when replaced or braked, not a zero's."""
+    with UR10Sim(system.scene_config(), watchdog_timeout=0.1) as s:
+        s.set_velocity_command(np.zeros(6))
+        s.advance(0.5)                             # at rest: the zero command's age is no risk
+        s.set_velocity_command(VELOCITY)
+        assert s.largest_command_age == 0.0
+        s.advance(0.03)
+        s.set_velocity_command(VELOCITY)
+        assert abs(s.largest_command_age - 0.03) < 0.003
+        s.advance(0.3)                             # braked at the timeout: that age, no more
+        assert 0.1 <= s.largest_command_age <= 0.1 + s.model.opt.timestep + 1e-9
+        s.set_velocity_command(VELOCITY)           # after the brake: nothing older counts
+        assert s.largest_command_age <= 0.1 + s.model.opt.timestep + 1e-9
+        s.reset()
+        assert s.largest_command_age == 0.0
+
+
 def test_without_watchdog_the_last_command_applies_forever():
     with UR10Sim(system.scene_config(), watchdog_timeout=0.0) as s:
         s.set_velocity_command(VELOCITY)

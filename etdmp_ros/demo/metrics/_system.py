@@ -64,7 +64,8 @@ def _simulation_figures(recorded, call_ns, end_ns):
             'frames': last.integer('frames'), 'frames_dropped': last.integer('frames_dropped'),
             'command_waits': last.integer('command_waits'),
             'command_wait_ms': last.number('command_wait_ms'),
-            'command_waits_in_vain': last.integer('command_waits_in_vain')}
+            'command_waits_in_vain': last.integer('command_waits_in_vain'),
+            'largest_command_age_ms': last.number('largest_command_age_ms')}
         camera = ev.of_kind(recorded, 'ur10_sim_camera', 'stopped')
         if camera:   # snapshots the camera process skipped because it was still rendering
             figures['simulation']['frames_rendered'] = camera[-1].integer('frames')
