@@ -182,8 +182,9 @@ bench-soak: $(STAMP)
 bench-obstacle_volumes: $(STAMP)
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_obstacle_volumes.py $(BENCH_ARGS)
 
-# Every plan at rest at its goal past tau, on recordings that start or end moving (issue 24;
-# needs no peer library). BENCH_ARGS="--before REV" adds the code of git REV beside it.
+# Every plan at rest at its goal past tau, on recordings that start or end moving
+# (docs/design.md, "Coming to rest"; needs no peer library). BENCH_ARGS="--before REV" adds the
+# code of git REV beside it.
 bench-rest: $(STAMP)
 	$(VENV_PY) test/benchmarks/bench_rest.py $(BENCH_ARGS)
 

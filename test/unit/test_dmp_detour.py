@@ -107,8 +107,8 @@ def test_the_goal_is_kept_past_tau():
     """
     The detour ends before the plan does: past tau the plan is the obstacle-free one.
 
-    (Whether the obstacle-free plan itself stays at its goal past tau is the DMP's business,
-    issue 24; these recordings end at rest, and their plans do.)
+    (Whether the obstacle-free plan itself stays at its goal past tau is the DMP's business
+    (test_dmp_rest.py); these recordings end at rest, and their plans do.)
     """
     for rec in (shapes.scribble(3, 2), shapes.scribble(4, 3), shapes.helix()):
         skill = learn(rec.positions, t=rec.t)

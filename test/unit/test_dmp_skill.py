@@ -419,7 +419,7 @@ _WAVE = np.column_stack([np.linspace(0.0, 8.0, 80), np.sin(np.linspace(0.0, 6.0,
 
 
 @pytest.mark.parametrize('positions, kwargs, message', [
-    # issue 13 item 9: stamps spanning 1.975e9 s (the plan would need 2e11 samples)
+    # Found by attacks: stamps spanning 1.975e9 s (the plan would need 2e11 samples)
     (_WAVE, {'t': np.linspace(0.0, 1.975e9, 80)}, 'MAX_DEMO_DURATION'),
     # coordinates x 1e300: every later product overflowed ('start equals goal' at generalize)
     (_WAVE * 1e300, {}, 'MAX_DEMO_COORDINATE'),
@@ -449,7 +449,7 @@ def test_limits_leave_usable_demonstrations_alone():
 
 @pytest.mark.parametrize('tau, dt, n', [(0.005, 0.01, 1), (0.001, 0.01, 1)])
 def test_a_movement_of_fewer_than_two_samples_is_refused(tau, dt, n):
-    # issue 13 item 7: duration 0.005 gave a 1-pose "plan" at the start, as a success.
+    # Found by attacks: duration 0.005 gave a 1-pose "plan" at the start, as a success.
     skill = learn(builtin_demo('G'))
     with pytest.raises(GeneralizationError, match=f'would have {n} sample'):
         skill.generalize(skill.start + 1.0, skill.goal, tau=tau, dt=dt)

@@ -202,7 +202,7 @@ def _wave(n=50):
 
 
 def test_files_beyond_the_limits_are_refused_before_they_are_read(tmp_path):
-    # issue 13 items 1 and 2: a 289-byte .npy whose header claims (10^12, 2) raised
+    # Found by attacks: a 289-byte .npy whose header claims (10^12, 2) raised
     # _ArrayMemoryError (14.6 TiB) and stopped the node; a 1.5 MB .npz of 10^8 x 2 zeros took
     # 11.8 GB (10^6 here, to be quick; the node test has the 10^8 one); a 200 MB CSV 16 GB.
     # Each is refused by its header or size; good files still load.
