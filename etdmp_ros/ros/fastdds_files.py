@@ -245,6 +245,12 @@ def quarantined():
     return sorted(_QUARANTINED)
 
 
+def release():
+    """Let go of the ports :func:`clean` locked (their files: the next cleaning's)."""
+    while _QUARANTINED:
+        os.close(_QUARANTINED.popitem()[1])
+
+
 def _remove(directory, names, removed):
     for name in names:
         try:

@@ -127,6 +127,7 @@ class Leftovers:
         """
         self._stop.set()
         self._thread.join(timeout=5)
+        fastdds_files.release()      # the ports this process locked for killed readers
         self.note()
         problems = []
         alive = descendants(self.root) | marked(self.token)

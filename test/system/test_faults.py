@@ -66,7 +66,9 @@ def faults(colcon_install, module_ros_env, tmp_path_factory):
             watch.close()
         codes = sys_.stop()
         # What the killed nodes left in /dev/shm (a port whose killed writer still counted as
-        # its user outlives its reader): removed as the next node's start would remove it.
+        # its user outlives its reader): removed as the next node's start would remove it,
+        # with the ports this process locked for killed readers (a Watch starting cleans).
+        fastdds_files.release()
         fastdds_files.clean()
     assert all(code == 0 for code in codes.values()), codes
 

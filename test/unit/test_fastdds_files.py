@@ -141,7 +141,8 @@ def test_a_killed_readers_port_that_a_live_writer_maps_is_locked_not_removed(tmp
         assert clean(tmp_path) == [] and fastdds_files.quarantined() == [f'{port}_el']
     finally:
         writer.communicate('')
-        os.close(fastdds_files._QUARANTINED.pop(f'{port}_el'))
+        fastdds_files.release()
+    assert fastdds_files.quarantined() == []
     # The writer gone, this process's lock released: a killed reader's port, removed.
     assert sorted(clean(tmp_path)) == sorted([port, f'{port}_el', f'sem.{port}_mutex'])
 
