@@ -4,8 +4,8 @@ Experiment logic behind the ``etdmp`` command line, callable without argparse.
 Two experiments, both on top of the public core :mod:`etdmp_ros.dmp`:
 
 - :func:`compare_methods`: one generalization request (start, goal, obstacles) served by both DMP
-  and ET-DMP, with the similarity (nRMSE, docs/design.md "Similarity measure"), the final distance to the goal and the
-  obstacle clearance of each.
+  and ET-DMP, with the similarity (nRMSE, docs/design.md "Similarity measure"), the final
+  distance to the goal and the obstacle clearance of each.
 - :func:`reproduce`: the paper's 2D letter simulation (Table 2, Figs. 5, 7, 8, 13) for ANY letters
   directory and table in the format of ``pbdlib_2Dletters/table2.json``.
 
