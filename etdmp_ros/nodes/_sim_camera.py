@@ -233,7 +233,6 @@ def main(argv=None):
                 f'slower than the camera rate), {early} sent before the camera was ready')
         log.info(text)
         events.publish('stopped', text, frames=published, skipped=skipped, early=early)
-        events.flush()
         if 'sim' in locals():
             sim.close()
         node.destroy_node()

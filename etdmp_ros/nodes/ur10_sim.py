@@ -307,7 +307,6 @@ class UR10SimNode(Node):
                 command_wait_ms=stats['wait_time'] * 1e3,
                 command_waits_in_vain=stats['waits_expired'], largest_command_age_ms=age * 1e3,
                 contact_ticks=stats['contact_ticks'], contact_pairs=' '.join(pairs))
-            self.events.flush()
 
     def use_executor_priority(self):
         """
@@ -360,7 +359,6 @@ class UR10SimNode(Node):
             self.get_logger().fatal(f'simulation stopped: {type(exc).__name__}: {exc}')
             self.events.publish('failed', f'simulation stopped: {type(exc).__name__}: {exc}',
                                 ERROR, reason=f'{type(exc).__name__}: {exc}')
-            self.events.flush()
             self.context.try_shutdown()
         finally:
             if self._camera is None:

@@ -116,16 +116,16 @@ def test_ros2_run_starts_every_node(ros2):
         for name in system.NODE_NAMES:
             files = ' '.join(f'--params-file {f}' for f in system.parameter_files(name, config))
             nodes[name] = runner.start(f'ros2 run etdmp_ros {name} --ros-args {files}', name)
-        expected = {f'/{n}' for n in system.NODE_NAMES} | {'/ur10_sim_camera'}
-
-        def listed():
-            out = runner.run('ros2 node list --no-daemon --spin-time 3', check=False).stdout
-            return set(out.split()) >= expected and set(out.split())
-        names = wait_for(listed, STARTUP, 'the nodes in ros2 node list', nodes.values())
-        assert names == expected
         for name, line in READY.items():
             wait_for(lambda: line in nodes[name].log(), STARTUP, f'{name}: {line!r}',
                      nodes.values())
+        expected = {f'/{n}' for n in system.NODE_NAMES} | {'/ur10_sim_camera'}
+
+        def listed():
+            out = runner.run('ros2 node list', check=False).stdout
+            return set(out.split()) >= expected and set(out.split())
+        names = wait_for(listed, 60, 'the nodes in ros2 node list', nodes.values())
+        assert names == expected
     finally:
         codes = {}
         for name in reversed(system.NODE_NAMES):    # the simulation last
@@ -170,7 +170,8 @@ def launched(ros2):
 
 
 def _listed(ros2, verb):
-    out = ros2.run(f'ros2 {verb} list -t --no-daemon --spin-time 3').stdout
+    """Return ``ros2 <verb> list -t`` as a user runs it (from the ``ros2 daemon``'s graph)."""
+    out = ros2.run(f'ros2 {verb} list -t').stdout
     return ros2_cli.without_internals(ros2_cli.names_and_types(out))
 
 
@@ -184,14 +185,14 @@ def test_node_topic_and_service_lists_equal_the_readme_tables(launched):
     nodes = {f'/{n}' for n in documented}
 
     def complete():
-        out = ros2.run('ros2 node list --no-daemon --spin-time 3', check=False).stdout
+        out = ros2.run('ros2 node list', check=False).stdout
         return set(out.split()) >= nodes and set(out.split())
     running = wait_for(complete, 60, f'the documented nodes {sorted(nodes)} in ros2 node list')
     assert running == nodes, f'running, not in docs/ros.md: {sorted(running - nodes)}'
 
     topics, services = ros2_cli.readme_topics()
-    # Discovery is incremental: take the union of lists for up to 30 s, then compare (three
-    # lists of 3 s each once missed both services of a fresh clone's idle run).
+    # Discovery is incremental (the daemon the first list starts learns the graph as the
+    # nodes announce themselves): take the union of lists for up to 30 s, then compare.
     found_topics, found_services = {}, {}
     deadline = time.monotonic() + 30.0
     while True:
@@ -313,17 +314,23 @@ def test_bad_request_gives_an_empty_plan_and_an_error(launched, what):
     assert len(ros2_cli.plan_positions(launched.ros2.run(good).stdout)) > 100
 
 
-def _describe(ros2, node, name):
-    return param(ros2, 'describe', node, name).stdout
+def _described(ros2, node, *names):
+    """Return ``{name: its text}`` of one ``ros2 param describe <node> <names...>``."""
+    out = param(ros2, 'describe', node, *names).stdout
+    blocks = ['Parameter name: ' + block for block in out.split('Parameter name: ')[1:]]
+    described = {block.splitlines()[0].split(': ', 1)[1].strip(): block for block in blocks}
+    assert set(described) == set(names), out
+    return described
 
 
 def test_param_describe_and_get_show_the_system_description(launched):
     ros2 = launched.ros2
-    for node, name in (('dmp_server', 'skill'), ('dmp_server', 'method'),
-                       ('dmp_server', 'n_basis'), ('dmp_server', 'duration'),
-                       ('ur10_sim', 'goal_position'), ('ur10_sim', 'control_rate')):
+    texts = {('dmp_server', name): text for name, text in _described(
+        ros2, '/dmp_server', 'skill', 'method', 'n_basis', 'duration').items()}
+    texts.update({('ur10_sim', name): text for name, text in _described(
+        ros2, '/ur10_sim', 'goal_position', 'control_rate').items()})
+    for (node, name), text in texts.items():
         parameter = system.node(node).parameter(name)
-        text = _describe(ros2, f'/{node}', name)
         assert f'Parameter name: {name}' in text, text
         assert f'Description: {parameter.full_description}' in text, text
         assert f'Type: {parameter.type_name.replace("[]", " array")}' in text, text

@@ -100,9 +100,31 @@ class Ros2:
         name = name or f'command_{self._count}'
         return Background(self.argv(command), self.home / f'{name}.log', self.env)
 
-    def stop_daemon(self):
-        """Stop the ``ros2 daemon`` of this domain, if one runs (tests must not leave one)."""
-        return self.run('ros2 daemon stop', timeout=30, check=False)
+    def stop_daemon(self, timeout=10.0):
+        """
+        Stop the ``ros2 daemon`` of this domain, if one runs (tests must not leave one).
+
+        ``ros2 daemon stop`` returns once the daemon was told; the process may take a moment
+        more to exit (seen: still there when the suite looked for leftovers), so this waits
+        up to ``timeout`` s for it to be gone.
+        """
+        result = self.run('ros2 daemon stop', timeout=30, check=False)
+        mark = f'--ros-domain-id {self.domain_id} '
+        waiting.wait_for(lambda: not any(
+            'ros2cli.daemon' in line and mark in line + ' ' for line in _command_lines()),
+            timeout, f'the ros2 daemon of domain {self.domain_id} to exit', period=0.05)
+        return result
+
+
+def _command_lines():
+    """Return the command lines of the processes running now (Linux /proc)."""
+    lines = []
+    for entry in Path('/proc').iterdir():
+        try:
+            lines.append((entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode())
+        except (OSError, ValueError):
+            continue
+    return lines
 
 
 class Background(NodeProcess):
