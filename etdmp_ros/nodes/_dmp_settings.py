@@ -57,8 +57,8 @@ class Settings:
         """
         Build from {parameter name: value}; raise ValueError saying what is wrong.
 
-        Each value is checked by its description (type, range, choices: DmpServerParameters);
-        here only what a description cannot say: skill names, the lengths of lists, the task
+        Each value is checked by its description (type, number of values, range, choices:
+        DmpServerParameters); here only what a description cannot say: skill names, the task
         plane's axes (orthogonal), the plan settings together (PlanSettings). Points beyond the
         workcell first, with their own reason (WORKCELL_POINTS).
         """
@@ -69,9 +69,6 @@ class Settings:
         p = DmpServerParameters.from_values(values)
         check_skill_name(p.skill)
         check_skill_name(p.teach_skill_name)
-        if len(p.static_obstacles) % 3:
-            raise ValueError('static_obstacles must be numbers x1, y1, z1, x2, ... (a multiple '
-                             f'of 3), got {len(p.static_obstacles)} values')
         gains = ObstacleGains(gamma=p.obstacle_gamma, beta=p.obstacle_beta,
                               gamma2=p.obstacle_gamma2, k_relative=p.obstacle_k_relative)
         workspace = Workspace(reach=p.reach_radius, margin=p.reach_margin,
@@ -97,15 +94,6 @@ class Settings:
             check_timing=p.check_timing, check_arm=p.check_arm, arm_clearance=p.arm_clearance,
             max_request_wait=p.max_request_wait, follow_goal=p.follow_goal,
             follow_threshold=p.follow_threshold, follow_lead=p.follow_lead,
-            initial_joints=_sized(p.initial_joint_positions, 'initial_joint_positions', 6,
-                                  '6 finite numbers'),
+            initial_joints=np.array(p.initial_joint_positions, dtype=float),
             parameters=p, goal_object=p.goal_object,
-            goal_offset=_sized(p.goal_offset, 'goal_offset', 3,
-                               '3 finite numbers [x, y, z] within 2 m'))
-
-
-def _sized(value, name, size, what):
-    """Return a list parameter of ``size`` numbers as an array (its range is checked)."""
-    if len(value) != size:
-        raise ValueError(f'{name} must be {what}, got {list(value)!r}')
-    return np.array(value, dtype=float)
+            goal_offset=np.array(p.goal_offset, dtype=float))

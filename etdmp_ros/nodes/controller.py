@@ -167,13 +167,11 @@ class ControllerNode(Node):
         Return the typed parameters and the ControllerConfig of ``values`` ({name: value}).
 
         Each value is checked by its description (ControllerParameters: ValueError naming it);
-        what a description cannot say is checked here and by ControllerConfig.validate: six
-        acceleration limits, gains below the control rate, condition_halt above
-        condition_slowdown. A negative actuation_delay is one control period (None).
+        what a description cannot say is checked here and by ControllerConfig.validate: gains
+        below the control rate, condition_halt above condition_slowdown. A negative
+        actuation_delay is one control period (None).
         """
         p = ControllerParameters.from_values(values)
-        if len(p.joint_acceleration_limits) != 6:
-            raise ValueError('joint_acceleration_limits must have 6 values (UR joint order)')
         config = ControllerConfig(
             rate=p.control_rate, position_gain=p.position_gain,
             orientation_gain=p.orientation_gain,

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-import math
 from typing import Any
 
 from etdmp_ros import limits
@@ -71,17 +70,14 @@ def _vector(name: str, value: object, size: int | None = None,
     return array
 
 
-def _positive(name: str, value: float) -> float:
-    value = float(value)
-    if not math.isfinite(value) or value <= 0.0:
-        raise ValueError(f'{name} must be a positive number, got {value}')
-    return value
+def _array(value: object) -> Array:
+    """Return a list parameter's value (checked by its description) as a float array."""
+    return np.asarray(value, dtype=float).reshape(-1)
 
 
-def _color(name: str, value: object) -> Array:
-    rgb = _vector(name, value)
-    if rgb.size not in (3, 4) or np.any(rgb < 0.0) or np.any(rgb > 1.0):
-        raise ValueError(f'{name} must be [r, g, b] (or rgba) in 0..1, got {rgb.tolist()}')
+def _rgba(value: object) -> Array:
+    """Return a colour parameter's value, rgb or rgba (checked by its description), as rgba."""
+    rgb = _array(value)
     return np.append(rgb[:3], rgb[3] if rgb.size == 4 else 1.0)
 
 
@@ -149,7 +145,7 @@ class SceneConfig:
 
     Build it with :meth:`from_parameters` (from a node's parameters, or
     :func:`etdmp_ros.ros.system.scene_config` for the defaults); the constructor takes the values
-    as they are and :meth:`from_parameters` validates them. Colours are rgba in 0..1.
+    as they are. Colours are rgba in 0..1.
     """
 
     tool_offset: np.ndarray
@@ -178,9 +174,14 @@ class SceneConfig:
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> SceneConfig:
         """
-        Return the scene from flat parameter names (those of :data:`SCENE_PARAMETERS`).
+        Return the scene of flat parameter values (those of :data:`SCENE_PARAMETERS`).
 
-        Raises ValueError naming the first missing or invalid parameter.
+        Each value must be one its description accepts (:data:`etdmp_ros.ros.system.SCENE`:
+        its number of values and its range), as the values that reach here are: checked where
+        they are typed (a node's parameters, :func:`etdmp_ros.ros.system.scene_config`). Checked
+        here is what one value cannot say: the camera's orientation is a rotation, and each
+        object that may move stands on the table clear of the robot's base (:meth:`placed`).
+        Raises ValueError naming a missing parameter or what is wrong.
         """
         missing = [name for name in SCENE_PARAMETERS
                    if name not in params and name not in OPTIONAL_SCENE_PARAMETERS]
@@ -188,38 +189,27 @@ class SceneConfig:
             raise ValueError(f'scene parameters missing: {", ".join(missing)}')
         p = params
         try:
-            camera_pose = CameraPose(_vector('camera.position', p['camera.position'], 3),
-                                     _vector('camera.orientation', p['camera.orientation'], 4))
+            camera_pose = CameraPose(p['camera.position'], p['camera.orientation'])
         except ValueError as exc:
             raise ValueError(f'camera pose: {exc}') from None
-        whiteboard = _vector('whiteboard.size', p['whiteboard.size'], 2)
-        if np.any(whiteboard < 0):
-            raise ValueError(f'whiteboard.size must be >= 0, got {whiteboard.tolist()}')
         scene = cls(
-            tool_offset=_vector('tool_offset', p['tool_offset'], 3),
-            initial_joint_positions=_vector('initial_joint_positions',
-                                            p['initial_joint_positions'], 6),
-            task_plane_origin=_vector('task_plane.origin', p['task_plane.origin'], 3),
-            camera_pose=camera_pose,
-            table_center=_vector('table.center', p['table.center'], 2),
-            table_size=np.array([_positive('table.size', v)
-                                 for v in _vector('table.size', p['table.size'], 2)]),
-            table_height=_positive('table.height', p['table.height']),
-            table_color=_color('table.color', p['table.color']),
-            whiteboard_size=whiteboard,
-            whiteboard_color=_color('whiteboard.color', p['whiteboard.color']),
+            tool_offset=_array(p['tool_offset']),
+            initial_joint_positions=_array(p['initial_joint_positions']),
+            task_plane_origin=_array(p['task_plane.origin']), camera_pose=camera_pose,
+            table_center=_array(p['table.center']), table_size=_array(p['table.size']),
+            table_height=float(p['table.height']), table_color=_rgba(p['table.color']),
+            whiteboard_size=_array(p['whiteboard.size']),
+            whiteboard_color=_rgba(p['whiteboard.color']),
             bottle_position=parse_bottle_position(p['bottle.position']),
-            bottle_radius=_positive('bottle.radius', p['bottle.radius']),
-            bottle_height=_positive('bottle.height', p['bottle.height']),
-            bottle_color=_color('bottle.color', p['bottle.color']),
+            bottle_radius=float(p['bottle.radius']), bottle_height=float(p['bottle.height']),
+            bottle_color=_rgba(p['bottle.color']),
             goal_position=parse_goal_position(p['goal_position']),
-            goal_radius=_positive('goal_marker.radius', p['goal_marker.radius']),
-            goal_color=_color('goal_marker.color', p['goal_marker.color']),
+            goal_radius=float(p['goal_marker.radius']), goal_color=_rgba(p['goal_marker.color']),
             obstacle_positions=parse_obstacle_positions(p['obstacle_positions']),
             obstacle_radii=parse_obstacle_radii(p.get('obstacle_radii') or []),
-            obstacle_radius=_positive('obstacle.radius', p['obstacle.radius']),
-            obstacle_height=_positive('obstacle.height', p['obstacle.height']),
-            obstacle_color=_color('obstacle.color', p['obstacle.color']),
+            obstacle_radius=float(p['obstacle.radius']),
+            obstacle_height=float(p['obstacle.height']),
+            obstacle_color=_rgba(p['obstacle.color']),
         )
         for name in MOVABLE:
             scene.placed(name, p[name])

@@ -96,8 +96,8 @@ DMP_SERVER = (
       'are ignored; 0 = no limit.', unit='s', value_range=_DAY, **_RUNTIME),
     P('static_obstacles', [], 'Obstacle points always used, flat [x1, y1, z1, x2, ...] in '
       'base_link (radius 0: points; as cylinders from the table up to them in the arm check).',
-      unit='m', value_range=WORKCELL_RANGE, array_type=DOUBLE_ARRAY, example=[0.8, 0.1, 0.0],
-      **_RUNTIME),
+      unit='m', value_range=WORKCELL_RANGE, multiple_of=3, array_type=DOUBLE_ARRAY,
+      example=[0.8, 0.1, 0.0], **_RUNTIME),
     P('tool_radius', _PLAN.tool_radius, "Radius of the tool (the simulation's pen and stirrer: "
       "9 mm): added to each obstacle's radius for the clearance a plan keeps from its centre.",
       unit='m', value_range=(0.0, 0.5), **_RUNTIME),
@@ -122,7 +122,7 @@ DMP_SERVER = (
       **_RUNTIME),
     P('goal_offset', [0.0, 0.0, 0.0], 'Added (base_link) to the perceived goal object for an '
       'empty goal frame id: e.g. the stirring goal near the bottom of the bottle, [0, 0, '
-      '-0.15] below its mouth.', unit='m', value_range=(-2.0, 2.0), **_RUNTIME),
+      '-0.15] below its mouth.', unit='m', value_range=(-2.0, 2.0), lengths=(3,), **_RUNTIME),
     P('min_distance', _PLAN.min_distance, 'Start and goal closer than this fail the request '
       '(start equals goal).', unit='m', value_range=(0.0, 1.0), **_RUNTIME),
     P('reach_radius', _REACH.reach, 'UR10 reach about the shoulder (reach check: a simple '
@@ -249,7 +249,7 @@ CONTROLLER = (
     P('joint_acceleration_limits', list(DEFAULT_ACCELERATION_LIMITS), 'Per joint, UR order '
       '(shoulder pan ... wrist 3). UR publishes none (only torques: 330, 330, 150, 56, 56, 56 '
       'N m); letter G 0.2 m tall in its nominal 2 s needs up to 20 at the elbow.',
-      unit='rad/s^2', value_range=(0.1, 1000.0)),
+      unit='rad/s^2', value_range=(0.1, 1000.0), lengths=(6,)),
     P('joint_limit_margin', _CONTROL.joint_limit_margin, 'Kept from each joint position '
       'limit; a joint that could not stop before it halts the arm.', unit='rad',
       value_range=(0.0, 0.5)),

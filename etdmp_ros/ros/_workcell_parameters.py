@@ -20,23 +20,24 @@ P = parameter
 WORKCELL_RANGE = (-limits.MAX_REQUEST_COORDINATE, limits.MAX_REQUEST_COORDINATE)
 #: Range of a joint position (rad): the UR10's joint limits, +-2 pi (its URDF).
 JOINT_RANGE = (-2.0 * math.pi, 2.0 * math.pi)
-#: Range of a colour component (rgb in 0..1).
-_COLOUR = (0.0, 1.0)
+#: A colour: rgb (or rgba), each in 0..1.
+_COLOUR: dict[str, Any] = {'value_range': (0.0, 1.0), 'lengths': (3, 4)}
 
 # ------------------------------------------------------------------------------------ scene
 #: The workcell shared by every node (config/scene.yaml). Base frame: base_link of the UR10.
 SCENE = (
     P('tool_offset', [0.0, 0.0, 0.16], 'Tool tip (pen, stirrer) in the flange frame tool0, in '
-      'tool0 axes (along the flange axis).', unit='m', value_range=(-1.0, 1.0)),
+      'tool0 axes (along the flange axis).', unit='m', value_range=(-1.0, 1.0), lengths=(3,)),
     P('initial_joint_positions', [0.0, -1.2, 1.9, -2.27, -1.57, 0.0],
       'Joint positions the simulation starts in (pen 8 cm above the table, pointing down); '
-      'the posture of posture_gain.', unit='rad', value_range=JOINT_RANGE),
+      'the posture of posture_gain.', unit='rad', value_range=JOINT_RANGE, lengths=(6,)),
     P('task_plane.origin', [0.75, 0.15, 0.0], 'Origin of the plane in which 2D skills '
       '(letters, wiping) are executed: the table top in front of the robot.', unit='m',
-      value_range=WORKCELL_RANGE),
-    P('task_plane.x_axis', [1.0, 0.0, 0.0], 'x axis of the task plane in base_link.'),
+      value_range=WORKCELL_RANGE, lengths=(3,)),
+    P('task_plane.x_axis', [1.0, 0.0, 0.0], 'x axis of the task plane in base_link.',
+      lengths=(3,)),
     P('task_plane.y_axis', [0.0, 1.0, 0.0], 'y axis of the task plane in base_link '
-      '(orthogonal to x).'),
+      '(orthogonal to x).', lengths=(3,)),
     P('camera.position', [1.55, 0.05, 0.85], 'Position of the colour optical frame of the '
       'RealSense D435 (z forward, x right, y down) in base_link.', unit='m',
       value_range=WORKCELL_RANGE,
@@ -45,26 +46,29 @@ SCENE = (
       'base_link: position [x, y, z] and orientation quaternion [x, y, z, w]. The ONE copy of '
       'the extrinsics: ur10_sim renders from it and perception deprojects with it. Computed '
       'with CameraPose.look_at(eye=position, target=[0.72, 0.05, 0.0]) (tools/render_scene.py '
-      '--look-at).'),
+      '--look-at).', lengths=(3,)),
     P('camera.orientation', [-0.654881, -0.654881, 0.266705, 0.266705],
-      'Orientation quaternion [x, y, z, w] of the colour optical frame in base_link.'),
+      'Orientation quaternion [x, y, z, w] of the colour optical frame in base_link.',
+      lengths=(4,)),
     P('table.center', [0.45, 0.0], 'Centre [x, y] of the table top (the plane z = 0).',
-      unit='m', value_range=WORKCELL_RANGE),
+      unit='m', value_range=WORKCELL_RANGE, lengths=(2,)),
     P('table.size', [1.9, 1.5], 'Size [x, y] of the table top.', unit='m',
-      value_range=(0.1, 10.0)),
+      value_range=(0.1, 10.0), lengths=(2,)),
     P('table.height', 0.75, 'Height of the table legs.', unit='m', value_range=(0.1, 2.0)),
-    P('table.color', [0.62, 0.52, 0.40], 'Table colour, rgb in 0..1.', value_range=_COLOUR),
+    P('table.color', [0.62, 0.52, 0.40], 'Table colour, rgb (or rgba) in 0..1.', **_COLOUR),
     P('whiteboard.size', [0.6, 0.6], 'Size of a thin (0.5 mm) white sheet lying on the table, '
-      'centred under task_plane.origin; [0, 0]: none.', unit='m', value_range=(0.0, 10.0)),
-    P('whiteboard.color', [0.95, 0.95, 0.95], 'Whiteboard colour, rgb in 0..1.',
-      value_range=_COLOUR),
+      'centred under task_plane.origin; [0, 0]: none.', unit='m', value_range=(0.0, 10.0),
+      lengths=(2,)),
+    P('whiteboard.color', [0.95, 0.95, 0.95], 'Whiteboard colour, rgb (or rgba) in 0..1.',
+      **_COLOUR),
     P('bottle.position', [0.70, -0.30], 'Where [x, y] the open bottle stands on the table '
       "(all of it, clear of the robot's base); ur10_sim moves it at runtime (ros2 param set "
-      '/ur10_sim bottle.position "[0.7, -0.28]").', unit='m', value_range=WORKCELL_RANGE),
+      '/ur10_sim bottle.position "[0.7, -0.28]").', unit='m', value_range=WORKCELL_RANGE,
+      lengths=(2,)),
     P('bottle.radius', 0.045, 'Bottle radius.', unit='m', value_range=(0.005, 0.5)),
     P('bottle.height', 0.20, 'Bottle height; its mouth is at this z.', unit='m',
       value_range=(0.01, 1.0)),
-    P('bottle.color', [0.20, 0.35, 0.85], 'Bottle colour, rgb in 0..1.', value_range=_COLOUR),
+    P('bottle.color', [0.20, 0.35, 0.85], 'Bottle colour, rgb (or rgba) in 0..1.', **_COLOUR),
     P('goal_position', [0.838, 0.1, 0.002], 'Centre of the top face of the goal marker (a '
       "green disc lying on the table: all of it on the table top, clear of the robot's base) "
       'in base_link.', unit='m', value_range=WORKCELL_RANGE,
@@ -73,11 +77,11 @@ SCENE = (
       '"[...]"). Default (make demo): 9 cm from where the pen starts, which lies towards -x, '
       "+y of it (quadrant II) while the letter G's demonstration starts towards +x, +y of its "
       'goal (quadrant I): ET-DMP turns the G by 90 degrees, upright as the camera sees it, and '
-      'scales it to about 0.23 m tall, on the whiteboard.'),
+      'scales it to about 0.23 m tall, on the whiteboard.', lengths=(3,)),
     P('goal_marker.radius', 0.03, 'Radius of the goal marker disc.', unit='m',
       value_range=(0.005, 0.5)),
-    P('goal_marker.color', [0.10, 0.75, 0.20], 'Goal marker colour, rgb in 0..1.',
-      value_range=_COLOUR),
+    P('goal_marker.color', [0.10, 0.75, 0.20], 'Goal marker colour, rgb (or rgba) in 0..1.',
+      **_COLOUR),
     P('obstacle_positions', [0.757, 0.063, 0.08, 0.921, 0.045, 0.08], 'Centres of the top '
       'faces of the obstacle cylinders, flat [x1, y1, z1, x2, ...] in base_link (each on the '
       "table top, clear of the robot's base).", unit='m', value_range=WORKCELL_RANGE,
@@ -86,7 +90,8 @@ SCENE = (
       'z1, x2, ...]; ur10_sim moves them at runtime; [] for none (at most 8). Default (make '
       'demo): 20 mm beside the obstacle-free ET-DMP path of the G from the default start to '
       "goal_position (a quarter and half-way along it, inside the letter's bowl): that path "
-      'would run through both cylinders (the pen tip needs 25 + 3 mm from an axis).'),
+      'would run through both cylinders (the pen tip needs 25 + 3 mm from an axis).',
+      multiple_of=3),
     P('obstacle_radii', [], 'Radius of each obstacle cylinder, in the order of '
       'obstacle_positions; obstacles beyond this list (all, when it is empty) have '
       'obstacle.radius.', unit='m', value_range=(0.005, 0.5), array_type=DOUBLE_ARRAY,
@@ -96,8 +101,8 @@ SCENE = (
       value_range=(0.005, 0.5)),
     P('obstacle.height', 0.08, 'Height of the obstacle cylinders.', unit='m',
       value_range=(0.01, 1.0)),
-    P('obstacle.color', [0.85, 0.10, 0.10], 'Obstacle colour, rgb in 0..1.',
-      value_range=_COLOUR),
+    P('obstacle.color', [0.85, 0.10, 0.10], 'Obstacle colour, rgb (or rgba) in 0..1.',
+      **_COLOUR),
 )
 _SCENE = {p.name: p for p in SCENE}
 

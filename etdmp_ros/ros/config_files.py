@@ -170,9 +170,10 @@ def _default_cell(p: Parameter) -> str:
 def _range_cell(p: Parameter) -> str:
     if p.choices:
         return ', '.join(p.choices)
+    cells = [f'{p.count} values'] if p.count else []
     if p.value_range is not None:
-        return f'{p.value_range[0]:g} – {p.value_range[1]:g}'
-    return ''
+        cells.insert(0, f'{p.value_range[0]:g} – {p.value_range[1]:g}')
+    return '; '.join(cells)
 
 
 def parameter_table(spec: NodeSpec) -> str:

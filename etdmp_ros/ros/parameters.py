@@ -43,6 +43,8 @@ def descriptor(parameter: ParameterSpec) -> ParameterDescriptor:
                             dynamic_typing=parameter.dynamic_typing)
     if parameter.choices:
         d.additional_constraints = 'one of ' + ', '.join(parameter.choices)
+    elif parameter.count:
+        d.additional_constraints = f'{parameter.count} values'
     if parameter.value_range is not None and not isinstance(parameter.default, list):
         low, high = parameter.value_range
         if isinstance(parameter.default, int) and not isinstance(parameter.default, bool):

@@ -22,12 +22,14 @@ class Parameter:
     """
     One ROS parameter of a node, as declared and as documented.
 
-    ``value_range`` is ``(low, high)`` (ints for an integer parameter), ``choices`` the allowed
-    strings. ``dynamic``: may change at runtime (``ros2 param set``); otherwise read-only.
-    ``dynamic_typing``: values of another type are accepted and converted by the node (a list
-    as a YAML string). Every list parameter takes ``[]`` (which ``ros2 param set`` types as
-    ``bool[]``), integers for floats and whole floats for integers without it: they are turned
-    into its declared list type before rclpy checks the type
+    ``value_range`` is ``(low, high)`` (ints for an integer parameter; of each value of a list),
+    ``choices`` the allowed strings; ``lengths`` the numbers of values a list parameter may have
+    (empty: any), ``multiple_of`` a number its count of values must be a multiple of (points
+    given flat, x1, y1, z1, x2, ...). ``dynamic``: may change at runtime (``ros2 param set``);
+    otherwise read-only. ``dynamic_typing``: values of another type are accepted and converted
+    by the node (a list as a YAML string). Every list parameter takes ``[]`` (which ``ros2 param
+    set`` types as ``bool[]``), integers for floats and whole floats for integers without it:
+    they are turned into its declared list type before rclpy checks the type
     (:func:`etdmp_ros.ros.parameters.as_declared`). ``array_type`` types an empty-list
     default. ``section`` starts a new group of parameters in the YAML file; ``note`` is the
     comment above the parameter there (the description when empty); ``example``, for an empty
@@ -40,6 +42,8 @@ class Parameter:
     unit: str = ''
     value_range: tuple[float, float] | None = None
     choices: tuple[str, ...] = ()
+    lengths: tuple[int, ...] = ()
+    multiple_of: int = 0
     dynamic: bool = False
     dynamic_typing: bool = False
     array_type: str = ''
@@ -57,6 +61,8 @@ class Parameter:
                                  f'{self.value_range}')
         if self.choices and self.default not in self.choices:
             raise ValueError(f'{self.name}: default {self.default!r} not in {self.choices}')
+        if isinstance(self.default, list):
+            self.check(self.default)
         if isinstance(self.default, list) and not self.default and not self.array_type:
             raise ValueError(f'{self.name}: an empty default needs array_type')
 
@@ -64,17 +70,22 @@ class Parameter:
         """
         Raise ValueError saying why ``value`` is no value of this parameter, by its description.
 
-        Checks ``choices`` and ``value_range`` (each element of a list, NaN included: a list
-        parameter's range is checked here, rclpy checks only a scalar's). A value of another
-        type (a string for a list with ``dynamic_typing``) is the node's to check.
+        Checks ``choices``, a list's ``lengths`` and ``multiple_of``, and ``value_range`` (each
+        element of a list, NaN included: a list parameter's range is checked here, rclpy checks
+        only a scalar's). A value of another type (a string for a list with ``dynamic_typing``)
+        is the node's to check.
         """
         if self.choices and isinstance(value, str) and value not in self.choices:
             raise ValueError(f'{self.name} must be one of {", ".join(self.choices)}, got '
                              f'{value!r}')
+        many = isinstance(value, (list, tuple))
+        if many and self.lengths and len(value) not in self.lengths:
+            raise ValueError(f'{self.name} must have {self.count} values, got {len(value)}')
+        if many and self.multiple_of and len(value) % self.multiple_of:
+            raise ValueError(f'{self.name} must have {self.count} values, got {len(value)}')
         if self.value_range is None:
             return
         low, high = self.value_range
-        many = isinstance(value, (list, tuple))
         for i, v in enumerate(value if many else [value]):
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 continue
@@ -83,6 +94,16 @@ class Parameter:
                 unit = f' {self.unit}' if self.unit else ''
                 raise ValueError(f'{where} = {v:.6g}{unit} is outside its range {low:g} to '
                                  f'{high:g}{unit}')
+
+    @property
+    def count(self) -> str:
+        """Return how many values the parameter has (``3``, ``3 or 4``, ...; '' for any)."""
+        if self.lengths:
+            return ' or '.join(str(n) for n in self.lengths)
+        if self.multiple_of:
+            return f'a multiple of {self.multiple_of} (x1, y1, z1, x2, ...)' \
+                if self.multiple_of == 3 else f'a multiple of {self.multiple_of}'
+        return ''
 
     @property
     def type_name(self) -> str:

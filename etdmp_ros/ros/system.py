@@ -130,13 +130,13 @@ def scene_config(overrides: Mapping[str, Any] | None = None) -> SceneConfig:
     Return the default workcell as a validated SceneConfig.
 
     ``overrides``: optional ``{flat name: value}`` replacing defaults, e.g.
-    ``{'goal_position': [0.7, 0.2, 0.002]}``; ValueError names a bad value.
+    ``{'goal_position': [0.7, 0.2, 0.002]}``; ValueError names a bad value. Each value is
+    typed and checked by its description (:data:`SCENE`), as a node's parameters are, before
+    :meth:`SceneConfig.from_parameters` checks what no single value can say.
     """
     values = scene_defaults()
     values.update(overrides or {})
-    for p in SCENE:
-        p.check(values[p.name])
-    return SceneConfig.from_parameters(values)
+    return SceneConfig.from_parameters({p.name: p.typed(values[p.name]) for p in SCENE})
 
 
 def parameter_files(name: str, config_dir: str | os.PathLike[str] | None = None) -> list[Path]:

@@ -511,10 +511,18 @@ def test_scene_file_has_every_parameter_and_camera_pose_is_shared():
 def test_scene_parameters_are_validated():
     params = read_parameter_file(_scene_path())
     SceneConfig.from_parameters(params)
+    # Each value by its description where values are typed (the nodes, scene_config), what no
+    # single value says (a rotation; objects on the table) by SceneConfig itself.
     for name, bad in (('goal_position', [0.1, 0.2]), ('obstacle_positions', [0.1, 0.2]),
                       ('obstacle_radii', [0.02, -0.01]), ('obstacle_radii', [float('inf')]),
                       ('camera.orientation', [0, 0, 0, 0]), ('bottle.radius', -0.1),
-                      ('table.color', [2.0, 0, 0]), ('tool_offset', [0, 0, float('nan')])):
+                      ('table.color', [2.0, 0, 0]), ('tool_offset', [0, 0, float('nan')]),
+                      ('table.height', 'high'), ('table.color', [0.5, 0.5]),
+                      ('initial_joint_positions', [0.0] * 5)):
+        with pytest.raises(ValueError, match=name.split('.')[0]):
+            system.scene_config({name: bad})
+    for name, bad in (('camera.orientation', [0, 0, 0, 0]), ('goal_position', [0.1, 0.2]),
+                      ('obstacle_positions', [0.1, 0.2]), ('obstacle_radii', [0.02, -0.01])):
         with pytest.raises(ValueError, match=name.split('.')[0]):
             SceneConfig.from_parameters({**params, name: bad})
     missing = dict(params)

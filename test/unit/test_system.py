@@ -48,6 +48,34 @@ def test_a_default_outside_its_range_or_choices_is_refused():
         system.Parameter('files', [], 'files')
 
 
+#: List parameters with a number of values of their own, a count they refuse, and the reason:
+#: checked once, by the description, wherever a value is typed (the nodes, scene_config).
+COUNTS = [
+    ('ur10_sim', 'goal_position', [0.7, 0.2], 'goal_position must have 3 values, got 2'),
+    ('ur10_sim', 'table.color', [0.5, 0.5], 'table.color must have 3 or 4 values, got 2'),
+    ('ur10_sim', 'obstacle_positions', [0.7, 0.2, 0.08, 0.7],
+     'obstacle_positions must have a multiple of 3 (x1, y1, z1, x2, ...) values, got 4'),
+    ('dmp_server', 'static_obstacles', [0.1, 0.2], 'multiple of 3'),
+    ('dmp_server', 'goal_offset', [0.0, 0.0], 'goal_offset must have 3 values, got 2'),
+    ('controller', 'joint_acceleration_limits', [25.0] * 5,
+     'joint_acceleration_limits must have 6 values, got 5'),
+    ('controller', 'initial_joint_positions', [0.0] * 7,
+     'initial_joint_positions must have 6 values, got 7'),
+]
+
+
+@pytest.mark.parametrize('node, name, value, reason', COUNTS, ids=[row[1] for row in COUNTS])
+def test_list_parameters_have_their_number_of_values(node, name, value, reason):
+    parameter = system.node(node).parameter(name)
+    with pytest.raises(ValueError) as refused:
+        parameter.typed(value)
+    assert reason in str(refused.value)
+    parameter.typed(parameter.default)
+    assert descriptor(parameter).additional_constraints == f'{parameter.count} values'
+    with pytest.raises(ValueError, match='must have 2 values'):
+        system.Parameter('centre', [0.0, 0.0, 0.0], 'a centre', lengths=(2,))
+
+
 #: List parameters that took any finite value before (1e308 included), with a value beyond the
 #: range they now have, and what the refusal says.
 BEYOND = [
