@@ -226,15 +226,20 @@ class ControllerNode(Node):
         costs microseconds each, not an executor cycle). Return whether a joint state was used.
         """
         handle = self._joint_state_sub.handle
+        # A gap found before the newest still counts: the joint states that queued after a link
+        # came back arrive a period apart, only the first of them after the ones lost.
+        gap = newest[2] if newest is not None else ''
         with handle:
             for _ in range(limits.JOINT_STATE_QUEUE):
                 taken = handle.take_message(JointState, True)
                 if taken is None:
                     break
-                newest = self._read_joint_state(taken[0], times) or newest
+                read = self._read_joint_state(taken[0], times)
+                if read is not None:
+                    newest, gap = read, gap or read[2]
         if newest is None:
             return False
-        stamp, q, gap = newest
+        stamp, q, _ = newest
         if gap and not self._stale:
             # Joint states were lost, noticed only now: stop as the watchdog would have.
             self.watch.received(*times, stamp_ns=stamp)

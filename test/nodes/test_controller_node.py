@@ -406,10 +406,13 @@ def test_joint_states_that_never_came_are_lost_when_the_next_one_shows_it():
     assert 'none for 0.200 s of wall-clock time' in watch.gap(207 * ms, False)
 
 
-def test_a_link_loss_noticed_late_is_stale_input_not_a_tracking_error(ros_env):
+@pytest.mark.parametrize('queued', [1, 3])
+def test_a_link_loss_noticed_late_is_stale_input_not_a_tracking_error(ros_env, queued):
     # What the controller did when a link came back, the /clock first: it took the next joint
     # state, 0.5 s after the last, and stepped the path 0.5 s on from an arm the simulation's
-    # watchdog had braked: "unreachable: tracking error 109 mm". It is lost input.
+    # watchdog had braked: "unreachable: tracking error 109 mm". It is lost input. With more
+    # joint states queued behind that one (a period apart), it went on from the newest as if
+    # nothing had been lost (two_hosts link-down test, once): the gap of the first counts.
     import rclpy
     from etdmp_ros.nodes.controller import ControllerNode
     from rclpy.parameter import Parameter
@@ -431,8 +434,9 @@ def test_a_link_loss_noticed_late_is_stale_input_not_a_tracking_error(ros_env):
         wait_for(lambda: pub.get_subscription_count() >= 2, 10.0,
                  'the controller (and the probe) to match the publisher')
         clock.set_ros_time_override(Time(nanoseconds=5500 * ms))   # the link is back
-        pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp(5504 * ms)))
-        probe.wait_for(1)                        # delivered to the subscription, not yet taken
+        for k in range(queued):
+            pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp((5504 + 8 * k) * ms)))
+        probe.wait_for(queued)                   # delivered to the subscription, not yet taken
         node._watchdog()
         assert node._stale
         assert node.controller.status == 'stale-input'
