@@ -326,6 +326,8 @@ def teach_node(monkeypatch, tmp_path):
     rclpy.init(context=context, args=['--ros-args', '--disable-rosout-logs'])
     from etdmp_ros.nodes.teach import TeachNode
     from rclpy.parameter import Parameter
+    # No dmp_server in this domain: a short look for its services says so as well as 2 s.
+    monkeypatch.setattr('etdmp_ros.nodes.teach.SERVICE_WAIT', 0.2)
     node = TeachNode(context=context, parameter_overrides=[
         Parameter('port', value=0), Parameter('report_timeout', value=1.0)])
     yield node
