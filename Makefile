@@ -31,7 +31,7 @@ help:
 	@echo "make docs-site  the documentation as HTML, with the API reference -> build/docs/html/index.html"
 	@echo "make config     rewrite config/*.yaml and the docs' parameter tables from etdmp_ros/ros/system.py"
 	@echo "make bench      every benchmark (own .venv-bench/ with the peer libraries);"
-	@echo "                one of them: make bench-core|bench-demos|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-online|bench-soak|bench-sim|bench-dmp_server|bench-controller|bench-perception|bench-perception_restarts|bench-system|bench-kinesthetic|bench-faults"
+	@echo "                one of them: make bench-core|bench-demos|bench-obstacles|bench-obstacle_volumes|bench-rest|bench-online|bench-soak|bench-sim|bench-dmp_server|bench-controller|bench-flood|bench-perception|bench-perception_restarts|bench-system|bench-kinesthetic|bench-faults"
 	@echo "make bench-two-hosts  the system across two network namespaces (root): rates, latency, link cut"
 	@echo "make venv       only build .venv/ (pinned requirements.txt + this package, editable)"
 	@echo "make ros-tools  the ros2 CLI, launch and tf2_msgs into .venv/ from ROS_TOOLS=$(ROS_TOOLS) (make test does it)"
@@ -208,7 +208,7 @@ bench-faults: $(STAMP) ros-tools
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_faults.py $(BENCH_ARGS)
 
 # The nodes' own benchmarks run in the nodes' environment (with tf2_msgs: ur10_sim publishes /tf).
-bench-sim bench-dmp_server bench-perception bench-perception_restarts: bench-%: $(STAMP) ros-tools
+bench-sim bench-dmp_server bench-perception bench-perception_restarts bench-flood: bench-%: $(STAMP) ros-tools
 	MUJOCO_GL=egl $(VENV_PY) test/benchmarks/bench_$*.py $(BENCH_ARGS)
 
 # make bench-core, bench-obstacles, bench-controller: beside their peer libraries

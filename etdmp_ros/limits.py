@@ -149,7 +149,7 @@ MAX_OUTSIDE_FRACTION = 0.05
 #: Joint states the controller's subscription holds (KEEP_LAST): a flood from another publisher,
 #: delivered in bursts when the machine is busy, must not push the robot's own out before they
 #: are read (13 000 junk joint states a second through a 10-deep queue lost the robot's for
-#: 0.1 s). Each control step reads all that queued, microseconds each, and steps once.
+#: 0.1 s). All that queued is taken in one go, microseconds each, and the controller steps once.
 JOINT_STATE_QUEUE = 1000
 
 #: Most joints one JointState may name (a whole robot with grippers and sensors: generous);

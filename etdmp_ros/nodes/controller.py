@@ -48,6 +48,7 @@ from etdmp_ros.robot import (ControllerConfig, InputWatch, TrackingSummary,
                              trajectory_from_path, TrajectoryController, TrajectoryError,
                              UR10Model)
 from etdmp_ros.ros import qos, system, topics
+from etdmp_ros.ros.batches import TopicBatches
 from etdmp_ros.ros.conversions import (joint_state_from_cdr, ns_to_stamp, path_from_cdr,
                                        velocity_command_msg)
 from etdmp_ros.ros.events import ERROR, EventPublisher
@@ -119,14 +120,16 @@ class ControllerNode(Node):
         self._status_pub = self.create_publisher(String, topics.CONTROLLER_STATUS, qos.LATCHED)
         self.events = EventPublisher(self)
         # Raw bytes, read with numpy (joint_state_from_cdr): a flood of joint states for other
-        # joints is refused in microseconds. A deep history, not depth 1: such a flood must
-        # not overwrite the robot's own before they are read. Best effort: a reliable reader
-        # holds every later sample back until a lost one is repaired, so one lost joint state
-        # meant none for ~0.1 s (stale input); best effort, the next one comes a period later.
-        self._joint_state_sub = self.create_subscription(
-            JointState, JOINT_STATES_TOPIC, self._on_joint_state,
+        # joints is refused in microseconds. Taken in batches on a thread of their own
+        # (TopicBatches, started by start()), not one executor dispatch each. A deep history,
+        # not depth 1: such a flood must not overwrite the robot's own before they are read.
+        # Best effort: a reliable reader holds every later sample back until a lost one is
+        # repaired, so one lost joint state meant none for ~0.1 s (stale input); best effort,
+        # the next one comes a period later.
+        self._joint_states = TopicBatches(
+            self, JointState, JOINT_STATES_TOPIC,
             QoSProfile(depth=limits.JOINT_STATE_QUEUE, reliability=ReliabilityPolicy.BEST_EFFORT),
-            raw=True)
+            self._on_joint_states, min_interval=self.period / 8, limit=limits.JOINT_STATE_QUEUE)
         self.create_subscription(Path, PATH_TOPIC, self._on_path, qos.LATCHED, raw=True)
         self.create_service(SetBool, topics.PAUSE, self._on_pause)
         self.create_timer(self.period, self._watchdog,
@@ -143,9 +146,10 @@ class ControllerNode(Node):
         """
         Schedule the calling thread by the parameter thread_priority (the node program).
 
-        Call from the thread that will spin the executor (the control steps), once the node
-        exists. The program makes this change, not the node, so a test or a composed process
-        keeps its scheduling. The path checks run in threads of normal priority.
+        Call from the thread that will spin the executor (the watchdog, the paths), once the
+        node exists; the control steps run at the same priority in the thread of
+        :meth:`start`. The program makes this change, not the node, so a test or a composed
+        process keeps its scheduling. The path checks run in threads of normal priority.
         """
         priority = self.get_parameter('thread_priority').value
         reason = set_realtime_priority(priority)
@@ -211,32 +215,38 @@ class ControllerNode(Node):
             self.untimed_speed = (p.untimed_path_speed, p.untimed_path_angular_speed)
 
     # ------------------------------------------------------------------------------ control
-    def _on_joint_state(self, data):
+    def start(self):
+        """Start taking joint states (the node program; a test may call _watchdog alone)."""
+        self._joint_states.start(self.get_parameter('thread_priority').value)
+
+    def _on_joint_states(self, batch):
         receipt = time.monotonic()
         with self._lock:
-            times = self._input_times()
-            self._use_joint_states(self._read_joint_state(data, times), times, receipt)
+            self._use_joint_states(batch, receipt)
 
-    def _use_joint_states(self, newest, times, receipt):
+    def _use_joint_states(self, batch, receipt, times=None):
         """
-        Take the joint states queued in the subscription and step once, on the newest.
+        Step once, on the newest usable of the joint states ``batch``; whether one was used.
 
-        ``newest`` is (stamp, q) of one read already, or None. The executor hands over one
-        message per wait: what queued meanwhile is taken here (a flood from another publisher
-        costs microseconds each, not an executor cycle). Return whether a joint state was used.
+        ``batch``: serialized joint states, oldest first; None: those queued now.
+
+        The clocks (``times``: read here when None) are read once, after the joint states of
+        other joints are set aside: reading the ROS clock takes a lock in rclpy's C++ code,
+        and it cost more than half the controller's time under a flood of them.
         """
-        handle = self._joint_state_sub.handle
+        if batch is None:
+            batch = self._joint_states.take()
+        parsed = [read for read in map(self._parsed_joint_state, batch) if read is not None]
+        if not parsed:
+            return False
+        times = times or self._input_times()
         # A gap found before the newest still counts: the joint states that queued after a link
         # came back arrive a period apart, only the first of them after the ones lost.
-        gap = newest[2] if newest is not None else ''
-        with handle:
-            for _ in range(limits.JOINT_STATE_QUEUE):
-                taken = handle.take_message(JointState, True)
-                if taken is None:
-                    break
-                read = self._read_joint_state(taken[0], times)
-                if read is not None:
-                    newest, gap = read, gap or read[2]
+        newest, gap = None, ''
+        for stamp, q in parsed:
+            read = self._plausible_joint_state(stamp, q, times)
+            if read is not None:
+                newest, gap = read, gap or read[2]
         if newest is None:
             return False
         stamp, q, _ = newest
@@ -275,18 +285,22 @@ class ControllerNode(Node):
         self._publish_status()
         return True
 
-    def _read_joint_state(self, data, times):
-        """
-        Return (stamp ns, q, gap) of serialized joint state bytes, None if they are not usable.
-
-        ``gap``: why the joint states before it count as lost ('' if they do not,
-        :meth:`InputWatch.gap`).
-        """
+    def _parsed_joint_state(self, data):
+        """Return (stamp ns, q) of serialized joint state bytes, None if they are not usable."""
         try:
             stamp, q, _ = joint_state_from_cdr(data)
         except ValueError as exc:
             self._ignore(str(exc))
             return None
+        return stamp, q
+
+    def _plausible_joint_state(self, stamp, q, times):
+        """
+        Return (stamp ns, q, gap) of a parsed joint state, None if it cannot be the robot's.
+
+        ``gap``: why the joint states before it count as lost ('' if they do not,
+        :meth:`InputWatch.gap`).
+        """
         if stamp == 0:      # unstamped: measured when received
             stamp = self.get_clock().now().nanoseconds
         implausible = self.watch.implausible(stamp, times[0], times[2], times[1])
@@ -332,7 +346,7 @@ class ControllerNode(Node):
             # After the process was not scheduled for a while, the executor may run this timer
             # and the /clock callbacks before the joint states that queued meanwhile: those are
             # late, not lost.
-            if lost and self._use_joint_states(None, times, time.monotonic()):
+            if lost and self._use_joint_states(None, time.monotonic(), times):
                 return
             if lost:
                 self._input_lost(lost)
@@ -490,7 +504,13 @@ class ControllerNode(Node):
 
     # -------------------------------------------------------------------------------- exit
     def send_zeros(self):
-        """Publish zero velocity a few times (on exit: before the context shuts down)."""
+        """
+        Publish zero velocity a few times (on exit: before the context shuts down).
+
+        The joint states are no longer taken first: a control step after these would move
+        the arm again.
+        """
+        self._joint_states.stop()
         with self._lock:
             self.controller.shutdown()
             for _ in range(EXIT_ZEROS):
@@ -498,6 +518,11 @@ class ControllerNode(Node):
                 time.sleep(0.005)
             self._publish_status()
         self._command_pub.wait_for_all_acked(Duration(seconds=0.2))
+
+    def destroy_node(self):
+        """Stop taking joint states, destroy their hidden node, then this one."""
+        self._joint_states.stop()
+        super().destroy_node()
 
 
 def _pose_msg(position, rotation, stamp):
@@ -513,12 +538,17 @@ def _pose_msg(position, rotation, stamp):
 
 def main(args=None):
     """Run the controller until Ctrl-C (or SIGTERM); send zero velocity before exiting."""
-    # Let the control steps preempt a path check (worker thread) within 1 ms instead of 5 ms.
-    sys.setswitchinterval(0.001)
+    # Let the control steps preempt a path check (worker thread) within 0.2 ms instead of 5 ms:
+    # a step lets go of the GIL a few times (each publish), and each time the check held it
+    # for up to the interval. At 1 ms, a flood of junk joint states beside a path check still
+    # starved the simulation of commands for 60 ms, 1 run of 5 on an AMD EPYC; at 0.2 ms, 0
+    # of 4.
+    sys.setswitchinterval(0.0002)
 
     def make_nodes(nodes):
         nodes.append(ControllerNode())
         nodes[-1].use_thread_priority()
+        nodes[-1].start()
 
     return run(make_nodes, NODE_NAME, args)
 

@@ -389,6 +389,46 @@ def test_joint_states_queued_behind_the_clock_are_late_not_lost(ros_env):
         rclpy.try_shutdown(context=context)
 
 
+def test_joint_states_are_taken_in_batches_on_a_thread_of_their_own(ros_env):
+    # What the controller reads its joint states with (TopicBatches): a burst of 200 reaches
+    # on_batch whole and in order, in a few batches (min_interval 50 ms: the burst queues
+    # between two takes), on its own thread; stop() ends the thread and is safe to repeat.
+    import rclpy
+    from etdmp_ros.ros.batches import TopicBatches
+    from rclpy.qos import ReliabilityPolicy
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        owner = rclpy.create_node('owner', context=context)
+        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
+        batches, threads_seen = [], set()
+
+        def on_batch(batch):
+            threads_seen.add(threading.current_thread().name)
+            batches.append(batch)
+
+        reader = TopicBatches(owner, JointState, 'joint_states', qos, on_batch,
+                              min_interval=0.05, limit=1000)
+        assert reader.node.get_name() == '_owner_joint_states'
+        source = rclpy.create_node('source', context=context)
+        pub = source.create_publisher(JointState, 'joint_states', qos)
+        wait_for(lambda: pub.get_subscription_count() >= 1, 10.0, 'the reader to match')
+        reader.start()
+        for k in range(200):
+            pub.publish(joint_state_msg(Q_INITIAL, stamp=ns_to_stamp(k + 1)))
+        wait_for(lambda: sum(map(len, batches)) >= 200, 10.0, 'the 200 joint states taken')
+        assert [joint_state_from_cdr(d)[0] for b in batches for d in b] == list(range(1, 201))
+        assert len(batches) <= 10, [len(b) for b in batches]
+        assert threads_seen == {'_owner_joint_states'}
+        reader.stop()
+        assert not reader._thread.is_alive()
+        reader.stop()
+        source.destroy_node()
+        owner.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
 def test_joint_states_that_never_came_are_lost_when_the_next_one_shows_it():
     # A link down for 0.5 s: the simulation's /clock stopped reaching the controller with its
     # joint states, so its watchdog saw no time pass; then the clock and a joint state 0.5 s

@@ -120,6 +120,28 @@ def test_joint_states_from_bytes_refuse_what_the_arrays_refuse():
         joint_state_from_cdr(serialize_message(joint_state_msg(np.zeros(6)))[:40])
 
 
+def test_joint_states_from_bytes_look_names_up_by_their_bytes():
+    # The same names again: the order remembered (also the refusal), each message read anew.
+    junk = serialize_message(joint_state_msg(np.zeros(3), names=['a', 'b', 'c']))
+    for _ in range(2):
+        with pytest.raises(ValueError, match=r"lacks joints .* \(has \['a', 'b', 'c'\]\)"):
+            joint_state_from_cdr(junk)
+    order = [5, 3, 1, 0, 2, 4]
+    names = [JOINT_NAMES[i] for i in order]
+    for k in range(3):
+        q = np.arange(6.0) + k
+        data = serialize_message(joint_state_msg(q[order], names=names))
+        _, back, _ = joint_state_from_cdr(data)
+        assert np.array_equal(back, q)
+    # Asked for other names, the same bytes give another answer.
+    _, two, _ = joint_state_from_cdr(junk.replace(b'a\x00', b'x\x00'), names=['c', 'x'])
+    assert np.array_equal(two, [0.0, 0.0])
+    # More distinct name lists than are kept: each still read right.
+    for n in range(70):
+        one = joint_state_msg([float(n)], names=[f'joint_{n}'])
+        assert joint_state_from_cdr(serialize_message(one), names=[f'joint_{n}'])[1] == [n]
+
+
 def test_joint_state_arrays_refuses_bad_messages():
     good = joint_state_msg(np.zeros(6), np.zeros(6))
     missing = joint_state_msg(np.zeros(5), names=JOINT_NAMES[:5])

@@ -96,6 +96,13 @@ class CdrReader:
         self.offset += length
         return bytes(self.data[start:start + length - 1]).decode('utf-8', errors='replace')
 
+    def skip_string(self) -> None:
+        """Step over the next string (see :meth:`string`) without decoding it."""
+        length = self.uint32()
+        if length == 0 or 4 + self.offset + length > len(self.data):
+            raise ValueError('malformed string in serialized message')
+        self.offset += length
+
     def byte_sequence(self) -> memoryview:
         """Return the next sequence<uint8> as a memoryview of the data (no copy)."""
         length = self.uint32()
