@@ -129,7 +129,8 @@ class ControllerNode(Node):
         self._joint_states = TopicBatches(
             self, JointState, JOINT_STATES_TOPIC,
             QoSProfile(depth=limits.JOINT_STATE_QUEUE, reliability=ReliabilityPolicy.BEST_EFFORT),
-            self._on_joint_states, min_interval=self.period / 8, limit=limits.JOINT_STATE_QUEUE)
+            self._on_joint_states, min_interval=self.period / 8, limit=limits.JOINT_STATE_QUEUE,
+            lock=self._lock)
         self.create_subscription(Path, PATH_TOPIC, self._on_path, qos.LATCHED, raw=True)
         self.create_service(SetBool, topics.PAUSE, self._on_pause)
         self.create_timer(self.period, self._watchdog,
@@ -220,9 +221,7 @@ class ControllerNode(Node):
         self._joint_states.start(self.get_parameter('thread_priority').value)
 
     def _on_joint_states(self, batch):
-        receipt = time.monotonic()
-        with self._lock:
-            self._use_joint_states(batch, receipt)
+        self._use_joint_states(batch, time.monotonic())     # under self._lock (TopicBatches)
 
     def _use_joint_states(self, batch, receipt, times=None):
         """

@@ -42,15 +42,18 @@ class TopicBatches:
 
     ``on_batch(batch)`` gets a list of the serialized messages (bytes, oldest first, at most
     ``limit``) in the thread of :meth:`start`. :meth:`take` takes what queued from any thread
-    (e.g. a watchdog that must see queued messages before it calls them lost).
+    (e.g. a watchdog that must see queued messages before it calls them lost). ``lock``: held
+    while a batch is taken and handed over; the owner's, so that a batch it takes itself under
+    it is never handled before an older one.
     """
 
     def __init__(self, node: Node, msg_type: Any, topic: str, qos: QoSProfile,
                  on_batch: Callable[[list[bytes]], None], min_interval: float,
-                 limit: int) -> None:
+                 limit: int, lock: threading.Lock | None = None) -> None:
         """Create the hidden node and its subscription; nothing is taken until :meth:`start`."""
         self.msg_type, self.on_batch = msg_type, on_batch
         self.min_interval, self.limit = min_interval, limit
+        self.lock = lock or threading.Lock()
         self.node = rclpy.create_node(
             f'_{node.get_name()}_{topic.strip("/").replace("/", "_")}', context=node.context,
             namespace=node.get_namespace(), start_parameter_services=False,
@@ -102,11 +105,12 @@ class TopicBatches:
                     wait_set.clear_entities()
                     wait_set.add_subscription(self.subscription.handle)
                     wait_set.wait(_WAIT_NS)
-                batch = self.take()
+                with self.lock:
+                    batch = self.take()
+                    if batch:
+                        self.on_batch(batch)
             except (InvalidHandle, _rclpy.RCLError):
                 break       # the context or the node went away: nothing more to take
-            if batch:
-                self.on_batch(batch)
             # A batch at most every min_interval: a flood queues meanwhile, taken in one go.
             rest = last + self.min_interval - time.monotonic()
             if rest > 0:
