@@ -67,7 +67,11 @@ class Client(BackgroundNode):
                               100)
         n.create_subscription(Float64MultiArray, '/forward_velocity_controller/commands',
                               self._on_command, DEPTH)
-        n.create_subscription(String, '/etdmp/controller/status', self._on_status, LATCHED)
+        # Every status, also when this process is starved for a while: the controller sends
+        # each once (on a change) and its publisher keeps only the last, so a depth-1 reader
+        # here lost 'holding' (0.5 s long) once under a flood on a slower machine.
+        n.create_subscription(String, '/etdmp/controller/status', self._on_status,
+                              QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.pause = n.create_client(SetBool, '/controller/pause')
         self.parameters = n.create_client(SetParameters, '/controller/set_parameters')
         self.start()
