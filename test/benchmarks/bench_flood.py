@@ -6,8 +6,9 @@ A script, not a pytest test (``make bench-flood``)::
     .venv/bin/python test/benchmarks/bench_flood.py [--runs 3] [--rate 13000] [--seconds 5]
         [--no-docs]
 
-A publisher process sends serialized JointStates naming joints ``a, b, c`` at ``--rate`` (as
-test/nodes/test_adversarial_controller.py floods the controller); a reader process, set up as
+A publisher process sends serialized JointStates naming joints ``a, b, c`` at ``--rate``
+(``support.flood``, the program test/nodes/test_adversarial_controller.py floods the controller
+with, its sending thread at SCHED_FIFO 20 as there); a reader process, set up as
 the controller is (the UDP-only Fast DDS profile, its thread at SCHED_FIFO 50 where allowed),
 takes them with a best-effort subscription of depth 1000 and refuses each with
 ``joint_state_from_cdr``, one of two ways:
@@ -34,6 +35,7 @@ sys.path.insert(0, str(REPO / 'test'))
 
 from _results import add_option, command, printed, publish  # noqa: E402
 from etdmp_ros.ros.processes import isolated_environment  # noqa: E402
+from support.flood import FLOOD, FLOOD_PRIORITY  # noqa: E402
 
 READER = """
 import sys, time
@@ -77,30 +79,6 @@ wall, cpu = time.monotonic() - seen[1][0], time.process_time() - seen[1][1]
 print(seen[0], cpu / wall, flush=True)
 """
 
-PUBLISHER = """
-import sys, time
-import rclpy
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
-from sensor_msgs.msg import JointState
-rate, seconds = float(sys.argv[1]), float(sys.argv[2]) + 1.0
-rclpy.init()
-node = rclpy.create_node('flood')
-pub = node.create_publisher(JointState, 'joint_states',
-                            QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
-msg = serialize_message(JointState(name=['a', 'b', 'c'], position=[0.0, 1.0, 2.0]))
-while pub.get_subscription_count() < 1:
-    time.sleep(0.05)
-time.sleep(0.5)
-burst, n, start = max(1, round(rate / 1000)), 0, time.monotonic()
-while time.monotonic() < start + seconds:
-    for _ in range(burst):
-        pub.publish(msg)
-    n += burst
-    time.sleep(max(0.0, start + n / rate - time.monotonic()))
-print(n / (time.monotonic() - start), flush=True)
-"""
-
 
 def run_once(mode, rate, seconds):
     """Return (messages refused, reader cores, publisher rate) of one flood."""
@@ -109,7 +87,8 @@ def run_once(mode, rate, seconds):
                               stdout=subprocess.PIPE, text=True)
     try:
         assert reader.stdout.readline().strip() == 'ready'
-        sent = subprocess.run([sys.executable, '-c', PUBLISHER, str(rate), str(seconds)],
+        sent = subprocess.run([sys.executable, '-c', FLOOD, str(seconds + 1.0), str(rate),
+                               str(FLOOD_PRIORITY)],
                               env=env, capture_output=True, text=True, timeout=120, check=True)
         out, _ = reader.communicate(timeout=120)
     finally:
