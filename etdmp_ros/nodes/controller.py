@@ -44,9 +44,9 @@ import time
 
 from etdmp_ros import limits
 from etdmp_ros.geometry import quaternion as quat
-from etdmp_ros.robot import (ControllerConfig, InputWatch, TrackingSummary,
-                             trajectory_from_path, TrajectoryController, TrajectoryError,
-                             UR10Model)
+from etdmp_ros.robot import (CheckError, CheckProcess, ControllerConfig, InputWatch,
+                             TrackingSummary, trajectory_from_path, TrajectoryController,
+                             TrajectoryError, UR10Model)
 from etdmp_ros.ros import qos, system, topics
 from etdmp_ros.ros.batches import TopicBatches
 from etdmp_ros.ros.conversions import (joint_state_from_cdr, ns_to_stamp, path_from_cdr,
@@ -96,6 +96,9 @@ class ControllerNode(Node):
         self.max_path_poses = p.max_path_poses
         self.model = UR10Model(tool_offset=p.tool_offset)
         self.controller = TrajectoryController(self.model, self.config)
+        # Paths are checked in a process of its own: a check holds the GIL for ~50 ms, which
+        # the control thread would wait for whenever the machine preempts the checking thread.
+        self._checker = CheckProcess(p.tool_offset, self.controller.config)
         self.period = self.controller.period
 
         self._lock = threading.Lock()           # guards the controller and the fields below
@@ -109,7 +112,6 @@ class ControllerNode(Node):
         self._status = None
         self._path_generation = 0
         self._tracked = TrackingSummary(self.period)
-        self._check_lock = threading.Lock()
 
         # A second of history: a slow reader must never block a control step's publish().
         rate = rate_qos(self.config.rate)
@@ -467,8 +469,10 @@ class ControllerNode(Node):
             if spliced:
                 self.controller.follow(path, stamp)
                 self._accepted(len(stamps), path.duration, continued=True)
-        with self._check_lock:      # one check at a time: the checker has one model
-            reason = self.controller.check(path, q) if self.check_paths else ''
+        try:
+            reason = self._checker.check(path, q) if self.check_paths else ''
+        except CheckError as exc:   # refused (a spliced path stops): never followed unchecked
+            reason = f'it could not be checked: {exc}'
         with self._lock:
             if generation != self._path_generation:
                 return              # a newer path arrived meanwhile
@@ -519,8 +523,9 @@ class ControllerNode(Node):
         self._command_pub.wait_for_all_acked(Duration(seconds=0.2))
 
     def destroy_node(self):
-        """Stop taking joint states, destroy their hidden node, then this one."""
+        """Stop taking joint states and checking paths, destroy the hidden node, then this one."""
         self._joint_states.stop()
+        self._checker.close()
         super().destroy_node()
 
 
@@ -537,11 +542,12 @@ def _pose_msg(position, rotation, stamp):
 
 def main(args=None):
     """Run the controller until Ctrl-C (or SIGTERM); send zero velocity before exiting."""
-    # Let the control steps preempt a path check (worker thread) within 0.2 ms instead of 5 ms:
-    # a step lets go of the GIL a few times (each publish), and each time the check held it
-    # for up to the interval. At 1 ms, a flood of junk joint states beside a path check still
-    # starved the simulation of commands for 60 ms, 1 run of 5 on an AMD EPYC; at 0.2 ms, 0
-    # of 4.
+    # Let the control steps preempt the other threads (a path's conversion, the executor's
+    # callbacks) within 0.2 ms instead of 5 ms: a step lets go of the GIL a few times (each
+    # publish), and each time another thread may hold it up to the interval. (Chosen when the
+    # path checks still ran in a thread here: at 1 ms, a flood of junk joint states beside a
+    # check starved the simulation of commands for 60 ms, 1 run of 5 on an AMD EPYC; at 0.2 ms,
+    # 0 of 4. The checks now run in CheckProcess.)
     sys.setswitchinterval(0.0002)
 
     def make_nodes(nodes):

@@ -7,6 +7,7 @@ shares is :class:`SceneConfig`; the robot description and its frame tree are wha
 and robot_state_publisher would publish.
 """
 
+from ._check_process import CheckError, CheckProcess
 from ._controller import Command, ControllerConfig, STATUSES, TrajectoryController
 from ._delay import DelayEstimator
 from ._description import (CAMERA_OPTICAL_FRAME, camera_transforms, chain_pose, FrameTree,
@@ -23,7 +24,8 @@ from ._ur10 import (JOINT_NAMES, OFFICIAL_VELOCITY_LIMITS, robot_data_dir, ur10_
 from ._watch import InputWatch, TrackingSummary
 
 __all__ = [
-    'CAMERA_OPTICAL_FRAME', 'Command', 'ControllerConfig', 'DEFAULT_ACCELERATION_LIMITS',
+    'CAMERA_OPTICAL_FRAME', 'CheckError', 'CheckProcess', 'Command', 'ControllerConfig',
+    'DEFAULT_ACCELERATION_LIMITS',
     'DelayEstimator', 'DifferentialIK', 'FrameTree', 'GuidedMotion', 'GuideError', 'IKResult',
     'InputWatch', 'JOINT_NAMES', 'MinimumJerkMove', 'OFFICIAL_VELOCITY_LIMITS', 'PEN_RADIUS',
     'PEN_TIP_LENGTH', 'PEN_TIP_RADIUS', 'PoseTrajectory', 'SCENE_PARAMETERS', 'STATUSES',

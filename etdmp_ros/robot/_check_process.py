@@ -1,0 +1,147 @@
+"""
+Path checks in a process of their own: :meth:`TrajectoryController.check` without the GIL.
+
+A check solves a few hundred inverse kinematics problems (about 50 ms of Python and Pinocchio,
+which holds the GIL throughout). Run in a thread of the controller's process, it holds the GIL
+the control thread needs: on a loaded machine the operating system preempts the checking thread
+(normal priority) while it holds the lock, and the real-time control thread waits for it until
+the scheduler gives that thread the CPU again. No switch interval bounds that wait (a priority
+inversion through the GIL): beside a busy-looping process and a flood of junk joint states the
+simulation braked 7 times for want of commands while a path was checked.
+
+:class:`CheckProcess` keeps one worker process (:func:`main` in a Python of its own,
+started at once, so that the first path does not wait for its imports), which holds its own
+controller per configuration; requests and answers are pickles on its standard input and
+output. The calling thread waits for the answer without the GIL. The worker ends when its input
+closes, so also when the controller is killed. A worker that died is replaced for the next
+check and the check that lost it fails with :class:`CheckError` (never an empty reason, which
+means valid). No ROS here.
+"""
+
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import threading
+from typing import Any, BinaryIO
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ._controller import ControllerConfig, TrajectoryController
+from ._trajectory import PoseTrajectory
+from ._ur10 import UR10Model
+
+READY = 'ready'
+_WORKER = f'import sys; from {__name__} import main; sys.exit(main())'
+
+
+class CheckError(RuntimeError):
+    """The check process could not check a path (it died, or could not start)."""
+
+
+class CheckProcess:
+    """
+    :meth:`TrajectoryController.check` in a worker process; :meth:`check` is thread-safe.
+
+    ``tool_offset`` and the ``config`` object are read at each check (the controller node
+    changes its config's fields in place when a parameter is set).
+    """
+
+    def __init__(self, tool_offset: ArrayLike, config: ControllerConfig) -> None:
+        """Start the worker process (it imports Pinocchio meanwhile)."""
+        self.tool_offset = np.array(tool_offset, dtype=float)
+        self.config = config
+        self._lock = threading.Lock()
+        self._closed = False
+        self._process = self._start()
+        self._ready = False
+
+    @staticmethod
+    def _start() -> subprocess.Popen:
+        # -c, not -m: the package imports this module before -m would run it.
+        return subprocess.Popen([sys.executable, '-c', _WORKER], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE)
+
+    @property
+    def pid(self) -> int:
+        """The worker's process id."""
+        return self._process.pid
+
+    def check(self, path: PoseTrajectory, q: ArrayLike, max_samples: int = 200) -> str:
+        """Return why ``path`` cannot be executed from ``q``, '' if it can (as the controller)."""
+        request = (pickle.dumps((tuple(self.tool_offset), self.config)), path,
+                   np.asarray(q, dtype=float), max_samples)
+        with self._lock:
+            if self._closed:
+                raise CheckError('the check process is closed')
+            process = self._process
+            try:
+                if not self._ready:
+                    self._ready = _receive(process.stdout) == READY
+                pickle.dump(request, process.stdin)
+                process.stdin.flush()
+                kind, answer = _receive(process.stdout)
+            except (OSError, EOFError, pickle.UnpicklingError) as exc:
+                process.kill()
+                process.wait()
+                self._process, self._ready = self._start(), False   # for the next check
+                raise CheckError(f'the check process died (exit code {process.returncode}: '
+                                 f'{type(exc).__name__})') from None
+        if kind != 'ok':
+            raise CheckError(f'the check failed in the check process: {answer}')
+        return answer
+
+    def close(self) -> None:
+        """Stop the worker: its input closes, it exits (killed if it has not within 2 s)."""
+        with self._lock:
+            self._closed = True
+            process = self._process
+            process.stdin.close()
+            try:
+                process.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+            process.stdout.close()
+
+
+def _receive(stream: BinaryIO | None) -> Any:
+    if stream is None:
+        raise EOFError('no output')
+    return pickle.load(stream)
+
+
+def _serve(requests: BinaryIO, answers: BinaryIO) -> int:
+    """Answer checks until the input closes."""
+    controllers: dict[bytes, TrajectoryController] = {}
+    pickle.dump(READY, answers)
+    answers.flush()
+    while True:
+        try:
+            key, path, q, max_samples = pickle.load(requests)
+        except EOFError:
+            return 0
+        try:
+            controller = controllers.get(key)
+            if controller is None:
+                tool_offset, config = pickle.loads(key)
+                controllers.clear()       # one configuration at a time (a parameter change)
+                controller = controllers[key] = TrajectoryController(UR10Model(tool_offset),
+                                                                     config)
+            answer = ('ok', controller.check(path, q, max_samples))
+        except Exception as exc:   # noqa: B902 - sent back: the controller says the path failed
+            answer = ('error', f'{type(exc).__name__}: {exc}')
+        pickle.dump(answer, answers)
+        answers.flush()
+
+
+def main() -> int:
+    """Run the worker: normal scheduling, no Ctrl-C of its own (the controller stops it)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if hasattr(os, 'sched_setscheduler') and os.sched_getscheduler(0) != os.SCHED_OTHER:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    answers = os.fdopen(os.dup(sys.stdout.fileno()), 'wb')
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())     # a stray print must not corrupt them
+    return _serve(sys.stdin.buffer, answers)
