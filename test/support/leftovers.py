@@ -154,7 +154,7 @@ class Leftovers:
         for (name, inode), who in sorted(self.ours.items()):
             if name not in files or files[name].st_ino != inode:
                 continue
-            if held.get(inode) or maps.get(name):
+            if held.get(inode) or maps.get(name) or _live_port_mutex(name, files, held, maps):
                 continue          # in use again: another process took it over
             problems.append(f'/dev/shm/{name} left behind (it was {who})')
             try:
@@ -162,3 +162,21 @@ class Leftovers:
             except FileNotFoundError:
                 pass
         return problems
+
+
+def _live_port_mutex(name, files, held, maps):
+    """
+    Return whether ``name`` is the semaphore of a port some process uses now.
+
+    Fast DDS maps a port's semaphore only while it opens or closes the port, and removes it
+    only with the port: a port of a killed process that a later participant (of any domain or
+    session: the numbers are the machine's) took over keeps the same semaphore file, unmapped,
+    for that participant's life. It is not a leftover then (and must not be removed).
+    """
+    if fastdds_files.kind(name) != 'mutex':
+        return False
+    port = name.removeprefix('sem.').removesuffix('_mutex')
+    if maps.get(port):
+        return True
+    return any(held.get(files[lock].st_ino) for lock in (f'{port}_el', f'{port}_sl')
+               if lock in files)
