@@ -24,7 +24,7 @@ import signal
 import subprocess
 import sys
 import threading
-from typing import Any, BinaryIO
+from typing import Any, IO
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -41,6 +41,41 @@ class CheckError(RuntimeError):
     """The check process could not check a path (it died, or could not start)."""
 
 
+class _Worker:
+    """The worker process and the two pipes to it."""
+
+    def __init__(self) -> None:
+        # -c, not -m: the package imports this module before -m would run it.
+        self.process = subprocess.Popen([sys.executable, '-c', _WORKER], stdin=subprocess.PIPE,
+                                        stdout=subprocess.PIPE)
+        assert self.process.stdin is not None and self.process.stdout is not None
+        self.requests: IO[bytes] = self.process.stdin
+        self.answers: IO[bytes] = self.process.stdout
+        self.ready = False
+
+    def ask(self, request: tuple[Any, ...]) -> tuple[str, str]:
+        """Send one request, return its answer (raises OSError, EOFError if the worker died)."""
+        if not self.ready:
+            self.ready = pickle.load(self.answers) == READY
+        pickle.dump(request, self.requests)
+        self.requests.flush()
+        kind, answer = pickle.load(self.answers)
+        return kind, answer
+
+    def end(self, timeout: float) -> None:
+        """Close its input (it exits); kill it if it has not within ``timeout`` s."""
+        try:
+            self.requests.close()
+        except OSError:
+            pass              # it died: its pipe is broken
+        try:
+            self.process.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+        self.answers.close()
+
+
 class CheckProcess:
     """
     :meth:`TrajectoryController.check` in a worker process; :meth:`check` is thread-safe.
@@ -55,19 +90,12 @@ class CheckProcess:
         self.config = config
         self._lock = threading.Lock()
         self._closed = False
-        self._process = self._start()
-        self._ready = False
-
-    @staticmethod
-    def _start() -> subprocess.Popen:
-        # -c, not -m: the package imports this module before -m would run it.
-        return subprocess.Popen([sys.executable, '-c', _WORKER], stdin=subprocess.PIPE,
-                                stdout=subprocess.PIPE)
+        self._worker = _Worker()
 
     @property
     def pid(self) -> int:
-        """The worker's process id."""
-        return self._process.pid
+        """Return the worker's process id."""
+        return self._worker.process.pid
 
     def check(self, path: PoseTrajectory, q: ArrayLike, max_samples: int = 200) -> str:
         """Return why ``path`` cannot be executed from ``q``, '' if it can (as the controller)."""
@@ -76,19 +104,15 @@ class CheckProcess:
         with self._lock:
             if self._closed:
                 raise CheckError('the check process is closed')
-            process = self._process
+            worker = self._worker
             try:
-                if not self._ready:
-                    self._ready = _receive(process.stdout) == READY
-                pickle.dump(request, process.stdin)
-                process.stdin.flush()
-                kind, answer = _receive(process.stdout)
+                kind, answer = worker.ask(request)
             except (OSError, EOFError, pickle.UnpicklingError) as exc:
-                process.kill()
-                process.wait()
-                self._process, self._ready = self._start(), False   # for the next check
-                raise CheckError(f'the check process died (exit code {process.returncode}: '
-                                 f'{type(exc).__name__})') from None
+                worker.process.kill()
+                worker.end(0.0)
+                self._worker = _Worker()          # for the next check
+                raise CheckError(f'the check process died (exit code '
+                                 f'{worker.process.returncode}: {type(exc).__name__})') from None
         if kind != 'ok':
             raise CheckError(f'the check failed in the check process: {answer}')
         return answer
@@ -97,23 +121,10 @@ class CheckProcess:
         """Stop the worker: its input closes, it exits (killed if it has not within 2 s)."""
         with self._lock:
             self._closed = True
-            process = self._process
-            process.stdin.close()
-            try:
-                process.wait(timeout=2.0)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
-            process.stdout.close()
+            self._worker.end(2.0)
 
 
-def _receive(stream: BinaryIO | None) -> Any:
-    if stream is None:
-        raise EOFError('no output')
-    return pickle.load(stream)
-
-
-def _serve(requests: BinaryIO, answers: BinaryIO) -> int:
+def _serve(requests: IO[bytes], answers: IO[bytes]) -> int:
     """Answer checks until the input closes."""
     controllers: dict[bytes, TrajectoryController] = {}
     pickle.dump(READY, answers)
