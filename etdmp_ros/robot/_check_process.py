@@ -9,11 +9,12 @@ the scheduler gives that thread the CPU again. No switch interval bounds that wa
 inversion through the GIL): beside a busy-looping process and a flood of junk joint states the
 simulation braked 7 times for want of commands while a path was checked.
 
-:class:`CheckProcess` keeps one worker process (:func:`main` in a Python of its own,
-started at once, so that the first path does not wait for its imports), which holds its own
-controller per configuration; requests and answers are pickles on its standard input and
-output. The calling thread waits for the answer without the GIL. The worker ends when its input
-closes, so also when the controller is killed. A worker that died is replaced for the next
+:class:`CheckProcess` keeps one worker process (:func:`main` in a Python of its own, started
+at once and building its model, so that the first path does not wait for either), which holds
+its own controller for the current configuration; requests and answers are pickles on its
+standard input and output. The calling thread waits for the answer without the GIL. The
+worker ends when its input closes, so also when the controller is killed. It costs ~0.7 s of
+CPU as the controller starts and ~220 MB of memory. A worker that died is replaced for the next
 check and the check that lost it fails with :class:`CheckError` (never an empty reason, which
 means valid). No ROS here.
 """
@@ -33,7 +34,6 @@ from ._controller import ControllerConfig, TrajectoryController
 from ._trajectory import PoseTrajectory
 from ._ur10 import UR10Model
 
-READY = 'ready'
 _WORKER = f'import sys; from {__name__} import main; sys.exit(main())'
 
 
@@ -44,21 +44,31 @@ class CheckError(RuntimeError):
 class _Worker:
     """The worker process and the two pipes to it."""
 
-    def __init__(self) -> None:
+    def __init__(self, key: bytes) -> None:
         # -c, not -m: the package imports this module before -m would run it.
         self.process = subprocess.Popen([sys.executable, '-c', _WORKER], stdin=subprocess.PIPE,
                                         stdout=subprocess.PIPE)
         assert self.process.stdin is not None and self.process.stdout is not None
         self.requests: IO[bytes] = self.process.stdin
         self.answers: IO[bytes] = self.process.stdout
-        self.ready = False
+        # Build the model now, not at the first path (its URDF takes ~0.7 s to load); the
+        # answer is read before the first check's.
+        self.unread = 1
+        try:
+            self._send((key, None, None, 0))
+        except OSError:
+            pass              # it died at once: the first check says so
+
+    def _send(self, request: tuple[Any, ...]) -> None:
+        pickle.dump(request, self.requests)
+        self.requests.flush()
 
     def ask(self, request: tuple[Any, ...]) -> tuple[str, str]:
         """Send one request, return its answer (raises OSError, EOFError if the worker died)."""
-        if not self.ready:
-            self.ready = pickle.load(self.answers) == READY
-        pickle.dump(request, self.requests)
-        self.requests.flush()
+        self._send(request)
+        while self.unread:
+            pickle.load(self.answers)
+            self.unread -= 1
         kind, answer = pickle.load(self.answers)
         return kind, answer
 
@@ -90,7 +100,10 @@ class CheckProcess:
         self.config = config
         self._lock = threading.Lock()
         self._closed = False
-        self._worker = _Worker()
+        self._worker = _Worker(self._key())
+
+    def _key(self) -> bytes:
+        return pickle.dumps((tuple(self.tool_offset), self.config))
 
     @property
     def pid(self) -> int:
@@ -99,8 +112,7 @@ class CheckProcess:
 
     def check(self, path: PoseTrajectory, q: ArrayLike, max_samples: int = 200) -> str:
         """Return why ``path`` cannot be executed from ``q``, '' if it can (as the controller)."""
-        request = (pickle.dumps((tuple(self.tool_offset), self.config)), path,
-                   np.asarray(q, dtype=float), max_samples)
+        request = (self._key(), path, np.asarray(q, dtype=float), max_samples)
         with self._lock:
             if self._closed:
                 raise CheckError('the check process is closed')
@@ -110,7 +122,7 @@ class CheckProcess:
             except (OSError, EOFError, pickle.UnpicklingError) as exc:
                 worker.process.kill()
                 worker.end(0.0)
-                self._worker = _Worker()          # for the next check
+                self._worker = _Worker(self._key())       # for the next check
                 raise CheckError(f'the check process died (exit code '
                                  f'{worker.process.returncode}: {type(exc).__name__})') from None
         if kind != 'ok':
@@ -127,8 +139,6 @@ class CheckProcess:
 def _serve(requests: IO[bytes], answers: IO[bytes]) -> int:
     """Answer checks until the input closes."""
     controllers: dict[bytes, TrajectoryController] = {}
-    pickle.dump(READY, answers)
-    answers.flush()
     while True:
         try:
             key, path, q, max_samples = pickle.load(requests)
@@ -139,9 +149,9 @@ def _serve(requests: IO[bytes], answers: IO[bytes]) -> int:
             if controller is None:
                 tool_offset, config = pickle.loads(key)
                 controllers.clear()       # one configuration at a time (a parameter change)
-                controller = controllers[key] = TrajectoryController(UR10Model(tool_offset),
-                                                                     config)
-            answer = ('ok', controller.check(path, q, max_samples))
+                controller = controllers[key] = TrajectoryController(
+                    UR10Model(tool_offset), config, fast=False)     # checks use no kernels
+            answer = ('ok', '' if path is None else controller.check(path, q, max_samples))
         except Exception as exc:   # noqa: B902 - sent back: the controller says the path failed
             answer = ('error', f'{type(exc).__name__}: {exc}')
         pickle.dump(answer, answers)
