@@ -95,6 +95,9 @@ class InputWatch:
         self._robot: int | None = None      # robot time (ns) of the latest receipt
         self._wall: int | None = None       # steady time (ns) of the latest receipt
         self._stamp: int | None = None      # stamp (ns) of the latest joint state accepted
+        # Robot time (ns) at which that stamp arrived, or would have arrived had it not come
+        # late: the reference its successors' stamps are measured against (implausible()).
+        self._reference: int | None = None
         self._arrived: int | None = None    # stamp (ns) of the latest plausible one to arrive
         self._simulated = False
 
@@ -103,9 +106,16 @@ class InputWatch:
         """Note a joint state (stamped ``stamp_ns``) received at these robot and steady times."""
         if simulated != self._simulated:
             self._stamp = self._arrived = None
-        self._robot, self._wall, self._simulated = robot_ns, wall_ns, simulated
         if stamp_ns is not None:
+            # A late arrival's lateness stays out of the reference: taken as its receipt time,
+            # every joint state on time after it read as that much ahead of the clock, was
+            # refused, and none became the reference again (after one 0.1 s stall beside a busy
+            # loop, every joint state of the run was refused "+0.112 s off the robot clock").
+            on_time = (None if self._stamp is None or self._reference is None
+                       else self._reference + stamp_ns - self._stamp)
+            self._reference = robot_ns if on_time is None else min(robot_ns, on_time)
             self._stamp = stamp_ns
+        self._robot, self._wall, self._simulated = robot_ns, wall_ns, simulated
 
     def implausible(self, stamp_ns: int, robot_ns: int, simulated: bool,
                     wall_ns: int | None = None) -> str:
@@ -133,9 +143,9 @@ class InputWatch:
         """
         if self._stamp is None or simulated != self._simulated:
             return ''
-        assert self._robot is not None and self._wall is not None   # set with _stamp
+        assert self._reference is not None and self._wall is not None   # set with _stamp
         advance = (stamp_ns - self._stamp) * 1e-9
-        skew = advance - (robot_ns - self._robot) * 1e-9
+        skew = advance - (robot_ns - self._reference) * 1e-9
         if abs(skew) <= self.timeout or (skew < 0.0 and advance > 0.0):
             return ''
         if skew > 0.0 and wall_ns is not None and \
@@ -143,7 +153,8 @@ class InputWatch:
             return ''
         return (f'its stamp is {skew:+.3f} s off the robot clock (advanced '
                 f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '
-                f'clock advanced {(robot_ns - self._robot) * 1e-9:.3f} s), not from the robot')
+                f'clock advanced {(robot_ns - self._reference) * 1e-9:.3f} s), not from the '
+                'robot')
 
     def gap(self, stamp_ns: int, simulated: bool) -> str:
         """

@@ -524,6 +524,25 @@ def test_a_joint_state_stamp_must_advance_with_the_robots_clock():
     assert watch.implausible(42_008 * ms, 15 * ms, False) == ''
 
 
+def test_after_a_late_joint_state_the_ones_on_time_are_taken():
+    # A fresh clone beside a busy loop: one joint state came 0.104 s late (taken: late, not
+    # false), then every one on time was refused "+0.112 s off the robot clock" for the rest
+    # of the run, the late one's receipt having become the reference they were measured by.
+    ms = 1_000_000
+    watch = InputWatch(timeout=0.1, stall_timeout=1.0)
+    watch.received(5000 * ms, 0, True, stamp_ns=5000 * ms)
+    assert watch.implausible(5008 * ms, 5112 * ms, True, wall_ns=112 * ms) == ''      # late
+    watch.received(5112 * ms, 112 * ms, True, stamp_ns=5008 * ms)
+    # The simulation catches up (its time runs ahead of the wall clock for a moment).
+    for k, stamp in enumerate(range(5120, 5400, 8)):
+        wall = (120 + 4 * k) * ms
+        assert watch.implausible(stamp * ms, stamp * ms, True, wall_ns=wall) == '', stamp
+        watch.received(stamp * ms, wall, True, stamp_ns=stamp * ms)
+    # Stamps from the future are still refused after it.
+    assert '+100.000 s off' in watch.implausible(105_400 * ms, 5400 * ms, True,
+                                                 wall_ns=300 * ms)
+
+
 def test_a_stalled_simulation_is_late_input_not_lost_input(rig):
     """
     Freeze the simulation (SIGSTOP) for 0.3 s mid-letter: no stale-input, the letter goes on.

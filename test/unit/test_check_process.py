@@ -53,7 +53,7 @@ def test_a_check_costs_the_caller_almost_no_cpu(checker):
             check(path, Q_INITIAL)
         costs[name] = (time.thread_time() - cpu, time.perf_counter() - wall)
     print({k: f'{c * 1e3:.1f} ms CPU in {w * 1e3:.1f} ms' for k, (c, w) in costs.items()})
-    assert costs['in process'][0] > 0.5 * costs['in process'][1]     # the work is Python's
+    assert costs['in process'][0] > 0.05       # 3 checks: the work is this thread's CPU
     assert costs['worker'][0] < 0.1 * costs['in process'][0]
 
 
