@@ -277,6 +277,23 @@ def test_a_moved_goal_is_measured_against_the_new_marker_and_the_executed_plan()
     assert 'goal_follow' in m['definitions']
 
 
+def test_a_moved_goal_received_late_by_the_recorder_keeps_the_chain():
+    # A fresh clone: the recorder got the moved bottle 0.4 s late (batched), after the
+    # controller had accepted the re-planned path; measured from that receipt, the chain found
+    # no acceptance and every latency after dmp_server read None.
+    on_time = compute_metrics(_moved_run())[0]['goal_follow']
+    run = _moved_run()
+    seen = run.rec['goal_seen']
+    seen[seen[:, 0] > 3.55e9, 1] += 4e8
+    follow = compute_metrics(run)[0]['goal_follow']
+    assert follow['controller_accept_ms'] == pytest.approx(on_time['controller_accept_ms'])
+    assert follow['controller_first_command_ms'] == on_time['controller_first_command_ms']
+    # From dmp_server's own account of when it had the message (4.1 ms before its event).
+    assert follow['end_to_end_ms'] == pytest.approx(
+        follow['controller_first_command_ms'] + 4.1 - 0.1, abs=1e-3)
+    assert follow['confirmation_wait_ms'] == pytest.approx(on_time['confirmation_wait_ms'])
+
+
 def test_a_moved_goal_not_followed_fails_the_checks():
     m, _ = compute_metrics(_moved_run(follow=False))
     assert m['goal_error_mm'] == pytest.approx(40.0, abs=1e-6)

@@ -93,9 +93,10 @@ MOVE_DEFINITIONS = {
                    "controller: path published (dmp_server's clock, its 'followed' event's "
                    "published_wall_ns) -> its 'path_accepted' event -> first command after "
                    'it received here; end_to_end_ms: the confirming message '
-                   'received here (dmp_server receives it at about the same time) -> that '
-                   "first command received here (wall clock: the events' and the receipt "
-                   'times)',
+                   'received here (dmp_server receives it at about the same time), or '
+                   "dmp_server's own time of it (its event less dmp_server_ms) if earlier -> "
+                   "that first command received here (wall clock: the events' and the "
+                   'receipt times)',
 }
 
 #: What ``metrics.json``'s ``system`` holds (etdmp_ros.demo.metrics.system_figures).

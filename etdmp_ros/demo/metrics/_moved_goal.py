@@ -144,9 +144,11 @@ def _follow_chain(run, followed, confirmed_ns, move_ns):
     """
     rec = run.rec
     took_ms, poses = followed.number('took_ms'), followed.integer('poses')
-    # When dmp_server had the confirming message: its receipt here, else its own account.
-    server_seen_ns = confirmed_ns if confirmed_ns is not None else \
-        followed.wall_ns - took_ms * 1e6
+    # When dmp_server had the confirming message: its receipt here, or its own account if that
+    # is earlier (this recorder once received the bottle 0.4 s late, batched, after the
+    # controller had accepted the re-planned path: the chain then found no acceptance).
+    own_ns = followed.wall_ns - took_ms * 1e6
+    server_seen_ns = own_ns if confirmed_ns is None else min(confirmed_ns, own_ns)
     out = {'dmp_server_ms': took_ms,
            'replanned_from_path_time_s': followed.number('from_path_time_s'),
            'controller_path_time_estimate_s': followed.number('controller_path_time_s')}
