@@ -100,12 +100,16 @@ class InputWatch:
         self._reference: int | None = None
         self._arrived: int | None = None    # stamp (ns) of the latest plausible one to arrive
         self._simulated = False
+        # (robot time ns, skew s) of the first of the joint states refused one after the other
+        # with about the same skew, none taken since (implausible()).
+        self._refused: tuple[int, float] | None = None
 
     def received(self, robot_ns: int, wall_ns: int, simulated: bool,
                  stamp_ns: int | None = None) -> None:
         """Note a joint state (stamped ``stamp_ns``) received at these robot and steady times."""
         if simulated != self._simulated:
             self._stamp = self._arrived = None
+        self._refused = None
         if stamp_ns is not None:
             # A late arrival's lateness stays out of the reference: taken as its receipt time,
             # every joint state on time after it read as that much ahead of the clock, was
@@ -138,6 +142,13 @@ class InputWatch:
           s off ... advanced 0.176 s ... while the clock advanced 0.072 s"). A stamp 100 s ahead
           still is no stamp of the robot's.
 
+        - joint states that keep coming with the same skew for ``timeout`` of the robot's
+          time, none taken meanwhile, are the robot's and the reference was wrong: the first
+          joint state a starting controller took had queued while the machine was busy (its
+          receipt became the reference, 0.15 s late), and every one after it read "+0.152 s
+          off" until the end of the run. They are taken from then on. Forged stamps that come
+          beside the robot's, or in a burst, never make such a run.
+
         The controller goes on from such a joint state; its missed steps re-synchronise the
         path (etdmp_ros.robot._controller).
         """
@@ -150,6 +161,12 @@ class InputWatch:
             return ''
         if skew > 0.0 and wall_ns is not None and \
                 advance <= (wall_ns - self._wall) * 1e-9 + self.timeout:
+            return ''
+        if self._refused is None or abs(skew - self._refused[1]) > self.timeout / 2:
+            self._refused = (robot_ns, skew)
+        elif (robot_ns - self._refused[0]) * 1e-9 >= self.timeout:
+            # received() takes this one's receipt as the new reference; no gap: they came.
+            self._stamp = self._arrived = None
             return ''
         return (f'its stamp is {skew:+.3f} s off the robot clock (advanced '
                 f'{(stamp_ns - self._stamp) * 1e-9:.3f} s since the last accepted one while the '

@@ -826,3 +826,34 @@ def test_singularity_halt_through_ros(rig):
     q = np.array([v[0] for v in joints.values()])
     assert q[:, 4].max() < -0.05                      # stopped short of the singularity
     assert 'halted-singularity' in rig.controller.log()
+
+
+def test_a_late_first_joint_state_does_not_lock_the_robot_out():
+    # Two runs of the fault tests on a machine busy with starting nodes: the first joint state
+    # the controller took had queued (its receipt, the reference, 0.152 s late); every joint
+    # state after it read "+0.152 s off the robot clock" and the controller never took one.
+    ms = 1_000_000
+    watch = InputWatch(timeout=0.1, stall_timeout=1.0)
+    watch.received(5152 * ms, 0, True, stamp_ns=5000 * ms)
+    refused = []
+    for stamp in range(5160, 5600, 8):
+        robot = wall = stamp     # on time from now on
+        why = watch.implausible(stamp * ms, robot * ms, True, wall_ns=(wall - 5152) * ms)
+        if why:
+            refused.append(stamp)
+            continue
+        watch.received(robot * ms, (wall - 5152) * ms, True, stamp_ns=stamp * ms)
+    # Refused for one timeout of robot time (the controller goes stale meanwhile), then taken.
+    assert refused and refused[-1] - refused[0] <= 110, refused
+    assert watch.implausible(5600 * ms, 5600 * ms, True, wall_ns=448 * ms) == ''
+    # Forged stamps in a burst (the attacks: three at once) still never make such a run.
+    for k in range(3):
+        assert '+100.0' in watch.implausible((105_600 + 8 * k) * ms, 5600 * ms, True,
+                                             wall_ns=448 * ms)
+    # Nor do forged stamps beside the robot's: each one taken ends their run.
+    for k in range(40):
+        t = 5608 + 8 * k
+        assert '+0.500 s off' in watch.implausible((t + 500) * ms, t * ms, True,
+                                                   wall_ns=(t - 5152) * ms)
+        assert watch.implausible(t * ms, t * ms, True, wall_ns=(t - 5152) * ms) == ''
+        watch.received(t * ms, (t - 5152) * ms, True, stamp_ns=t * ms)
