@@ -317,13 +317,17 @@ def _stale_port(directory, number, files, unmapped):
             return [mutex], 'port mutex taken by a dead process'
         return None
     if locks:
-        if f'{port}_el' in locks and port in files and not unmapped(port):
+        present = (directory / port).exists()
+        if f'{port}_el' in locks and present and not unmapped(port):
             # Its reader was killed and a live writer still sends into this file. Removed, the
             # next reader of that number would make a new file that the writer never opens:
             # it goes on sending into this one (Fast DDS notices a dead reader only if it
             # died waiting, not while it handled a message). Locked, no reader takes this
-            # number again and the writer opens the new reader's port afresh (clean).
+            # number again and the writer opens the new reader's port afresh (clean). The
+            # file's age does not matter: a writer that finds the port broken makes it anew.
             return [f'{port}_el'], QUARANTINE
+        if present and port not in files:
+            return None         # made a moment ago: its maker may not have mapped it yet
         return every, 'port lock not held'
     if port in files:
         # No reader at all (readers lock for life): a reader that exited cleanly while a

@@ -20,6 +20,7 @@ them, the benchmark prints them):
 """
 
 import os
+from pathlib import Path
 import re
 import signal
 import threading
@@ -28,7 +29,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from etdmp_ros.demo.recording import Recorder
 from etdmp_ros.demo.scenario import Scenario
-from etdmp_ros.ros import events, qos, system
+from etdmp_ros.ros import events, fastdds_files, qos, system
 from etdmp_ros.ros.background import BackgroundNode
 from etdmp_ros.ros.conversions import joint_state_from_cdr
 from etdmp_ros.ros.processes import installed_command, NodeProcess, SystemProcesses
@@ -183,9 +184,36 @@ class Watch(BackgroundNode):
         assert all(r.successful for r in future.result().results)
 
 
-def wait(predicate, timeout, what, processes=()):
+def wait(predicate, timeout, what, processes=(), details=None):
     """Wait until ``predicate()``; fail naming ``what`` (and the logs of dead processes)."""
-    return waiting.wait_for(predicate, timeout, what, processes, period=0.01)
+    return waiting.wait_for(predicate, timeout, what, processes, period=0.01, details=details)
+
+
+def shared_memory_state(log=''):
+    """
+    Return what a blind restarted reader's failure needs to be explained.
+
+    The start of its log ``log`` and, of every Fast DDS port in /dev/shm, its age, who locks
+    it and who maps it (process names).
+    """
+    owners, maps = fastdds_files.lock_owners(), fastdds_files.mappers()
+    now = time.time()
+
+    def who(pids):
+        names = []
+        for pid in sorted(pids):
+            try:
+                command = Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ')
+                names.append(f'{pid} ({command[-60:].decode(errors="replace").strip()})')
+            except OSError:
+                names.append(f'{pid} (gone)')
+        return ', '.join(names) or '-'
+    lines = ['start of the log:', *log.splitlines()[:3], '/dev/shm ports:']
+    for name, st in sorted(fastdds_files.listing().items()):
+        if 'port' in name:
+            lines.append(f'  {name}: {now - st.st_mtime:.1f} s old, locked by '
+                         f'{who(owners.get(st.st_ino, ()))}, mapped by {who(maps.get(name, ()))}')
+    return '\n'.join(lines)
 
 
 class System:
@@ -439,7 +467,8 @@ def restart(sys_, watch, name):
         time.sleep(1.0)     # nothing says the service's endpoints matched: no condition
     elif name == 'perception':
         wait(lambda: watch.goals[-1][0] > since, RESTART, 'a goal perceived again',
-             sys_.running())
+             sys_.running(),
+             details=lambda: shared_memory_state(sys_.processes['perception'].log()))
     else:   # the controller, or the simulation: the controller idle again, with joint states
         wait(lambda: watch.status[-1][0] > since and watch.state() == 'idle', RESTART,
              f'the controller idle after the restart of {name}', sys_.running())

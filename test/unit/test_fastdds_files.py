@@ -147,6 +147,26 @@ def test_a_killed_readers_port_that_a_live_writer_maps_is_locked_not_removed(tmp
     assert sorted(clean(tmp_path)) == sorted([port, f'{port}_el', f'sem.{port}_mutex'])
 
 
+def test_a_killed_readers_port_made_anew_by_its_writer_is_locked_too(tmp_path):
+    # A writer that finds a killed reader's port broken makes the port file anew (Fast DDS's
+    # regenerate_port): the file is young, its lock file old. Taken as a dead reader's port
+    # ('port lock not held'), the file the writer maps was removed with the lock.
+    port = f'fastrtps_port{PORT}'
+    make(tmp_path, f'{port}_el', f'sem.{port}_mutex')
+    make(tmp_path, port, age=0.0)
+    with open(tmp_path / port, 'r+b') as f:
+        view = mmap.mmap(f.fileno(), 64)
+        try:
+            assert stale(tmp_path) == [([f'{port}_el'], fastdds_files.QUARANTINE)]
+        finally:
+            view.close()
+    # Not mapped by anyone and young: its maker may be about to map it; kept this time.
+    assert stale(tmp_path) == []
+    make(tmp_path, port, age=fastdds_files.GRACE + 1.0)
+    assert stale(tmp_path) == [([port, f'{port}_el', f'{port}_sl', f'sem.{port}_mutex'],
+                                'port lock not held')]
+
+
 def test_a_left_over_lock_and_mutex_alone_are_stale(tmp_path):
     make(tmp_path, 'fastrtps_00000000000000c1_el', f'sem.fastrtps_port{PORT}_mutex')
     assert sorted(clean(tmp_path)) == ['fastrtps_00000000000000c1_el',
