@@ -237,6 +237,8 @@ class Rig:
     def tracking_errors(self, path, joints, refs):
         """Return true tool-tip errors (m) while tracking, checking the reference's timing."""
         stamps = sorted(refs)
+        # Said before the arithmetic below meets an empty array (a bare ValueError).
+        assert len(stamps) >= 100, f'{len(stamps)} references with joint states received'
         t = np.array(stamps) * 1e-9
         ref = np.array([refs[s] for s in stamps])
         t0 = path_time_offset(path, t, ref)
