@@ -99,7 +99,8 @@ def main(args=None):
 
     with tempfile.TemporaryDirectory(prefix='etdmp_bringup_') as directory:
         argv = ros_arguments(args, directory)
-        return run(make, 'bringup', argv, startup_errors=(InvalidConfiguration,))
+        return run(make, 'bringup', argv, startup_errors=(InvalidConfiguration,),
+                   shared_memory=False)
 
 
 if __name__ == '__main__':
