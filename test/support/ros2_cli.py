@@ -209,6 +209,31 @@ def csv_rows(text, fields):
     return np.array(rows, dtype=float).reshape(-1, fields)
 
 
+def published_rows(text, fields):
+    """
+    Return (source stamps ns, publication numbers, data) of ``ros2 topic echo --csv -i`` output.
+
+    ``--include-message-info`` puts the publisher's own account before each message's
+    ``fields`` numbers: its source timestamp and its publication sequence number, which count
+    every message it published, whether or not this reader got it.
+    """
+    stamps, numbers, rows = [], [], []
+    for line in text.splitlines():
+        parts = line.strip().split(',')
+        if len(parts) < 4 + fields:
+            continue
+        try:
+            stamp, number = int(parts[0]), int(parts[2])
+            row = [float(v) for v in parts[-fields:]]
+        except ValueError:
+            continue
+        stamps.append(stamp)
+        numbers.append(number)
+        rows.append(row)
+    return (np.array(stamps, dtype=np.int64), np.array(numbers, dtype=np.int64),
+            np.array(rows, dtype=float).reshape(-1, fields))
+
+
 def hz_rates(text):
     """Return the ``average rate`` values a ``ros2 topic hz`` printed, in order."""
     return [float(v) for v in re.findall(r'average rate: ([0-9.]+)', text)]
