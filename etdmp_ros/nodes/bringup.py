@@ -99,8 +99,7 @@ def main(args=None):
 
     with tempfile.TemporaryDirectory(prefix='etdmp_bringup_') as directory:
         argv = ros_arguments(args, directory)
-        return run(make, 'bringup', argv, startup_errors=(InvalidConfiguration,),
-                   shared_memory=False)
+        return run(make, 'bringup', argv, startup_errors=(InvalidConfiguration,))
 
 
 if __name__ == '__main__':

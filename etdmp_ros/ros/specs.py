@@ -278,12 +278,10 @@ class NodeSpec:
     stale on the simulation's time (a stalled simulation is late, not lost). The others stamp
     with their inputs' stamps and need no clock.
 
-    ``shared_memory``: the node may use Fast DDS's shared-memory transport (config/fastdds.xml)
-    beside UDP. No node of the system does (config/fastdds_udp.xml): a shared-memory send can
-    wait seconds for another process, and a reader restarted beside a running writer could stay
-    blind for good (Fast DDS 2.14; docs/reliability.md). Over UDP on one computer the camera's
-    frames cost perception and the camera no more CPU (measured there). Processes outside the
-    system description (the simulation's camera process, tools that record images) keep it.
+    ``shared_memory``: the node receives camera images, which Fast DDS's shared-memory
+    transport carries (config/fastdds.xml). The others talk UDP only (config/fastdds_udp.xml):
+    a shared-memory send can wait seconds for another process (docs/reliability.md), and the
+    simulation, the controller and dmp_server close the control loop.
     """
 
     name: str

@@ -93,9 +93,9 @@ def dds_profile(shared_memory: bool = True, environ: Mapping[str, str] | None = 
     """
     Return the package's Fast DDS profile file for a process (a Path), None to keep another.
 
-    ``shared_memory``: the process may use shared memory beside UDP (the simulation's camera
-    process, tools recording images); the nodes talk UDP only (every send without waiting for
-    another process, no blind reader after a restart: docs/reliability.md). None when
+    ``shared_memory``: the process receives or sends camera images (perception, the camera,
+    teach, tools recording them); the others (ur10_sim, controller, dmp_server) talk UDP only,
+    so that no send of theirs can wait for another process (docs/reliability.md). None when
     FASTRTPS_DEFAULT_PROFILES_FILE (or FASTDDS_...) names a file that is not the package's
     choice, when the RMW is not Fast DDS, or when the package has no config/ folder.
     ``realtime``: a node with a real-time thread; where this process may use SCHED_FIFO, the

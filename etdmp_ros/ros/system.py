@@ -55,6 +55,7 @@ NODES = (
              'are its built-in defaults).'),
     NodeSpec('perception', 'goal and obstacles in base_link from the colour + depth camera',
              PERCEPTION_SCENE, PERCEPTION, 'etdmp_ros.nodes.perception:PerceptionNode',
+             shared_memory=True,
              config_header='Everything here except reliable_images can be changed at runtime '
              '(ros2 param set /perception <name> <value>).'),
     NodeSpec('dmp_server', 'learns skills from demonstrations and serves /generalize',
@@ -69,7 +70,7 @@ NODE_NAMES = tuple(n.name for n in NODES)
 #: launch file's ``teach:=true``), not by ``make demo``, ``bringup`` or the launch file's default.
 TEACH_NODE = NodeSpec('teach', 'the teaching page: draw a movement in a browser, teach it to '
                       'dmp_server, watch the UR10 write it', TEACH_SCENE, TEACH,
-                      'etdmp_ros.nodes.teach:TeachNode',
+                      'etdmp_ros.nodes.teach:TeachNode', shared_memory=True,
                       config_header='The page is served to this machine only unless address '
                       'says otherwise.')
 #: Every node of the package: the system's, then the teaching page's.

@@ -14,9 +14,7 @@ ur10_sim runs (with its camera process) for the whole run, as a user's simulatio
 first goal. Its start-up alone takes about 1.5 s. Before the fixes (docs/reliability.md,
 "A restarted perception gets the camera again within seconds"), 15 of 25 Ctrl-C restarts saw
 no frame for 30 s and more, and every restart after a kill took 15-21 s; the target is 8 s,
-as test_faults.py asserts. Since 2026-12-07 perception receives the frames over UDP (over
-shared memory a restarted perception could stay blind for good: docs/reliability.md).
-``--load busy``: one more process busy-looping on a core. The
+as test_faults.py asserts. ``--load busy``: one more process busy-looping on a core. The
 table goes into docs/reliability.md (block ``perception-restarts``) unless ``--no-docs``.
 """
 

@@ -105,19 +105,18 @@ def test_perception_killed_mid_motion_the_last_goal_is_used(faults):
     end = plan.poses[-1].pose.position
     assert np.linalg.norm([end.x - last[0], end.y - last[1]]) < 1e-3, (end, last)
     assert np.linalg.norm(watch.goals[-1][1] - watch.truth) < 3e-3
-    # Over shared memory the camera could go on sending into the killed reader's port for
-    # good (1 of 2 runs beside a busy loop); perception now receives over UDP (a restarted
-    # reader is a new address) and sees the camera once discovery has matched it.
+    # The camera finds the killed reader's shared-memory port broken after one health check
+    # (config/fastdds.xml: 2 s; it was 16 s with 10 s) and sends to the new one.
     print(f'perception killed and started again: a goal after {back:.1f} s')
     assert back <= PERCEPTION_BACK, f'the restarted perception saw the goal after {back:.1f} s'
 
 
 def test_perception_stopped_and_started_again_sees_the_camera(faults):
     sys_, watch = faults
-    # Over shared memory the next perception took the same port number, and the camera sent
-    # into a file it no longer listened on (15 of 25 such restarts saw no frame for 30 s and
-    # more before etdmp_ros.ros.fastdds_files kept ports that a live process maps; CI once saw
-    # none for 90 s after that). Perception now receives over UDP.
+    # The camera keeps the port of a reader that exited cleanly open: the next perception
+    # (same port number) must reuse that file, not a new one the camera never sends to (15 of
+    # 25 such restarts saw no frame for 30 s and more, until etdmp_ros.ros.fastdds_files kept
+    # ports that a live process maps).
     assert sys_.interrupt('perception') == 0
     back = restart(sys_, watch, 'perception')
     print(f'perception stopped with Ctrl-C and started again: a goal after {back:.1f} s')
