@@ -24,7 +24,12 @@ A script, not a pytest test. From the repository root::
    rendering; so latency = arrival of /etdmp/goal - arrival of /clock, both with that stamp,
    both seen by this process's clock. It includes rendering, image transport, matching,
    detection and the goal's transport. Both image QoS settings (reliable_images true / false)
-   are run; the goal rate shows how many of the camera's 30 frames/s become a goal.
+   are run; the goal rate shows how many of the camera's 30 frames/s become a goal. Each
+   with perception as it ships (``shm``: shared memory beside UDP) and, for the comparison,
+   on UDP only (``udp``; ``--transports``), with the CPU of perception and of ur10_sim with its
+   camera process over the run, and how many Fast DDS shared-memory files perception maps
+   (0: the frames came over UDP). Run it once more with ``net.core.rmem_max`` at a stock
+   kernel's 212992 to see UDP with small socket buffers (docs/reliability.md).
 
 Wall-clock figures (``time.perf_counter``); the machine has 2 cores shared with other work,
 which shows up in p99. Exits 0 unless ``--strict`` and a target is missed.
@@ -138,11 +143,44 @@ def _stop(process, log):
     log.close()
 
 
-def bench_latency(duration, reliable, log_dir):
-    """Run ur10_sim + perception; return latency percentiles and rates."""
+def _cpu_seconds(pids):
+    """Return the CPU seconds (user + system) the processes ``pids`` have used so far."""
+    total = 0.0
+    for pid in pids:
+        try:
+            fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+    return total
+
+
+def _with_children(pid):
+    """Return ``pid`` and its child processes (ur10_sim's camera process)."""
+    family = [pid]
+    for entry in Path('/proc').iterdir():
+        try:
+            if entry.name.isdigit() and \
+                    int((entry / 'stat').read_text().rsplit(')', 1)[1].split()[1]) == pid:
+                family.append(int(entry.name))
+        except OSError:
+            continue
+    return family
+
+
+def bench_latency(duration, reliable, log_dir, transport='shm'):
+    """
+    Run ur10_sim + perception; return latency percentiles, rates and the processes' CPU.
+
+    ``transport``: ``shm``, perception as it ships (shared memory beside UDP); ``udp``, on the
+    UDP-only profile of the other nodes (config/fastdds_udp_localhost.xml, rcl handed
+    SYSTEM_DEFAULT as etdmp_ros.ros.spin does), the alternative for restarts
+    (docs/reliability.md).
+    """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rosgraph_msgs.msg import Clock
+    from etdmp_ros.ros import fastdds_files
 
     domain = str(150 + os.getpid() % 80)
     env = dict(os.environ, ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
@@ -150,9 +188,14 @@ def bench_latency(duration, reliable, log_dir):
     env.pop('ROS_LOCALHOST_ONLY', None)
     os.environ.update(ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     qos = 'reliable' if reliable else 'best_effort'
+    perception_env = dict(env)
+    if transport == 'udp':
+        profile = REPO / 'config' / 'fastdds_udp_localhost.xml'
+        perception_env.update(FASTRTPS_DEFAULT_PROFILES_FILE=str(profile),
+                              ROS_AUTOMATIC_DISCOVERY_RANGE='SYSTEM_DEFAULT')
     sim = _start('etdmp_ros.nodes.ur10_sim', env, log_dir / 'bench_ur10_sim.log')
-    perception = _start('etdmp_ros.nodes.perception', env,
-                        log_dir / f'bench_perception_{qos}.log',
+    perception = _start('etdmp_ros.nodes.perception', perception_env,
+                        log_dir / f'bench_perception_{qos}_{transport}.log',
                         ('-p', f'reliable_images:={str(reliable).lower()}'))
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -171,10 +214,16 @@ def bench_latency(duration, reliable, log_dir):
             if time.perf_counter() > deadline:
                 raise RuntimeError(f'no /etdmp/goal within 60 s; see {log_dir}')
         goals.clear()
+        pids = {'sim': _with_children(sim[0].pid), 'perception': [perception[0].pid]}
+        used = {name: _cpu_seconds(p) for name, p in pids.items()}
         start = time.perf_counter()
         while time.perf_counter() - start < duration:
             executor.spin_once(timeout_sec=0.05)
         elapsed = time.perf_counter() - start
+        cores = {name: (_cpu_seconds(p) - used[name]) / elapsed for name, p in pids.items()}
+        # Which way the frames came: perception maps shared-memory files only if it uses them.
+        shm_files = sum(name.startswith('fastrtps_') for name in fastdds_files.mappers(
+            pids=pids['perception']))
     finally:
         executor.shutdown()
         node.destroy_node()
@@ -184,8 +233,10 @@ def bench_latency(duration, reliable, log_dir):
     latencies = [t - ticks[s] for s, t in goals if s in ticks]
     sim_seconds = (max(s for s, _ in goals) - min(s for s, _ in goals)) * 1e-9 if goals else 0
     result = _percentiles(latencies) if latencies else {'n': 0}
-    result.update(qos=qos, goal_rate_hz=len(goals) / elapsed,
-                  goals_per_sim_second=(len(goals) - 1) / sim_seconds if sim_seconds else 0.0)
+    result.update(qos=qos, transport=transport, goal_rate_hz=len(goals) / elapsed,
+                  goals_per_sim_second=(len(goals) - 1) / sim_seconds if sim_seconds else 0.0,
+                  perception_cores=cores['perception'], sim_cores=cores['sim'],
+                  perception_shm_files=shm_files)
     return result
 
 
@@ -259,6 +310,9 @@ def _parse_args(argv):
                         help='seconds of the end-to-end run per QoS setting (20)')
     parser.add_argument('--quick', action='store_true', help='10 frames, 3 repeats, 5 s')
     parser.add_argument('--skip-nodes', action='store_true', help='frame timing only')
+    parser.add_argument('--transports', nargs='+', default=['shm', 'udp'],
+                        choices=('shm', 'udp'),
+                        help='perception as it ships (shm) and on UDP only (udp)')
     parser.add_argument('--json', type=Path, help='also write the figures to this file')
     parser.add_argument('--strict', action='store_true',
                         help='exit 1 when the detect p50 target is missed')
@@ -294,18 +348,23 @@ def main(argv=None):
         if not args.skip_nodes:
             print(f'\nEnd to end, image stamp -> /etdmp/goal, ur10_sim (30 fps) + perception, '
                   f'{args.duration:g} s each:\n')
-            print('| image QoS | p50 ms | p99 ms | max ms | goals/s (wall) | goals per sim s |')
-            print('|---|---|---|---|---|---|')
+            print('| transport | image QoS | p50 ms | p99 ms | max ms | goals/s (wall) | goals '
+                  'per sim s | perception cores | ur10_sim + camera cores | shm files mapped '
+                  'by perception |')
+            print('|---|---|---|---|---|---|---|---|---|---|')
             report['end_to_end'] = []
-            for reliable in (True, False):
-                r = bench_latency(args.duration, reliable, log_dir)
-                report['end_to_end'].append(r)
-                if r['n']:
-                    print(f'| {r["qos"]} | {r["p50_ms"]:.1f} | {r["p99_ms"]:.1f} | '
-                          f'{r["max_ms"]:.1f} | {r["goal_rate_hz"]:.1f} | '
-                          f'{r["goals_per_sim_second"]:.1f} |')
-                else:
-                    print(f'| {r["qos"]} | no goals |')
+            for transport in args.transports:
+                for reliable in (True, False):
+                    r = bench_latency(args.duration, reliable, log_dir, transport)
+                    report['end_to_end'].append(r)
+                    if r['n']:
+                        print(f'| {transport} | {r["qos"]} | {r["p50_ms"]:.1f} | '
+                              f'{r["p99_ms"]:.1f} | {r["max_ms"]:.1f} | '
+                              f'{r["goal_rate_hz"]:.1f} | {r["goals_per_sim_second"]:.1f} | '
+                              f'{r["perception_cores"]:.2f} | {r["sim_cores"]:.2f} | '
+                              f'{r["perception_shm_files"]} |')
+                    else:
+                        print(f'| {transport} | {r["qos"]} | no goals |')
             print('\nWhere the time goes (perception node in this process, reliable images; ms '
                   'after the tick that stamps the frame):\n')
             print('| event | p50 ms | p99 ms |')
