@@ -143,31 +143,6 @@ def _stop(process, log):
     log.close()
 
 
-def _cpu_seconds(pids):
-    """Return the CPU seconds (user + system) the processes ``pids`` have used so far."""
-    total = 0.0
-    for pid in pids:
-        try:
-            fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-        except OSError:
-            continue
-        total += (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-    return total
-
-
-def _with_children(pid):
-    """Return ``pid`` and its child processes (ur10_sim's camera process)."""
-    family = [pid]
-    for entry in Path('/proc').iterdir():
-        try:
-            if entry.name.isdigit() and \
-                    int((entry / 'stat').read_text().rsplit(')', 1)[1].split()[1]) == pid:
-                family.append(int(entry.name))
-        except OSError:
-            continue
-    return family
-
-
 def bench_latency(duration, reliable, log_dir, transport='shm'):
     """
     Run ur10_sim + perception; return latency percentiles, rates and the processes' CPU.
@@ -180,6 +155,7 @@ def bench_latency(duration, reliable, log_dir, transport='shm'):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rosgraph_msgs.msg import Clock
+    from etdmp_ros.demo.cpu_monitor import tree_cpu_seconds
     from etdmp_ros.ros import fastdds_files
 
     domain = str(150 + os.getpid() % 80)
@@ -214,16 +190,18 @@ def bench_latency(duration, reliable, log_dir, transport='shm'):
             if time.perf_counter() > deadline:
                 raise RuntimeError(f'no /etdmp/goal within 60 s; see {log_dir}')
         goals.clear()
-        pids = {'sim': _with_children(sim[0].pid), 'perception': [perception[0].pid]}
-        used = {name: _cpu_seconds(p) for name, p in pids.items()}
+        # ur10_sim with its camera process; perception alone.
+        pids = {'sim': sim[0].pid, 'perception': perception[0].pid}
+        used = {name: tree_cpu_seconds(pid) for name, pid in pids.items()}
         start = time.perf_counter()
         while time.perf_counter() - start < duration:
             executor.spin_once(timeout_sec=0.05)
         elapsed = time.perf_counter() - start
-        cores = {name: (_cpu_seconds(p) - used[name]) / elapsed for name, p in pids.items()}
+        cores = {name: (tree_cpu_seconds(pid) - used[name]) / elapsed
+                 for name, pid in pids.items()}
         # Which way the frames came: perception maps shared-memory files only if it uses them.
         shm_files = sum(name.startswith('fastrtps_') for name in fastdds_files.mappers(
-            pids=pids['perception']))
+            pids=[pids['perception']]))
     finally:
         executor.shutdown()
         node.destroy_node()
