@@ -309,7 +309,9 @@ def _publish_calls(scripts):
     return calls
 
 
+@lru_cache(maxsize=None)
 def _blocks_and_calls():
+    """Return the docs' results blocks and the scripts' publish() calls, read once (read-only)."""
     scripts = sorted(p for p in BENCHMARKS.glob('*.py') if p.name != '_results.py')
     return _results_blocks(), _publish_calls(scripts)
 
