@@ -102,10 +102,6 @@ def colcon_install(tmp_path_factory):
         pytest.skip(f'colcon is not installed beside {sys.executable} (make venv installs it)')
     tmp = tmp_path_factory.mktemp('colcon')
     env = dict(os.environ, COLCON_HOME=str(tmp / 'colcon_home'))
-    # Byte-compiled as a user's colcon build is: with PYTHONDONTWRITEBYTECODE set (some shells
-    # and containers do), setuptools skips it and every node process the tests start compiles
-    # the package's sources again (0.2 s of CPU each, a few hundred processes a session).
-    env.pop('PYTHONDONTWRITEBYTECODE', None)
     before = _litter()
     result = subprocess.run(
         [str(COLCON), '--log-base', str(tmp / 'log'), 'build',
