@@ -239,10 +239,10 @@ def test_radii_of_obstacles_partly_hidden_by_the_arm(sized, detector):
         for x in np.arange(0.30, 0.62, 0.04):
             for y in np.arange(-0.05, 0.40, 0.04):
                 top = np.array([x, y, 0.08])
-                # Rendered only where the arm alone hides some of it (0.1: the two ways of
-                # judging differed by 0.04 at most over the grid); judged below as rendered.
+                # Rendered only where the arm alone hides some of it: 0.09-0.1 wider than the
+                # check below (the two ways of judging differed by 0.04 at most on the grid).
                 estimate = visible_fraction(sim, arm_only, top, radius, 0.08, rendered=False)
-                if not 0.05 <= estimate <= 0.95:
+                if not 0.05 <= estimate <= 0.99:
                     continue
                 rgb, depth = place(sim, (2.0, 2.0, -1.0), [top], q)
                 if not 0.15 <= visible_fraction(sim, depth, top, radius, 0.08) <= 0.9:
