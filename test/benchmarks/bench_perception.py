@@ -148,7 +148,7 @@ def bench_latency(duration, reliable, log_dir, transport='shm'):
     Run ur10_sim + perception; return latency percentiles, rates and the processes' CPU.
 
     ``transport``: ``shm``, perception as it ships (shared memory beside UDP); ``udp``, on the
-    UDP-only profile of the other nodes (config/fastdds_udp_localhost.xml, rcl handed
+    UDP-only profile of the other nodes (etdmp_ros.ros.spin.dds_profile, rcl handed
     SYSTEM_DEFAULT as etdmp_ros.ros.spin does), the alternative for restarts
     (docs/reliability.md).
     """
@@ -157,6 +157,7 @@ def bench_latency(duration, reliable, log_dir, transport='shm'):
     from rosgraph_msgs.msg import Clock
     from etdmp_ros.demo.cpu_monitor import tree_cpu_seconds
     from etdmp_ros.ros import fastdds_files
+    from etdmp_ros.ros.spin import dds_profile
 
     domain = str(150 + os.getpid() % 80)
     env = dict(os.environ, ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
@@ -166,7 +167,8 @@ def bench_latency(duration, reliable, log_dir, transport='shm'):
     qos = 'reliable' if reliable else 'best_effort'
     perception_env = dict(env)
     if transport == 'udp':
-        profile = REPO / 'config' / 'fastdds_udp_localhost.xml'
+        # The other nodes' profile, chosen where they choose it; SYSTEM_DEFAULT as dds_settings.
+        profile = dds_profile(shared_memory=False, environ=env)
         perception_env.update(FASTRTPS_DEFAULT_PROFILES_FILE=str(profile),
                               ROS_AUTOMATIC_DISCOVERY_RANGE='SYSTEM_DEFAULT')
     sim = _start('etdmp_ros.nodes.ur10_sim', env, log_dir / 'bench_ur10_sim.log')
